@@ -1,0 +1,162 @@
+//! The command line (clap derive). Parsing only: the work is in [`crate::report`].
+
+use clap::{Args, Parser, Subcommand};
+use nalgebra::Vector2;
+
+use crate::error::InputError;
+
+/// Ring-digraph consensus formation flight over MAVLink.
+#[derive(Debug, Parser)]
+#[command(name = "ringswarm", version, about, long_about = None)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Stability of a ring (bound on k, eigenvalues of L, Yu's bound, closed loop) and,
+    /// without --alpha/--beta, recommended gains. Exit code 0 stable, 1 unstable.
+    Analyze(AnalyzeArgs),
+    /// Plan the gain k (and, if needed, one agent's new initial velocity) that makes the
+    /// swarm reach a target velocity. Exit code 0 feasible, 1 infeasible.
+    Plan(PlanArgs),
+}
+
+/// Arguments of `ringswarm analyze`.
+#[derive(Debug, Args)]
+pub struct AnalyzeArgs {
+    /// Number of macro-vertices m (N = 2m vehicles).
+    #[arg(long, short = 'm')]
+    pub macro_vertices: usize,
+    /// The ring gain k.
+    #[arg(long, short = 'k', allow_negative_numbers = true)]
+    pub k: f64,
+    /// Position coupling α (1/s²); give it with --beta.
+    #[arg(long, requires = "beta", allow_negative_numbers = true)]
+    pub alpha: Option<f64>,
+    /// Velocity coupling β (1/s); give it with --alpha.
+    #[arg(long, requires = "alpha", allow_negative_numbers = true)]
+    pub beta: Option<f64>,
+    /// Design gain k̂ ≤ k for the recommended gains: they then hold for every k in [k̂, k]
+    /// (default: k itself).
+    #[arg(long, allow_negative_numbers = true)]
+    pub design_k: Option<f64>,
+    /// Relative margin of the recommended gains over Yu's bound (0.25 = 25 %).
+    #[arg(long, default_value_t = 0.25)]
+    pub gain_margin: f64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `ringswarm plan`.
+#[derive(Debug, Args)]
+pub struct PlanArgs {
+    /// Initial horizontal velocities, one "vx,vy" per agent separated by ';' (m/s,
+    /// paper frame: x east, y north), in ring order.
+    #[arg(long, value_parser = parse_velocity_list, allow_hyphen_values = true)]
+    pub initial_velocities: VelocityList,
+    /// The target final velocity "vx,vy" (m/s).
+    #[arg(long, value_parser = parse_target, allow_hyphen_values = true)]
+    pub target: Vector2<f64>,
+    /// How far above the stability bound the chosen k must stay.
+    #[arg(long, default_value_t = 0.1)]
+    pub margin: f64,
+    /// The largest k the planner may choose.
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    pub k_max: f64,
+    /// Refuse plans whose re-targeted agent would fly faster than this (m/s).
+    #[arg(long)]
+    pub max_speed: Option<f64>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// A parsed list of horizontal velocities (m/s).
+#[derive(Debug, Clone, PartialEq)]
+pub struct VelocityList(pub Vec<Vector2<f64>>);
+
+/// Parses `"vx,vy;vx,vy;…"`.
+///
+/// # Errors
+/// [`InputError::BadVector`] naming the first malformed entry (1-based), or
+/// [`InputError::Empty`].
+pub fn parse_velocity_list(text: &str) -> Result<VelocityList, InputError> {
+    let entries: Vec<&str> = text.split(';').map(str::trim).collect();
+    if entries.iter().all(|e| e.is_empty()) {
+        return Err(InputError::Empty("the velocity list"));
+    }
+    entries
+        .iter()
+        .enumerate()
+        .map(|(i, entry)| parse_vector2("initial velocity", i + 1, entry))
+        .collect::<Result<Vec<_>, _>>()
+        .map(VelocityList)
+}
+
+fn parse_target(text: &str) -> Result<Vector2<f64>, InputError> {
+    parse_vector2("target velocity", 1, text.trim())
+}
+
+fn parse_vector2(what: &'static str, index: usize, text: &str) -> Result<Vector2<f64>, InputError> {
+    let bad = |reason: String| InputError::BadVector {
+        what,
+        index,
+        text: text.to_owned(),
+        reason,
+    };
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    if parts.len() != 2 {
+        return Err(bad(format!("{} components", parts.len())));
+    }
+    let mut values = [0.0; 2];
+    for (slot, part) in values.iter_mut().zip(&parts) {
+        let value: f64 = part
+            .parse()
+            .map_err(|_| bad(format!("\"{part}\" is not a number")))?;
+        if !value.is_finite() {
+            return Err(bad(format!("{part} is not finite")));
+        }
+        *slot = value;
+    }
+    Ok(Vector2::new(values[0], values[1]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn velocity_list_parses_with_spaces_and_negatives() {
+        let list = parse_velocity_list(" 1, 2; -1 ,3 ;-2.5,4e1").unwrap();
+        assert_eq!(
+            list.0,
+            vec![
+                Vector2::new(1.0, 2.0),
+                Vector2::new(-1.0, 3.0),
+                Vector2::new(-2.5, 40.0)
+            ]
+        );
+    }
+
+    #[test]
+    fn malformed_velocity_lists_name_the_entry() {
+        let err = parse_velocity_list("1,2;3").unwrap_err();
+        assert!(
+            matches!(err, InputError::BadVector { index: 2, .. }),
+            "{err}"
+        );
+        let err = parse_velocity_list("1,2;x,4").unwrap_err();
+        assert!(err.to_string().contains("\"x\" is not a number"), "{err}");
+        let err = parse_velocity_list("1,nan").unwrap_err();
+        assert!(err.to_string().contains("not finite"), "{err}");
+        assert_eq!(
+            parse_velocity_list(" ; "),
+            Err(InputError::Empty("the velocity list"))
+        );
+    }
+}

@@ -1,0 +1,32 @@
+//! # ringswarm
+//!
+//! A ground-control coordinator that flies quadrotors in formation over MAVLink with the
+//! ring-digraph consensus law of Dennisselvan, Kumar and Mukherjee: `N = 2m` vehicles on a
+//! ring of macro-vertices of size two, one gain `k`, double-integrator consensus in x/y,
+//! a PD altitude loop, and attitude + thrust setpoints for each vehicle.
+//!
+//! ## Layout
+//! - [`consensus`]: the paper's maths, pure: ring digraph, stability bound on `k`, Yu's
+//!   bound, gain design, final velocity, achievable-velocity planner, per-agent law.
+//! - [`control`]: pure: altitude loop, actuator envelope and saturation, acceleration →
+//!   attitude quaternion and normalised thrust, frame conversions.
+//! - [`report`]: what the `analyze` and `plan` commands compute and print.
+//! - [`cli`]: the command line (clap).
+//! - [`error`]: one error enum per layer.
+//!
+//! ```
+//! use ringswarm::consensus::{RingDigraph, CouplingGains, analyze};
+//! let ring = RingDigraph::new(4, -0.5)?;
+//! let report = analyze(&ring, Some(CouplingGains::new(1.0, 6.0)?))?;
+//! assert!(report.stable);
+//! assert!((report.k_min + 1.0).abs() < 1e-12);
+//! # Ok::<(), ringswarm::error::ConsensusError>(())
+//! ```
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod cli;
+pub mod consensus;
+pub mod control;
+pub mod error;
+pub mod report;

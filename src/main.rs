@@ -1,0 +1,66 @@
+//! The `ringswarm` binary: parse the command line, install tracing, dispatch.
+//!
+//! Exit codes: 0 for a stable / feasible answer, 1 for an unstable / infeasible one,
+//! 2 for a usage error (clap's own, or a value our validation refuses).
+
+use std::process::ExitCode;
+
+use clap::Parser;
+use ringswarm::cli::{AnalyzeArgs, Cli, Command, PlanArgs};
+use ringswarm::consensus::PlanRequest;
+use ringswarm::report::{AnalyzeRequest, run_analyze, run_plan};
+use tracing_subscriber::EnvFilter;
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(EnvFilter::from_default_env())
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Analyze(args) => analyze(&args),
+        Command::Plan(args) => plan(&args),
+    };
+    match result {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::from(1),
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// Prints the analysis; `Ok(stable)`.
+fn analyze(args: &AnalyzeArgs) -> anyhow::Result<bool> {
+    let output = run_analyze(&AnalyzeRequest {
+        macro_vertices: args.macro_vertices,
+        k: args.k,
+        gains: args.alpha.zip(args.beta),
+        design_k: args.design_k,
+        gain_margin: args.gain_margin,
+    })?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&output)?);
+    } else {
+        println!("{output}");
+    }
+    Ok(output.stable)
+}
+
+/// Prints the plan; `Ok(feasible)`.
+fn plan(args: &PlanArgs) -> anyhow::Result<bool> {
+    let output = run_plan(&PlanRequest {
+        velocities_mps: args.initial_velocities.0.clone(),
+        target_mps: args.target,
+        k_margin: args.margin,
+        k_max: args.k_max,
+        max_speed_mps: args.max_speed,
+    })?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&output)?);
+    } else {
+        println!("{output}");
+    }
+    Ok(output.feasible)
+}

@@ -1,0 +1,360 @@
+//! What `analyze` and `plan` compute and print: one serialisable output per command,
+//! shown as text (`Display`) or as one JSON object.
+
+use std::fmt;
+
+use nalgebra::Vector2;
+use serde::Serialize;
+
+use crate::consensus::{
+    CouplingGains, PlanOutcome, PlanRequest, RingDigraph, StabilityReport, analyze,
+    numeric_k_lower_bound, plan, recommend_gains,
+};
+use crate::error::InputError;
+
+/// The largest ring `analyze` accepts (a dense `2m × 2m` eigenvalue problem, plus a
+/// numeric bisection on it).
+pub const MAX_ANALYZE_MACRO_VERTICES: usize = 256;
+
+/// Tolerance of the numeric cross-check of the bound on `k`.
+const NUMERIC_BOUND_TOLERANCE: f64 = 1e-9;
+
+/// What `analyze` is asked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnalyzeRequest {
+    /// `m`.
+    pub macro_vertices: usize,
+    /// `k`.
+    pub k: f64,
+    /// `(α, β)`, if given.
+    pub gains: Option<(f64, f64)>,
+    /// `k̂` for the recommended gains (default `k`).
+    pub design_k: Option<f64>,
+    /// Relative margin of the recommended gains.
+    pub gain_margin: f64,
+}
+
+/// Recommended gains in the output.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Recommendation {
+    /// `α`.
+    pub alpha: f64,
+    /// `β`.
+    pub beta: f64,
+    /// `k̂`: the gains hold for every `k` in `[k̂, k]`.
+    pub design_k: f64,
+    /// The largest Yu bound over `[k̂, k]`.
+    pub worst_yu_bound: f64,
+    /// `β²/α ÷ worst_yu_bound − 1`.
+    pub margin: f64,
+}
+
+/// The output of `analyze`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AnalyzeOutput {
+    /// `m`.
+    pub macro_vertices: usize,
+    /// `N = 2m`.
+    pub agents: usize,
+    /// `k`.
+    pub k: f64,
+    /// The bound of Theorem 1 (true bound for `m = 1`).
+    pub k_min: f64,
+    /// The same bound found by bisection on numeric eigenvalues.
+    pub k_min_numeric: f64,
+    /// `k − k_min`.
+    pub k_margin: f64,
+    /// Eigenvalues of `L` as `[re, im]`, sorted by real part.
+    pub laplacian_eigenvalues: Vec<[f64; 2]>,
+    /// The left null vector `w`.
+    pub w: Vec<f64>,
+    /// Yu's bound on `β²/α` (`null` when `L` is unstable).
+    pub yu_bound: Option<f64>,
+    /// `α`, when given.
+    pub alpha: Option<f64>,
+    /// `β`, when given.
+    pub beta: Option<f64>,
+    /// `β²/α`, when given.
+    pub gain_ratio: Option<f64>,
+    /// Whether `(α, β)` meet Yu's bound, when given.
+    pub meets_yu_bound: Option<bool>,
+    /// Largest real part of the closed-loop eigenvalues except the double zero (1/s).
+    pub closed_loop_abscissa: Option<f64>,
+    /// Recommended gains when none were given and `k` is stable.
+    pub recommended: Option<Recommendation>,
+    /// The verdict.
+    pub stable: bool,
+}
+
+/// Runs `analyze`.
+///
+/// # Errors
+/// [`InputError`] for `m = 0`, a ring too large, non-finite or non-positive gains, or a
+/// design gain outside `(k_min, k]`.
+pub fn run_analyze(request: &AnalyzeRequest) -> Result<AnalyzeOutput, InputError> {
+    if request.macro_vertices > MAX_ANALYZE_MACRO_VERTICES {
+        return Err(InputError::TooLarge {
+            given: request.macro_vertices,
+            max: MAX_ANALYZE_MACRO_VERTICES,
+        });
+    }
+    let ring = RingDigraph::new(request.macro_vertices, request.k)?;
+    let gains = request
+        .gains
+        .map(|(alpha, beta)| CouplingGains::new(alpha, beta))
+        .transpose()?;
+    let report: StabilityReport = analyze(&ring, gains)?;
+    let recommended = match (gains, report.yu_bound) {
+        (None, Some(_)) => {
+            let design = recommend_gains(
+                request.macro_vertices,
+                request.k,
+                request.design_k.unwrap_or(request.k),
+                request.gain_margin,
+            )?;
+            Some(Recommendation {
+                alpha: design.gains.alpha,
+                beta: design.gains.beta,
+                design_k: design.design_k,
+                worst_yu_bound: design.worst_yu_bound,
+                margin: design.margin,
+            })
+        }
+        _ => None,
+    };
+    let check = report.gain_check.as_ref();
+    Ok(AnalyzeOutput {
+        macro_vertices: report.macro_vertices,
+        agents: ring.agents(),
+        k: report.k,
+        k_min: report.k_min,
+        k_min_numeric: numeric_k_lower_bound(request.macro_vertices, NUMERIC_BOUND_TOLERANCE)?,
+        k_margin: report.k_margin,
+        laplacian_eigenvalues: report
+            .laplacian_eigenvalues
+            .iter()
+            .map(|z| [z.re, z.im])
+            .collect(),
+        w: report.w.clone(),
+        yu_bound: report.yu_bound,
+        alpha: gains.map(|g| g.alpha),
+        beta: gains.map(|g| g.beta),
+        gain_ratio: check.map(|c| c.ratio),
+        meets_yu_bound: check.map(|c| c.yu_margin.is_some_and(|m| m > 0.0)),
+        closed_loop_abscissa: check.map(|c| c.closed_loop_abscissa),
+        recommended,
+        stable: report.stable,
+    })
+}
+
+impl fmt::Display for AnalyzeOutput {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "ring digraph: m = {} macro-vertices, N = {} agents, k = {}",
+            self.macro_vertices, self.agents, self.k
+        )?;
+        writeln!(
+            f,
+            "bound on k (Theorem 1): k > {:.6}   (numeric eigenvalue check: {:.6})",
+            self.k_min, self.k_min_numeric
+        )?;
+        let side = if self.k_margin > 0.0 {
+            "above"
+        } else {
+            "NOT above"
+        };
+        writeln!(
+            f,
+            "  k is {side} the bound: margin k - k_min = {:+.6}",
+            self.k_margin
+        )?;
+        writeln!(f, "eigenvalues of L:")?;
+        for [re, im] in &self.laplacian_eigenvalues {
+            writeln!(f, "  {re:+.6} {im:+.6}i")?;
+        }
+        let w: Vec<String> = self.w.iter().map(|x| format!("{x}")).collect();
+        writeln!(f, "left null vector w = ({})", w.join(", "))?;
+        match self.yu_bound {
+            Some(bound) => writeln!(f, "Yu's bound: beta^2/alpha > {bound:.6}")?,
+            None => writeln!(
+                f,
+                "Yu's bound: none (a non-zero eigenvalue of L is not in the right half-plane)"
+            )?,
+        }
+        if let (Some(alpha), Some(beta), Some(ratio)) = (self.alpha, self.beta, self.gain_ratio) {
+            let meets = if self.meets_yu_bound == Some(true) {
+                "meets"
+            } else {
+                "does NOT meet"
+            };
+            writeln!(
+                f,
+                "gains: alpha = {alpha}, beta = {beta}, beta^2/alpha = {ratio:.6} ({meets} the bound)"
+            )?;
+        }
+        if let Some(abscissa) = self.closed_loop_abscissa {
+            writeln!(
+                f,
+                "closed-loop spectral abscissa (without the double zero): {abscissa:+.6} 1/s"
+            )?;
+        }
+        if let Some(r) = &self.recommended {
+            writeln!(
+                f,
+                "recommended gains: alpha = {:.6}, beta = {:.6} (beta^2/alpha = {:.0}% above the worst bound {:.6} over k in [{}, {}])",
+                r.alpha,
+                r.beta,
+                100.0 * r.margin,
+                r.worst_yu_bound,
+                r.design_k,
+                self.k
+            )?;
+        }
+        write!(
+            f,
+            "verdict: {}",
+            if self.stable { "STABLE" } else { "UNSTABLE" }
+        )
+    }
+}
+
+/// The output of `plan` (agents numbered from 1, as in the paper).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PlanOutput {
+    /// `N`.
+    pub agents: usize,
+    /// The target (m/s).
+    pub target: [f64; 2],
+    /// `g` before any change.
+    pub g: [f64; 2],
+    /// `h` before any change.
+    pub h: [f64; 2],
+    /// The stability bound on `k`.
+    pub k_min: f64,
+    /// The required distance above it.
+    pub margin: f64,
+    /// Whether the target is reachable.
+    pub feasible: bool,
+    /// The re-targeted agent (1-based), if any.
+    pub agent: Option<usize>,
+    /// Its class (`odd` / `even` in the paper's numbering).
+    pub agent_class: Option<String>,
+    /// Its initial velocity before (m/s).
+    pub old_velocity: Option<[f64; 2]>,
+    /// Its new initial velocity (m/s).
+    pub new_velocity: Option<[f64; 2]>,
+    /// `|new − old|` (m/s).
+    pub velocity_change: Option<f64>,
+    /// `δ = 1 + k`.
+    pub delta: Option<f64>,
+    /// The gain.
+    pub k: Option<f64>,
+    /// The final velocity predicted from the (modified) velocities and `k` (m/s).
+    pub predicted_final_velocity: Option<[f64; 2]>,
+    /// Why the target is not reachable.
+    pub reason: Option<String>,
+}
+
+/// Runs `plan`.
+///
+/// # Errors
+/// [`InputError`] for an odd agent count, non-finite numbers or a negative margin.
+pub fn run_plan(request: &PlanRequest) -> Result<PlanOutput, InputError> {
+    let answer = plan(request)?;
+    let pair = |v: Vector2<f64>| [v.x, v.y];
+    let mut out = PlanOutput {
+        agents: request.velocities_mps.len(),
+        target: pair(request.target_mps),
+        g: pair(answer.g),
+        h: pair(answer.h),
+        k_min: answer.k_min,
+        margin: request.k_margin,
+        feasible: answer.is_feasible(),
+        agent: None,
+        agent_class: None,
+        old_velocity: None,
+        new_velocity: None,
+        velocity_change: None,
+        delta: None,
+        k: None,
+        predicted_final_velocity: None,
+        reason: None,
+    };
+    match answer.outcome {
+        PlanOutcome::Feasible {
+            delta,
+            k,
+            retarget,
+            predicted_final_velocity_mps,
+        } => {
+            out.delta = Some(delta);
+            out.k = Some(k);
+            out.predicted_final_velocity = Some(pair(predicted_final_velocity_mps));
+            if let Some(r) = retarget {
+                out.agent = Some(r.agent + 1);
+                out.agent_class = Some(format!("{:?}", r.class).to_lowercase());
+                out.old_velocity = Some(pair(r.old_velocity_mps));
+                out.new_velocity = Some(pair(r.new_velocity_mps));
+                out.velocity_change = Some(r.change_mps);
+            }
+        }
+        PlanOutcome::Infeasible { reason } => out.reason = Some(reason),
+    }
+    Ok(out)
+}
+
+impl fmt::Display for PlanOutput {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let v = |p: [f64; 2]| format!("({:.4}, {:.4})", p[0], p[1]);
+        writeln!(
+            f,
+            "{} agents, target final velocity {} m/s",
+            self.agents,
+            v(self.target)
+        )?;
+        writeln!(
+            f,
+            "g = {}, h = {}   (the target is reached iff delta*g = h, delta = 1 + k)",
+            v(self.g),
+            v(self.h)
+        )?;
+        writeln!(
+            f,
+            "admissible k: k >= k_min + margin = {:.6} + {}",
+            self.k_min, self.margin
+        )?;
+        if !self.feasible {
+            return write!(
+                f,
+                "INFEASIBLE: {}",
+                self.reason.as_deref().unwrap_or("no admissible gain")
+            );
+        }
+        match (self.agent, self.old_velocity, self.new_velocity) {
+            (Some(agent), Some(old), Some(new)) => writeln!(
+                f,
+                "re-target agent {agent} ({}): initial velocity {} -> {} m/s (change {:.4} m/s)",
+                self.agent_class.as_deref().unwrap_or("?"),
+                v(old),
+                v(new),
+                self.velocity_change.unwrap_or(f64::NAN)
+            )?,
+            _ => writeln!(
+                f,
+                "no agent needs a new velocity: g and h are collinear with an admissible delta"
+            )?,
+        }
+        writeln!(
+            f,
+            "delta = {:.6}, k = {:.6}",
+            self.delta.unwrap_or(f64::NAN),
+            self.k.unwrap_or(f64::NAN)
+        )?;
+        let predicted = self.predicted_final_velocity.map(v).unwrap_or_default();
+        write!(
+            f,
+            "predicted final velocity with these velocities and k: {predicted} m/s\nverdict: FEASIBLE"
+        )
+    }
+}
