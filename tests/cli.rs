@@ -1,0 +1,162 @@
+//! The `ringswarm` binary end to end: outputs, exit codes and error messages.
+
+use std::process::{Command, Output};
+
+fn ringswarm(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ringswarm"))
+        .args(args)
+        .output()
+        .expect("the test binary runs")
+}
+
+fn json(output: &Output) -> serde_json::Value {
+    serde_json::from_slice(&output.stdout).expect("stdout is one JSON object")
+}
+
+fn stderr(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+#[test]
+fn analyze_example_1_is_stable() {
+    let out = ringswarm(&[
+        "analyze",
+        "--macro-vertices",
+        "4",
+        "--k",
+        "-0.5",
+        "--alpha",
+        "1",
+        "--beta",
+        "6",
+        "--json",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let v = json(&out);
+    assert!((v["k_min"].as_f64().unwrap() + 1.0).abs() < 1e-12);
+    assert!((v["k_margin"].as_f64().unwrap() - 0.5).abs() < 1e-12);
+    assert!((v["yu_bound"].as_f64().unwrap() - 5.389_377_276_613_346).abs() < 1e-9);
+    assert!((v["closed_loop_abscissa"].as_f64().unwrap() + 0.167_392_671_721_78).abs() < 1e-9);
+    assert_eq!(v["stable"], serde_json::json!(true));
+    assert_eq!(v["laplacian_eigenvalues"].as_array().unwrap().len(), 8);
+    assert_eq!(
+        v["w"],
+        serde_json::json!([1.0, 0.5, 1.0, 0.5, 1.0, 0.5, 1.0, 0.5])
+    );
+}
+
+#[test]
+fn analyze_unstable_gains_exit_with_one() {
+    let out = ringswarm(&[
+        "analyze", "-m", "4", "-k", "-0.8", "--alpha", "1", "--beta", "3", "--json",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let v = json(&out);
+    assert_eq!(v["stable"], serde_json::json!(false));
+    assert!(v["closed_loop_abscissa"].as_f64().unwrap() > 0.0);
+    // k below the bound is an answer with its (negative) margin, not a crash.
+    let out = ringswarm(&["analyze", "-m", "4", "-k", "-1.2", "--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let v = json(&out);
+    assert!((v["k_margin"].as_f64().unwrap() + 0.2).abs() < 1e-12);
+    assert!(v["yu_bound"].is_null());
+}
+
+#[test]
+fn analyze_without_gains_recommends_gains_that_meet_the_bound() {
+    let out = ringswarm(&["analyze", "-m", "3", "-k", "5", "--json"]);
+    assert_eq!(out.status.code(), Some(0));
+    let v = json(&out);
+    let rec = &v["recommended"];
+    let (alpha, beta) = (
+        rec["alpha"].as_f64().unwrap(),
+        rec["beta"].as_f64().unwrap(),
+    );
+    assert!(beta * beta / alpha > 1.25 * 1.221_422_976 - 1e-6);
+}
+
+#[test]
+fn bad_input_gets_a_specific_message_and_exit_code_two() {
+    let cases: [(&[&str], &str); 6] = [
+        (
+            &["analyze", "-m", "0", "-k", "1"],
+            "at least one macro-vertex",
+        ),
+        (
+            &["analyze", "-m", "3", "-k", "nan"],
+            "k must be a finite number",
+        ),
+        (
+            &[
+                "analyze", "-m", "3", "-k", "1", "--alpha", "0", "--beta", "2",
+            ],
+            "alpha must be greater than zero",
+        ),
+        (
+            &[
+                "analyze", "-m", "3", "-k", "1", "--alpha", "1", "--beta", "-2",
+            ],
+            "beta must be greater than zero",
+        ),
+        (
+            &["plan", "--initial-velocities", "1,2;3", "--target", "1,1"],
+            "initial velocity #2",
+        ),
+        (
+            &[
+                "plan",
+                "--initial-velocities",
+                "1,2;3,4;5,6",
+                "--target",
+                "1,1",
+            ],
+            "even number of agents",
+        ),
+    ];
+    for (args, message) in cases {
+        let out = ringswarm(args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(stderr(&out).contains(message), "{args:?}: {}", stderr(&out));
+        assert!(!stderr(&out).contains("panicked"));
+    }
+}
+
+#[test]
+fn plan_reports_agent_velocity_gain_and_prediction() {
+    let out = ringswarm(&[
+        "plan",
+        "--initial-velocities",
+        "9,4;15,8;18,-2;13,1;-8,-7;14,18",
+        "--target",
+        "20,30",
+        "--json",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let v = json(&out);
+    assert_eq!(v["feasible"], serde_json::json!(true));
+    assert_eq!(v["agent"], serde_json::json!(4));
+    assert!((v["k"].as_f64().unwrap() - 10.0).abs() < 1e-12);
+    let vf = v["predicted_final_velocity"].as_array().unwrap();
+    assert!((vf[0].as_f64().unwrap() - 20.0).abs() < 1e-9);
+    assert!((vf[1].as_f64().unwrap() - 30.0).abs() < 1e-9);
+    let new = v["new_velocity"].as_array().unwrap();
+    assert!((new[0].as_f64().unwrap() - (31.0 + 41.0 / 11.0)).abs() < 1e-9);
+}
+
+#[test]
+fn plan_with_a_speed_limit_can_be_infeasible() {
+    let out = ringswarm(&[
+        "plan",
+        "--initial-velocities",
+        "9,4;15,8;18,-2;13,1;-8,-7;14,18",
+        "--target",
+        "20,30",
+        "--max-speed",
+        "50",
+        "--json",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let v = json(&out);
+    assert_eq!(v["feasible"], serde_json::json!(false));
+    assert!(v["reason"].as_str().unwrap().contains("50 m/s"));
+}
