@@ -1,14 +1,25 @@
 //! # ringswarm-sitl
 //!
-//! The software-in-the-loop emulator that ringswarm flies against when no hardware, PX4
-//! build or Gazebo is at hand. It will hold:
+//! A software-in-the-loop quadrotor emulator that behaves like a PX4 SITL instance on the
+//! wire, so that ringswarm (and pymavlink, MAVSDK or MAVProxy) can fly it with no
+//! hardware, PX4 build or Gazebo.
 //!
-//! - `physics`: a pure, fixed-step rigid-body quadrotor with an attitude controller;
-//! - `autopilot`: a sans-IO machine with PX4's wire behaviour (heartbeat, modes, arming,
-//!   acknowledgements, the offboard-loss failsafe, parameters);
-//! - `udp`: the tokio driver that serves one emulated vehicle per PX4 port pair.
+//! ## Layout
+//! - [`physics`]: pure, fixed-step rigid-body quadrotor (RK4), motors, drag, wind, ground.
+//! - [`control`]: PX4-like attitude P → rate PID → mixer, and the position/velocity
+//!   controller used by Hold, Land and the pilot.
+//! - [`profile`]: vehicle profiles (`ideal`, `x500`) with documented numbers.
+//! - [`codec`]: MAVLink framing of datagrams with the `mavlink` crate as payload codec.
+//! - [`params`], [`world`], [`time`]: parameter table, geodetic world, simulated time.
 //!
-//! None of these exist yet; this crate is a placeholder in the workspace so that the
-//! layout, the lockfile and CI already cover it. It never depends on `ringswarm`.
+//! It never depends on `ringswarm`.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
+
+pub mod codec;
+pub mod control;
+pub mod params;
+pub mod physics;
+pub mod profile;
+pub mod time;
+pub mod world;

@@ -1,0 +1,269 @@
+//! MAVLink framing: bytes ↔ messages, with the `mavlink` crate as the payload codec.
+//!
+//! The crate's connections are not used (see REFERENCE §5: its `udpin` replies to the last
+//! sender only); sockets are ours and this module turns one datagram into frames and one
+//! message into bytes. A datagram may carry several frames, MAVLink 1 or 2, signed or
+//! not (signatures are not checked). Faulty frames come out as [`FrameError`] values so
+//! that the caller can count them, and decoding goes on after a bad frame when its length
+//! is known.
+
+use mavlink::dialects::common::MavMessage;
+use mavlink::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message, calculate_crc};
+
+/// MAVLink 1 start byte.
+const STX_V1: u8 = 0xFE;
+/// MAVLink 2 start byte.
+const STX_V2: u8 = 0xFD;
+/// MAVLink 2 incompatibility flag: the frame is signed (13-byte trailer).
+const INCOMPAT_SIGNED: u8 = 0x01;
+/// Length of the MAVLink 2 signature trailer.
+const SIGNATURE_LEN: usize = 13;
+
+/// A decoded frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    /// Sender system and component, sequence.
+    pub header: MavHeader,
+    /// The message.
+    pub msg: MavMessage,
+    /// MAVLink 1 or 2.
+    pub version: MavlinkVersion,
+}
+
+/// Why a frame could not be decoded.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum FrameError {
+    /// Bytes that do not start a frame were skipped.
+    Garbage {
+        /// How many bytes.
+        skipped: usize,
+    },
+    /// The datagram ends inside a frame.
+    Truncated,
+    /// The checksum does not match (corruption, or a message of another dialect).
+    BadCrc {
+        /// The frame's message id.
+        msgid: u32,
+    },
+    /// A message id the common dialect does not know.
+    UnknownMessage {
+        /// The id.
+        msgid: u32,
+    },
+    /// The payload did not parse (for example an enum value newer than the dialect).
+    BadPayload {
+        /// The frame's message id.
+        msgid: u32,
+    },
+}
+
+impl std::fmt::Display for FrameError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Garbage { skipped } => write!(f, "{skipped} bytes outside any frame"),
+            Self::Truncated => write!(f, "truncated frame"),
+            Self::BadCrc { msgid } => write!(f, "bad checksum on message id {msgid}"),
+            Self::UnknownMessage { msgid } => write!(f, "unknown message id {msgid}"),
+            Self::BadPayload { msgid } => write!(f, "unparsable payload for message id {msgid}"),
+        }
+    }
+}
+
+/// Decodes every frame in one datagram.
+pub fn decode_datagram(bytes: &[u8]) -> Vec<Result<Frame, FrameError>> {
+    let mut out = Vec::new();
+    let mut at = 0;
+    while at < bytes.len() {
+        let start = bytes[at..]
+            .iter()
+            .position(|b| *b == STX_V1 || *b == STX_V2);
+        match start {
+            None => {
+                out.push(Err(FrameError::Garbage {
+                    skipped: bytes.len() - at,
+                }));
+                break;
+            }
+            Some(0) => {}
+            Some(skipped) => {
+                out.push(Err(FrameError::Garbage { skipped }));
+                at += skipped;
+            }
+        }
+        let (result, consumed) = decode_frame(&bytes[at..]);
+        out.push(result);
+        match consumed {
+            Some(n) => at += n,
+            None => break,
+        }
+    }
+    out
+}
+
+/// Decodes one frame at the start of `bytes`; returns its length when it is known.
+fn decode_frame(bytes: &[u8]) -> (Result<Frame, FrameError>, Option<usize>) {
+    let v2 = bytes[0] == STX_V2;
+    let header_len = if v2 { 10 } else { 6 };
+    if bytes.len() < header_len {
+        return (Err(FrameError::Truncated), None);
+    }
+    let payload_len = usize::from(bytes[1]);
+    let signed = v2 && bytes[2] & INCOMPAT_SIGNED != 0;
+    let total = header_len + payload_len + 2 + if signed { SIGNATURE_LEN } else { 0 };
+    if bytes.len() < total {
+        return (Err(FrameError::Truncated), None);
+    }
+    let (sequence, system_id, component_id, msgid) = if v2 {
+        (
+            bytes[4],
+            bytes[5],
+            bytes[6],
+            u32::from_le_bytes([bytes[7], bytes[8], bytes[9], 0]),
+        )
+    } else {
+        (bytes[2], bytes[3], bytes[4], u32::from(bytes[5]))
+    };
+    let crc_at = header_len + payload_len;
+    let received_crc = u16::from_le_bytes([bytes[crc_at], bytes[crc_at + 1]]);
+    if MavMessage::default_message_from_id(msgid).is_none() {
+        return (Err(FrameError::UnknownMessage { msgid }), Some(total));
+    }
+    if calculate_crc(&bytes[1..crc_at], MavMessage::extra_crc(msgid)) != received_crc {
+        return (Err(FrameError::BadCrc { msgid }), Some(total));
+    }
+    let version = if v2 {
+        MavlinkVersion::V2
+    } else {
+        MavlinkVersion::V1
+    };
+    let payload = &bytes[header_len..crc_at];
+    let result = MavMessage::parse(version, msgid, payload)
+        .map(|msg| Frame {
+            header: MavHeader {
+                system_id: u32::from(system_id),
+                component_id,
+                sequence,
+            },
+            msg,
+            version,
+        })
+        .map_err(|_| FrameError::BadPayload { msgid });
+    (result, Some(total))
+}
+
+/// Encodes messages from one system and component as MAVLink 2, counting sequence numbers.
+#[derive(Debug, Clone)]
+pub struct Encoder {
+    system_id: u8,
+    component_id: u8,
+    sequence: u8,
+}
+
+impl Encoder {
+    /// An encoder for `system_id`/`component_id`, starting at sequence 0.
+    pub fn new(system_id: u8, component_id: u8) -> Self {
+        Self {
+            system_id,
+            component_id,
+            sequence: 0,
+        }
+    }
+
+    /// One unsigned MAVLink 2 frame.
+    pub fn encode(&mut self, msg: &MavMessage) -> Vec<u8> {
+        let header = MavHeader {
+            system_id: u32::from(self.system_id),
+            component_id: self.component_id,
+            sequence: self.sequence,
+        };
+        self.sequence = self.sequence.wrapping_add(1);
+        let mut raw = MAVLinkV2MessageRaw::new();
+        raw.serialize_message(header, msg);
+        raw.raw_bytes().to_vec()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mavlink::dialects::common::{
+        COMMAND_LONG_DATA, HEARTBEAT_DATA, MavAutopilot, MavCmd, MavModeFlag, MavState, MavType,
+    };
+
+    fn heartbeat() -> MavMessage {
+        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 6 << 16,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
+            base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            system_status: MavState::MAV_STATE_STANDBY,
+            mavlink_version: 3,
+        })
+    }
+
+    #[test]
+    fn heartbeat_golden_bytes() {
+        // MAVLink 2 heartbeat from 1/1, sequence 0: payload custom_mode u32 LE, type 2,
+        // autopilot 12, base_mode 1, system_status 3, version 3; CRC extra 50.
+        let bytes = Encoder::new(1, 1).encode(&heartbeat());
+        let payload = [0x00, 0x00, 0x06, 0x00, 0x02, 0x0C, 0x01, 0x03, 0x03];
+        assert_eq!(&bytes[..10], &[0xFD, 9, 0, 0, 0, 1, 1, 0, 0, 0]);
+        assert_eq!(&bytes[10..19], &payload);
+        let crc = calculate_crc(&bytes[1..19], 50);
+        assert_eq!(&bytes[19..], &crc.to_le_bytes());
+    }
+
+    #[test]
+    fn round_trip_and_two_frames_in_one_datagram() {
+        let mut enc = Encoder::new(3, 1);
+        let cmd = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            target_system: 3,
+            target_component: 1,
+            command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            confirmation: 0,
+            param1: 1.0,
+            param2: 0.0,
+            param3: 0.0,
+            param4: 0.0,
+            param5: 0.0,
+            param6: 0.0,
+            param7: 0.0,
+        });
+        let mut datagram = enc.encode(&heartbeat());
+        datagram.extend(enc.encode(&cmd));
+        let frames = decode_datagram(&datagram);
+        assert_eq!(frames.len(), 2);
+        let second = frames[1].clone().unwrap();
+        assert_eq!(second.msg, cmd);
+        assert_eq!(second.header.system_id, 3);
+        assert_eq!(second.header.sequence, 1);
+    }
+
+    #[test]
+    fn corrupt_truncated_and_unknown_frames_are_reported() {
+        let mut bytes = Encoder::new(1, 1).encode(&heartbeat());
+        bytes[12] ^= 0xFF;
+        assert_eq!(
+            decode_datagram(&bytes),
+            vec![Err(FrameError::BadCrc { msgid: 0 })]
+        );
+        let bytes = Encoder::new(1, 1).encode(&heartbeat());
+        assert_eq!(
+            decode_datagram(&bytes[..15]),
+            vec![Err(FrameError::Truncated)]
+        );
+        let mut unknown = bytes.clone();
+        unknown[7] = 0x39; // id 0x30039, not in common
+        unknown[8] = 0x00;
+        unknown[9] = 0x03;
+        assert_eq!(
+            decode_datagram(&unknown),
+            vec![Err(FrameError::UnknownMessage { msgid: 0x30039 })]
+        );
+        let mut garbage = vec![1, 2, 3];
+        garbage.extend(&bytes);
+        let frames = decode_datagram(&garbage);
+        assert_eq!(frames[0], Err(FrameError::Garbage { skipped: 3 }));
+        assert!(frames[1].is_ok());
+    }
+}

@@ -1,0 +1,238 @@
+//! The parameter table: PX4 names, PX4 encoding.
+//!
+//! Values travel as MAVLink `float` fields. Integer parameters use PX4's bytewise encoding
+//! (`MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE`): the `i32`'s bytes are sent as the
+//! float's bytes. The profile's physical values are read-only (`SIM_*`): a PARAM_SET on
+//! them, or of a value out of range, is answered with the unchanged value, as PX4 does.
+
+use crate::profile::Profile;
+
+/// A parameter's type on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ParamKind {
+    /// `MAV_PARAM_TYPE_INT32`, bytewise.
+    Int32,
+    /// `MAV_PARAM_TYPE_REAL32`.
+    Real32,
+}
+
+/// One parameter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Param {
+    /// Name (at most 16 characters).
+    pub name: &'static str,
+    /// Its type.
+    pub kind: ParamKind,
+    /// Its value (integers are held exactly in an `f64`).
+    pub value: f64,
+    /// Admissible range.
+    pub range: (f64, f64),
+    /// Whether PARAM_SET may change it.
+    pub read_only: bool,
+}
+
+impl Param {
+    /// The value as MAVLink carries it.
+    pub fn wire_value(&self) -> f32 {
+        match self.kind {
+            ParamKind::Real32 => self.value as f32,
+            ParamKind::Int32 => f32::from_ne_bytes((self.value as i32).to_ne_bytes()),
+        }
+    }
+
+    /// Decodes a wire value for this parameter's type.
+    pub fn from_wire(&self, wire: f32) -> f64 {
+        match self.kind {
+            ParamKind::Real32 => f64::from(wire),
+            ParamKind::Int32 => f64::from(i32::from_ne_bytes(wire.to_ne_bytes())),
+        }
+    }
+}
+
+/// Why a PARAM_SET changed nothing.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ParamSetError {
+    /// No parameter of that name.
+    Unknown(String),
+    /// The parameter is read-only.
+    ReadOnly(&'static str),
+    /// The value is not finite or outside the parameter's range.
+    OutOfRange {
+        /// The parameter.
+        name: &'static str,
+        /// The value asked for.
+        value: f64,
+    },
+}
+
+/// The vehicle's parameters, in a fixed order (their `param_index`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamTable {
+    params: Vec<Param>,
+}
+
+impl ParamTable {
+    /// The table for a vehicle with `system_id` and `profile`.
+    pub fn new(system_id: u8, profile: &Profile) -> Self {
+        use ParamKind::{Int32, Real32};
+        let p = |name, kind, value, range, read_only| Param {
+            name,
+            kind,
+            value,
+            range,
+            read_only,
+        };
+        let params = vec![
+            p(
+                "BAT1_CAPACITY",
+                Real32,
+                battery_capacity_mah(profile),
+                (0.0, 1e5),
+                false,
+            ),
+            p("COM_DISARM_LAND", Real32, 2.0, (-1.0, 20.0), false),
+            p("COM_DISARM_PRFLT", Real32, 10.0, (-1.0, 60.0), false),
+            p("COM_OBL_RC_ACT", Int32, 0.0, (0.0, 7.0), false),
+            p("COM_OF_LOSS_T", Real32, 1.0, (0.0, 60.0), false),
+            p("COM_RC_IN_MODE", Int32, 4.0, (0.0, 4.0), false),
+            p(
+                "MAV_SYS_ID",
+                Int32,
+                f64::from(system_id),
+                (1.0, 250.0),
+                true,
+            ),
+            p("MIS_TAKEOFF_ALT", Real32, 2.5, (0.0, 1000.0), false),
+            p("MPC_LAND_SPEED", Real32, 0.7, (0.1, 5.0), false),
+            p(
+                "MPC_THR_HOVER",
+                Real32,
+                profile.hover_throttle(),
+                (0.05, 0.95),
+                false,
+            ),
+            p("MPC_TILTMAX_AIR", Real32, 45.0, (20.0, 89.0), false),
+            p(
+                "SIM_DRAG",
+                Real32,
+                profile.linear_drag_per_s,
+                (0.0, 0.0),
+                true,
+            ),
+            p("SIM_IXX", Real32, profile.inertia_kg_m2.x, (0.0, 0.0), true),
+            p("SIM_IYY", Real32, profile.inertia_kg_m2.y, (0.0, 0.0), true),
+            p("SIM_IZZ", Real32, profile.inertia_kg_m2.z, (0.0, 0.0), true),
+            p("SIM_MASS", Real32, profile.mass_kg, (0.0, 0.0), true),
+            p(
+                "SIM_MOT_TAU",
+                Real32,
+                profile.motor_time_constant_s,
+                (0.0, 0.0),
+                true,
+            ),
+            p(
+                "SIM_THRUST_MAX",
+                Real32,
+                profile.max_thrust_n(),
+                (0.0, 0.0),
+                true,
+            ),
+        ];
+        Self { params }
+    }
+
+    /// Number of parameters (`param_count`).
+    pub fn len(&self) -> usize {
+        self.params.len()
+    }
+
+    /// Whether the table is empty (never, for a vehicle).
+    pub fn is_empty(&self) -> bool {
+        self.params.is_empty()
+    }
+
+    /// The parameter at `index`.
+    pub fn get(&self, index: usize) -> Option<&Param> {
+        self.params.get(index)
+    }
+
+    /// The index and parameter called `name`.
+    pub fn find(&self, name: &str) -> Option<(usize, &Param)> {
+        self.params.iter().enumerate().find(|(_, p)| p.name == name)
+    }
+
+    /// The value of a parameter known to exist.
+    ///
+    /// # Panics
+    /// If `name` is not in the table: names are compile-time constants of this crate.
+    pub fn value(&self, name: &str) -> f64 {
+        self.find(name)
+            .map(|(_, p)| p.value)
+            .unwrap_or_else(|| panic!("parameter {name} is in the table"))
+    }
+
+    /// Sets a parameter from its wire value.
+    ///
+    /// # Errors
+    /// [`ParamSetError`] for an unknown name, a read-only parameter or a value out of range.
+    pub fn set(&mut self, name: &str, wire: f32) -> Result<usize, ParamSetError> {
+        let index = self
+            .find(name)
+            .map(|(i, _)| i)
+            .ok_or_else(|| ParamSetError::Unknown(name.to_owned()))?;
+        let param = &mut self.params[index];
+        if param.read_only {
+            return Err(ParamSetError::ReadOnly(param.name));
+        }
+        let value = param.from_wire(wire);
+        if !value.is_finite() || value < param.range.0 || value > param.range.1 {
+            return Err(ParamSetError::OutOfRange {
+                name: param.name,
+                value,
+            });
+        }
+        param.value = value;
+        Ok(index)
+    }
+}
+
+/// Battery capacity for a profile: a 4S 5000 mAh pack for the x500 class, scaled by mass.
+fn battery_capacity_mah(profile: &Profile) -> f64 {
+    (2500.0 * profile.mass_kg).round()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn integers_are_bytewise_and_reals_are_floats() {
+        let table = ParamTable::new(3, &Profile::x500());
+        let (_, sys) = table.find("MAV_SYS_ID").unwrap();
+        assert_eq!(sys.wire_value().to_ne_bytes(), 3i32.to_ne_bytes());
+        let (_, hover) = table.find("MPC_THR_HOVER").unwrap();
+        assert_eq!(hover.wire_value(), 0.5);
+    }
+
+    #[test]
+    fn set_checks_name_read_only_and_range() {
+        let mut table = ParamTable::new(1, &Profile::x500());
+        assert!(table.set("COM_OF_LOSS_T", 2.5).is_ok());
+        assert_eq!(table.value("COM_OF_LOSS_T"), 2.5);
+        let seven = f32::from_ne_bytes(7i32.to_ne_bytes());
+        assert!(table.set("COM_OBL_RC_ACT", seven).is_ok());
+        assert_eq!(table.value("COM_OBL_RC_ACT"), 7.0);
+        assert_eq!(
+            table.set("SIM_MASS", 3.0),
+            Err(ParamSetError::ReadOnly("SIM_MASS"))
+        );
+        assert_eq!(
+            table.set("NOPE", 1.0),
+            Err(ParamSetError::Unknown("NOPE".into()))
+        );
+        assert!(matches!(
+            table.set("COM_OF_LOSS_T", f32::NAN),
+            Err(ParamSetError::OutOfRange { .. })
+        ));
+    }
+}

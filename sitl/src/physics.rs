@@ -1,0 +1,363 @@
+//! Rigid-body quadrotor dynamics, pure and fixed-step.
+//!
+//! Frames: position and velocity in the vehicle's local NED frame (m, m/s); attitude as the
+//! rotation from body FRD to NED; body rates in FRD (rad/s). Four motors in PX4's X layout:
+//!
+//! ```text
+//!        front
+//!    3 (CW)   1 (CCW)        motor i at (x, y) = (±d, ±d) in FRD
+//!         \ /                1: (+d, +d)  2: (−d, −d)  3: (+d, −d)  4: (−d, +d)
+//!         / \                CCW props give a positive (nose-right) yaw reaction.
+//!    2 (CCW)  4 (CW)
+//! ```
+//!
+//! Each motor's thrust follows its command (`0..1` of full thrust) with a first-order lag.
+//! Forces: gravity, thrust along body −z, linear drag on airspeed (`v − wind`). Torques:
+//! `τ = Σ rᵢ × Fᵢ` plus the yaw reaction, and `ω̇ = I⁻¹(τ − ω × Iω)`. One step is classical
+//! RK4 over the whole state, then the quaternion is renormalised and the ground contact is
+//! applied as a constraint: the vehicle never goes below the ground, rests on it while the
+//! thrust cannot lift it, and lifts off when it can.
+
+use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3, Vector4};
+
+use crate::profile::{GRAVITY_MPS2, Profile};
+
+/// The full mechanical state of one vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BodyState {
+    /// Position in the local NED frame (m).
+    pub pos_ned_m: Vector3<f64>,
+    /// Velocity in NED (m/s).
+    pub vel_ned_mps: Vector3<f64>,
+    /// Rotation from body FRD to NED.
+    pub attitude: UnitQuaternion<f64>,
+    /// Body rates in FRD (rad/s).
+    pub rate_frd_rps: Vector3<f64>,
+    /// Thrust of each motor (N).
+    pub motor_thrust_n: Vector4<f64>,
+}
+
+impl BodyState {
+    /// At rest, level, at `pos_ned_m`.
+    pub fn at_rest(pos_ned_m: Vector3<f64>) -> Self {
+        Self {
+            pos_ned_m,
+            vel_ned_mps: Vector3::zeros(),
+            attitude: UnitQuaternion::identity(),
+            rate_frd_rps: Vector3::zeros(),
+            motor_thrust_n: Vector4::zeros(),
+        }
+    }
+}
+
+/// The time derivative of a [`BodyState`], in the same layout.
+#[derive(Debug, Clone, Copy)]
+struct Derivative {
+    pos: Vector3<f64>,
+    vel: Vector3<f64>,
+    quat: Quaternion<f64>,
+    rate: Vector3<f64>,
+    motors: Vector4<f64>,
+}
+
+/// Environment inputs that are not commands.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Environment {
+    /// Wind velocity in NED (m/s).
+    pub wind_ned_mps: Vector3<f64>,
+    /// Height of the ground as a NED z coordinate (m): the vehicle stays at `z ≤ ground`.
+    pub ground_z_ned_m: f64,
+}
+
+/// A quadrotor airframe: the profile's numbers and its mixing matrices.
+#[derive(Debug, Clone)]
+pub struct Airframe {
+    profile: Profile,
+    /// `[T, τx, τy, τz] = allocation · thrusts`.
+    allocation: Matrix4<f64>,
+    /// Its inverse.
+    mixing: Matrix4<f64>,
+}
+
+/// Motor positions in FRD (x, y) for PX4's quad X, and the yaw reaction sign.
+const MOTORS: [(f64, f64, f64); 4] = [
+    (1.0, 1.0, 1.0),
+    (-1.0, -1.0, 1.0),
+    (1.0, -1.0, -1.0),
+    (-1.0, 1.0, -1.0),
+];
+
+impl Airframe {
+    /// Builds the airframe of a profile.
+    pub fn new(profile: Profile) -> Self {
+        let d = profile.motor_offset_m;
+        let mut allocation = Matrix4::zeros();
+        for (i, (x, y, spin)) in MOTORS.iter().enumerate() {
+            allocation[(0, i)] = 1.0;
+            allocation[(1, i)] = -y * d; // τx = −Σ yᵢ Tᵢ (thrust along −z)
+            allocation[(2, i)] = x * d; // τy = Σ xᵢ Tᵢ
+            allocation[(3, i)] = spin * profile.moment_constant_m;
+        }
+        let mixing = allocation.try_inverse().expect(
+            "the X allocation matrix is invertible for any positive arm and moment constant",
+        );
+        Self {
+            profile,
+            allocation,
+            mixing,
+        }
+    }
+
+    /// The profile.
+    pub fn profile(&self) -> &Profile {
+        &self.profile
+    }
+
+    /// Motor thrusts (N) for a collective thrust (N) and body torques (N·m), with the
+    /// torques kept and the collective traded first when a motor would saturate (PX4's
+    /// mixer without airmode), then everything clipped to `0..max`.
+    pub fn mix(&self, thrust_n: f64, torque_frd_nm: Vector3<f64>) -> Vector4<f64> {
+        let max = self.profile.max_motor_thrust_n;
+        let base = Vector4::repeat(thrust_n / 4.0);
+        let mut diff =
+            self.mixing * Vector4::new(0.0, torque_frd_nm.x, torque_frd_nm.y, torque_frd_nm.z);
+        // Yaw has the lowest priority: drop it first if the spread does not fit.
+        let spread = |d: &Vector4<f64>| d.max() - d.min();
+        if spread(&diff) > max {
+            let no_yaw = self.mixing * Vector4::new(0.0, torque_frd_nm.x, torque_frd_nm.y, 0.0);
+            diff = if spread(&no_yaw) > max {
+                no_yaw * (max / spread(&no_yaw))
+            } else {
+                no_yaw
+            };
+        }
+        let mut thrusts = base + diff;
+        let (hi, lo) = (thrusts.max(), thrusts.min());
+        if hi > max {
+            thrusts.add_scalar_mut(-(hi - max));
+        } else if lo < 0.0 {
+            thrusts.add_scalar_mut(-lo);
+        }
+        thrusts.map(|t| t.clamp(0.0, max))
+    }
+
+    /// Collective thrust (N) and torques (N·m) produced by motor thrusts.
+    pub fn wrench(&self, motor_thrust_n: &Vector4<f64>) -> (f64, Vector3<f64>) {
+        let w = self.allocation * motor_thrust_n;
+        (w[0], Vector3::new(w[1], w[2], w[3]))
+    }
+
+    fn derivative(
+        &self,
+        s: &BodyState,
+        motor_cmd_n: &Vector4<f64>,
+        env: &Environment,
+    ) -> Derivative {
+        let p = &self.profile;
+        let (thrust, torque) = self.wrench(&s.motor_thrust_n);
+        let thrust_ned = s.attitude * Vector3::new(0.0, 0.0, -thrust / p.mass_kg);
+        let drag = (s.vel_ned_mps - env.wind_ned_mps) * -p.linear_drag_per_s;
+        let vel = thrust_ned + drag + Vector3::new(0.0, 0.0, GRAVITY_MPS2);
+        let inertia = p.inertia_kg_m2;
+        let w = s.rate_frd_rps;
+        let gyro = w.cross(&inertia.component_mul(&w));
+        let rate = (torque - gyro).component_div(&inertia);
+        let omega = Quaternion::from_imag(w);
+        let quat = s.attitude.quaternion() * omega * 0.5;
+        let motors = (motor_cmd_n - s.motor_thrust_n) / p.motor_time_constant_s;
+        Derivative {
+            pos: s.vel_ned_mps,
+            vel,
+            quat,
+            rate,
+            motors,
+        }
+    }
+
+    /// Advances the state by `dt_s` with RK4 under motor thrust commands `motor_cmd_n`
+    /// (held constant over the step), then applies the ground contact.
+    pub fn step(
+        &self,
+        s: &BodyState,
+        motor_cmd_n: &Vector4<f64>,
+        env: &Environment,
+        dt_s: f64,
+    ) -> BodyState {
+        let cmd = motor_cmd_n.map(|t| t.clamp(0.0, self.profile.max_motor_thrust_n));
+        let add = |s: &BodyState, d: &Derivative, h: f64| BodyState {
+            pos_ned_m: s.pos_ned_m + d.pos * h,
+            vel_ned_mps: s.vel_ned_mps + d.vel * h,
+            attitude: UnitQuaternion::new_unchecked(s.attitude.quaternion() + d.quat * h),
+            rate_frd_rps: s.rate_frd_rps + d.rate * h,
+            motor_thrust_n: s.motor_thrust_n + d.motors * h,
+        };
+        let k1 = self.derivative(s, &cmd, env);
+        let k2 = self.derivative(&add(s, &k1, dt_s / 2.0), &cmd, env);
+        let k3 = self.derivative(&add(s, &k2, dt_s / 2.0), &cmd, env);
+        let k4 = self.derivative(&add(s, &k3, dt_s), &cmd, env);
+        let sum = Derivative {
+            pos: k1.pos + (k2.pos + k3.pos) * 2.0 + k4.pos,
+            vel: k1.vel + (k2.vel + k3.vel) * 2.0 + k4.vel,
+            quat: k1.quat + (k2.quat + k3.quat) * 2.0 + k4.quat,
+            rate: k1.rate + (k2.rate + k3.rate) * 2.0 + k4.rate,
+            motors: k1.motors + (k2.motors + k3.motors) * 2.0 + k4.motors,
+        };
+        let mut next = add(s, &sum, dt_s / 6.0);
+        next.attitude = UnitQuaternion::new_normalize(*next.attitude.quaternion());
+        self.apply_ground(&mut next, env);
+        next
+    }
+
+    /// Keeps the vehicle on or above the ground; on the ground and unable to lift off it
+    /// rests level at its heading, with no velocity and no rates.
+    fn apply_ground(&self, s: &mut BodyState, env: &Environment) {
+        if s.pos_ned_m.z < env.ground_z_ned_m {
+            return;
+        }
+        let (thrust, _) = self.wrench(&s.motor_thrust_n);
+        let lift_up = (s.attitude * Vector3::new(0.0, 0.0, -thrust)).z; // NED: negative is up
+        let can_lift = -lift_up > self.profile.mass_kg * GRAVITY_MPS2;
+        s.pos_ned_m.z = env.ground_z_ned_m;
+        if can_lift {
+            s.vel_ned_mps.z = s.vel_ned_mps.z.min(0.0);
+        } else {
+            let (_, _, yaw) = s.attitude.euler_angles();
+            s.vel_ned_mps = Vector3::zeros();
+            s.rate_frd_rps = Vector3::zeros();
+            s.attitude = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
+        }
+    }
+
+    /// Whether the state is resting on the ground.
+    pub fn on_ground(&self, s: &BodyState, env: &Environment) -> bool {
+        s.pos_ned_m.z >= env.ground_z_ned_m - 1e-9
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DT: f64 = 1e-3;
+
+    #[test]
+    fn hover_thrust_holds_altitude_within_a_centimetre_for_ten_seconds() {
+        for profile in Profile::all() {
+            let frame = Airframe::new(profile.clone());
+            let hover = profile.mass_kg * GRAVITY_MPS2 / 4.0;
+            let mut s = BodyState::at_rest(Vector3::new(0.0, 0.0, -10.0));
+            s.motor_thrust_n = Vector4::repeat(hover);
+            let env = Environment {
+                ground_z_ned_m: 0.0,
+                ..Default::default()
+            };
+            for _ in 0..10_000 {
+                s = frame.step(&s, &Vector4::repeat(hover), &env, DT);
+            }
+            assert!(
+                (s.pos_ned_m.z + 10.0).abs() < 0.01,
+                "{}: z = {}",
+                profile.name,
+                s.pos_ned_m.z
+            );
+            assert!(s.pos_ned_m.xy().norm() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn free_fall_after_motor_cut_matches_g() {
+        let frame = Airframe::new(Profile::ideal());
+        let mut s = BodyState::at_rest(Vector3::new(0.0, 0.0, -100.0));
+        let env = Environment {
+            ground_z_ned_m: 0.0,
+            ..Default::default()
+        };
+        for _ in 0..2000 {
+            s = frame.step(&s, &Vector4::zeros(), &env, DT);
+        }
+        // After 2 s: v = g·t, z = z0 + g·t²/2.
+        assert!((s.vel_ned_mps.z / (GRAVITY_MPS2 * 2.0) - 1.0).abs() < 0.005);
+        assert!(((s.pos_ned_m.z + 100.0) / (0.5 * GRAVITY_MPS2 * 4.0) - 1.0).abs() < 0.005);
+    }
+
+    #[test]
+    fn quaternion_stays_unit_over_a_million_steps() {
+        let frame = Airframe::new(Profile::x500());
+        let mut s = BodyState::at_rest(Vector3::new(0.0, 0.0, -1e6));
+        s.rate_frd_rps = Vector3::new(3.0, -2.0, 1.5);
+        let env = Environment {
+            ground_z_ned_m: 1e9,
+            ..Default::default()
+        };
+        for _ in 0..1_000_000 {
+            s = frame.step(&s, &Vector4::zeros(), &env, DT);
+        }
+        assert!((s.attitude.quaternion().norm() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn ground_holds_a_vehicle_without_thrust_at_zero_height() {
+        let frame = Airframe::new(Profile::x500());
+        let env = Environment {
+            ground_z_ned_m: 0.0,
+            ..Default::default()
+        };
+        let mut s = BodyState::at_rest(Vector3::zeros());
+        for _ in 0..5000 {
+            s = frame.step(&s, &Vector4::zeros(), &env, DT);
+        }
+        assert_eq!(s.pos_ned_m, Vector3::zeros());
+        assert_eq!(s.vel_ned_mps, Vector3::zeros());
+        // Dropped from 2 m, it lands and stays on the ground, never below.
+        let mut s = BodyState::at_rest(Vector3::new(0.0, 0.0, -2.0));
+        for _ in 0..3000 {
+            s = frame.step(&s, &Vector4::zeros(), &env, DT);
+            assert!(s.pos_ned_m.z <= 0.0);
+        }
+        assert_eq!(s.pos_ned_m.z, 0.0);
+    }
+
+    #[test]
+    fn full_thrust_lifts_off_the_ground() {
+        let profile = Profile::x500();
+        let frame = Airframe::new(profile.clone());
+        let env = Environment {
+            ground_z_ned_m: 0.0,
+            ..Default::default()
+        };
+        let mut s = BodyState::at_rest(Vector3::zeros());
+        for _ in 0..1000 {
+            s = frame.step(&s, &Vector4::repeat(profile.max_motor_thrust_n), &env, DT);
+        }
+        assert!(s.pos_ned_m.z < -0.5, "z = {}", s.pos_ned_m.z);
+    }
+
+    #[test]
+    fn mixer_reproduces_requested_wrench_inside_limits() {
+        let frame = Airframe::new(Profile::x500());
+        let torque = Vector3::new(0.3, -0.2, 0.05);
+        let thrusts = frame.mix(20.0, torque);
+        let (t, tau) = frame.wrench(&thrusts);
+        assert!((t - 20.0).abs() < 1e-9 && (tau - torque).norm() < 1e-9);
+        // A positive roll torque needs more thrust on the left motors (2, 3).
+        assert!(thrusts[1] > thrusts[0] && thrusts[2] > thrusts[3]);
+    }
+
+    #[test]
+    fn drag_pulls_velocity_towards_the_wind() {
+        let profile = Profile::x500();
+        let frame = Airframe::new(profile.clone());
+        let hover = profile.mass_kg * GRAVITY_MPS2 / 4.0;
+        let mut s = BodyState::at_rest(Vector3::new(0.0, 0.0, -50.0));
+        s.motor_thrust_n = Vector4::repeat(hover);
+        let env = Environment {
+            wind_ned_mps: Vector3::new(3.0, 0.0, 0.0),
+            ground_z_ned_m: 0.0,
+        };
+        for _ in 0..1000 {
+            s = frame.step(&s, &Vector4::repeat(hover), &env, DT);
+        }
+        // dv/dt = c(w − v): v(1 s) = 3·(1 − e^(−0.1)).
+        assert!((s.vel_ned_mps.x - 3.0 * (1.0 - (-0.1f64).exp())).abs() < 1e-6);
+    }
+}

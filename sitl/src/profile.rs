@@ -1,0 +1,166 @@
+//! Vehicle profiles: the physical numbers and controller gains of an emulated quadrotor.
+//!
+//! | profile | mass | thrust/weight | hover | motor lag | drag | used for |
+//! |---|---|---|---|---|---|---|
+//! | `ideal` | 1.0 kg | 5 | 0.2 | 5 ms | 0 | reproducing the paper: large margin, fast attitude |
+//! | `x500` | 2.0 kg | 2 | 0.5 | 30 ms | 0.10 /s | a Holybro X500-class frame |
+//!
+//! The x500 inertia, arm and moment constant follow PX4's Gazebo x500 model
+//! (`Ixx = Iyy = 0.0217`, `Izz = 0.040` kg·m², motors at ±0.174 m, moment constant
+//! 0.016 m); its motor lag is the slower of Gazebo's up/down time constants.
+
+use std::fmt;
+use std::str::FromStr;
+
+use nalgebra::Vector3;
+
+/// Standard gravity (m/s²).
+pub const GRAVITY_MPS2: f64 = 9.806_65;
+
+/// Gains of the PX4-like attitude and rate controllers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AttitudeGains {
+    /// Attitude P (1/s) for roll/pitch and for yaw.
+    pub attitude_p: Vector3<f64>,
+    /// Rate P (1/s), applied to the rate error to give angular acceleration.
+    pub rate_p: Vector3<f64>,
+    /// Rate I (1/s²).
+    pub rate_i: Vector3<f64>,
+    /// Rate D (dimensionless), on the measured rate's derivative.
+    pub rate_d: Vector3<f64>,
+    /// Largest commanded body rate (rad/s).
+    pub max_rate_rps: Vector3<f64>,
+}
+
+/// A vehicle profile.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Profile {
+    /// Name, as used in configs and on the command line.
+    pub name: &'static str,
+    /// Mass (kg).
+    pub mass_kg: f64,
+    /// Principal moments of inertia about body x, y, z (kg·m²).
+    pub inertia_kg_m2: Vector3<f64>,
+    /// Motor distance along body x and y from the centre (m), X configuration.
+    pub motor_offset_m: f64,
+    /// Thrust of one motor at full command (N).
+    pub max_motor_thrust_n: f64,
+    /// Yaw reaction moment per newton of thrust (m).
+    pub moment_constant_m: f64,
+    /// First-order motor time constant (s).
+    pub motor_time_constant_s: f64,
+    /// Linear drag: acceleration per m/s of airspeed (1/s).
+    pub linear_drag_per_s: f64,
+    /// Attitude and rate controller gains.
+    pub gains: AttitudeGains,
+}
+
+impl Profile {
+    /// Collective thrust at full command (N).
+    pub fn max_thrust_n(&self) -> f64 {
+        4.0 * self.max_motor_thrust_n
+    }
+
+    /// The normalised thrust that hovers (PX4's `MPC_THR_HOVER`).
+    pub fn hover_throttle(&self) -> f64 {
+        self.mass_kg * GRAVITY_MPS2 / self.max_thrust_n()
+    }
+
+    /// The `ideal` profile: thrust-to-weight 5, fast motors, no drag.
+    pub fn ideal() -> Self {
+        Self {
+            name: "ideal",
+            mass_kg: 1.0,
+            inertia_kg_m2: Vector3::new(0.01, 0.01, 0.018),
+            motor_offset_m: 0.15,
+            max_motor_thrust_n: 5.0 * GRAVITY_MPS2 / 4.0,
+            moment_constant_m: 0.016,
+            motor_time_constant_s: 0.005,
+            linear_drag_per_s: 0.0,
+            gains: AttitudeGains {
+                attitude_p: Vector3::new(12.0, 12.0, 5.0),
+                rate_p: Vector3::new(40.0, 40.0, 20.0),
+                rate_i: Vector3::new(20.0, 20.0, 10.0),
+                rate_d: Vector3::new(0.0, 0.0, 0.0),
+                max_rate_rps: Vector3::new(6.0, 6.0, 3.0),
+            },
+        }
+    }
+
+    /// The `x500` profile: about 2 kg, thrust-to-weight 2, 30 ms motors, mild drag.
+    pub fn x500() -> Self {
+        Self {
+            name: "x500",
+            mass_kg: 2.0,
+            inertia_kg_m2: Vector3::new(0.0217, 0.0217, 0.040),
+            motor_offset_m: 0.174,
+            max_motor_thrust_n: 2.0 * 2.0 * GRAVITY_MPS2 / 4.0,
+            moment_constant_m: 0.016,
+            motor_time_constant_s: 0.03,
+            linear_drag_per_s: 0.10,
+            gains: AttitudeGains {
+                attitude_p: Vector3::new(6.5, 6.5, 2.8),
+                rate_p: Vector3::new(18.0, 18.0, 8.0),
+                rate_i: Vector3::new(8.0, 8.0, 4.0),
+                rate_d: Vector3::new(0.0, 0.0, 0.0),
+                max_rate_rps: Vector3::new(3.8, 3.8, 3.5),
+            },
+        }
+    }
+
+    /// Every profile, for listings.
+    pub fn all() -> [Self; 2] {
+        [Self::ideal(), Self::x500()]
+    }
+}
+
+/// A profile name that is not known.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownProfile(pub String);
+
+impl fmt::Display for UnknownProfile {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let known: Vec<&str> = Profile::all().iter().map(|p| p.name).collect();
+        write!(
+            f,
+            "unknown vehicle profile \"{}\" (known: {})",
+            self.0,
+            known.join(", ")
+        )
+    }
+}
+
+impl std::error::Error for UnknownProfile {}
+
+impl FromStr for Profile {
+    type Err = UnknownProfile;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Profile::all()
+            .into_iter()
+            .find(|p| p.name == s)
+            .ok_or_else(|| UnknownProfile(s.to_owned()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn documented_numbers_hold() {
+        let x = Profile::x500();
+        assert!((x.max_thrust_n() / (x.mass_kg * GRAVITY_MPS2) - 2.0).abs() < 1e-12);
+        assert!((x.hover_throttle() - 0.5).abs() < 1e-12);
+        let i = Profile::ideal();
+        assert!((i.hover_throttle() - 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn unknown_profile_names_the_known_ones() {
+        let err = "x600".parse::<Profile>().unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "unknown vehicle profile \"x600\" (known: ideal, x500)"
+        );
+    }
+}

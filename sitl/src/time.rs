@@ -1,0 +1,65 @@
+//! Simulated time: a newtype over the time since the emulator started.
+//!
+//! Every machine and integrator takes `now` as an argument and never reads a clock, so the
+//! same inputs give the same outputs and lockstep drivers can run faster than real time.
+
+use std::ops::{Add, Sub};
+use std::time::Duration;
+
+/// Time since the start of the simulation, in whole microseconds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
+pub struct SimTime(u64);
+
+impl SimTime {
+    /// The start.
+    pub const ZERO: Self = Self(0);
+
+    /// From microseconds.
+    pub const fn from_micros(us: u64) -> Self {
+        Self(us)
+    }
+
+    /// From milliseconds.
+    pub const fn from_millis(ms: u64) -> Self {
+        Self(ms * 1000)
+    }
+
+    /// From seconds (rounded down to the microsecond; negative and NaN give zero).
+    pub fn from_secs_f64(s: f64) -> Self {
+        Self((s * 1e6).max(0.0) as u64)
+    }
+
+    /// Microseconds since the start.
+    pub const fn as_micros(self) -> u64 {
+        self.0
+    }
+
+    /// Milliseconds since the start (MAVLink's `time_boot_ms`, wrapping at `u32`).
+    pub const fn boot_ms(self) -> u32 {
+        (self.0 / 1000) as u32
+    }
+
+    /// Seconds since the start.
+    pub fn as_secs_f64(self) -> f64 {
+        self.0 as f64 * 1e-6
+    }
+
+    /// `self − earlier`, or zero if `earlier` is later.
+    pub fn saturating_since(self, earlier: Self) -> Duration {
+        Duration::from_micros(self.0.saturating_sub(earlier.0))
+    }
+}
+
+impl Add<Duration> for SimTime {
+    type Output = Self;
+    fn add(self, rhs: Duration) -> Self {
+        Self(self.0.saturating_add(rhs.as_micros() as u64))
+    }
+}
+
+impl Sub for SimTime {
+    type Output = Duration;
+    fn sub(self, rhs: Self) -> Duration {
+        self.saturating_since(rhs)
+    }
+}
