@@ -16,6 +16,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod autopilot;
 pub mod codec;
 pub mod control;
 pub mod params;

@@ -78,7 +78,13 @@ mod tests {
 
     #[test]
     fn decoding_inverts_encoding() {
-        for mode in [FlightMode::Position, FlightMode::Takeoff, FlightMode::Hold, FlightMode::Land, FlightMode::Offboard] {
+        for mode in [
+            FlightMode::Position,
+            FlightMode::Takeoff,
+            FlightMode::Hold,
+            FlightMode::Land,
+            FlightMode::Offboard,
+        ] {
             let c = mode.custom_mode();
             assert_eq!(FlightMode::from_px4((c >> 16) & 0xFF, c >> 24), Some(mode));
         }

@@ -1,0 +1,114 @@
+//! What one emulated vehicle is made of: identity, profile, start state, telemetry rates,
+//! wind. Validated once, when the vehicle is built.
+
+use nalgebra::Vector3;
+
+use crate::profile::Profile;
+
+/// Where and how a vehicle starts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StartState {
+    /// Start position as a NED offset from the world reference (m). It becomes the
+    /// vehicle's local origin.
+    pub pos_world_ned_m: Vector3<f64>,
+    /// Start velocity in NED (m/s); only used in the air.
+    pub vel_ned_mps: Vector3<f64>,
+    /// Heading (rad, NED yaw, 0 = north).
+    pub yaw_rad: f64,
+    /// On the ground and disarmed (false), or in the air, armed, with a pilot holding the
+    /// start velocity until OFFBOARD (true).
+    pub in_air: bool,
+}
+
+/// Steady wind plus seeded gusts (a first-order Gauss–Markov process per axis).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WindConfig {
+    /// Steady wind in NED (m/s).
+    pub steady_ned_mps: Vector3<f64>,
+    /// Standard deviation of the gusts (m/s); 0 disables them.
+    pub gust_std_mps: f64,
+    /// Correlation time of the gusts (s).
+    pub gust_tau_s: f64,
+}
+
+impl Default for WindConfig {
+    fn default() -> Self {
+        Self {
+            steady_ned_mps: Vector3::zeros(),
+            gust_std_mps: 0.0,
+            gust_tau_s: 2.0,
+        }
+    }
+}
+
+/// One vehicle.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VehicleConfig {
+    /// MAVLink system id (1..=250); component id is always 1.
+    pub system_id: u8,
+    /// The airframe.
+    pub profile: Profile,
+    /// The start state.
+    pub start: StartState,
+    /// Default rate of the high-rate streams ATTITUDE, ATTITUDE_QUATERNION,
+    /// LOCAL_POSITION_NED and GLOBAL_POSITION_INT (Hz).
+    pub fast_rate_hz: f64,
+    /// Wind.
+    pub wind: WindConfig,
+    /// Seed of the vehicle's random numbers (gusts).
+    pub seed: u64,
+}
+
+impl VehicleConfig {
+    /// A vehicle on the ground at the world reference, `x500`, 50 Hz telemetry.
+    pub fn new(system_id: u8, profile: Profile) -> Self {
+        Self {
+            system_id,
+            profile,
+            start: StartState {
+                pos_world_ned_m: Vector3::zeros(),
+                vel_ned_mps: Vector3::zeros(),
+                yaw_rad: 0.0,
+                in_air: false,
+            },
+            fast_rate_hz: 50.0,
+            wind: WindConfig::default(),
+            seed: u64::from(system_id),
+        }
+    }
+
+    /// Checks the numbers a vehicle cannot fly with.
+    ///
+    /// # Errors
+    /// A message naming the field and its value.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.system_id == 0 || self.system_id > 250 {
+            return Err(format!("system_id must be 1..=250, got {}", self.system_id));
+        }
+        let finite = |v: &Vector3<f64>| v.iter().all(|x| x.is_finite());
+        if !finite(&self.start.pos_world_ned_m)
+            || !finite(&self.start.vel_ned_mps)
+            || !self.start.yaw_rad.is_finite()
+        {
+            return Err(format!(
+                "vehicle {}: start state must be finite numbers",
+                self.system_id
+            ));
+        }
+        if !(self.fast_rate_hz > 0.0 && self.fast_rate_hz <= 1000.0) {
+            return Err(format!(
+                "vehicle {}: telemetry rate must be in (0, 1000] Hz, got {}",
+                self.system_id, self.fast_rate_hz
+            ));
+        }
+        let w = &self.wind;
+        let gusts_ok = w.gust_std_mps >= 0.0 && w.gust_tau_s > 0.0;
+        if !finite(&w.steady_ned_mps) || !gusts_ok {
+            return Err(format!(
+                "vehicle {}: wind needs finite steady wind, gust_std ≥ 0 and gust_tau > 0",
+                self.system_id
+            ));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,527 @@
+//! One emulated vehicle: PX4's wire behaviour around the physics, as a sans-IO machine.
+//!
+//! ```text
+//!            arm (400)                 DO_SET_MODE 6 with a live stream
+//!  DISARMED ───────────► ARMED ──────────────────────────────────────► OFFBOARD
+//!     ▲   ◄─────────────  │  ▲                                             │
+//!     │  disarm (landed,  │  └──── Position / Hold / Land / Takeoff ◄──────┤ setpoints silent
+//!     │  or forced)       │        (DO_SET_MODE, NAV_LAND, NAV_TAKEOFF)    │ > COM_OF_LOSS_T:
+//!     └───────────────────┴── landed for COM_DISARM_LAND, or armed         │ COM_OBL_RC_ACT
+//!                             without takeoff for COM_DISARM_PRFLT         ▼ (failsafe)
+//! ```
+//!
+//! A *live stream* is SET_ATTITUDE_TARGET messages carrying thrust, addressed to this
+//! system (or 0), finite, with a unit quaternion and thrust in `0..=1`, with no gap over
+//! 0.5 s (PX4's 2 Hz floor) for at least 1 s. OFFBOARD is refused with
+//! TEMPORARILY_REJECTED otherwise.
+//!
+//! Driving it: call [`Vehicle::handle_datagram`] for every datagram received on a link,
+//! [`Vehicle::handle_timeout`] whenever time has advanced (at least every
+//! [`PHYSICS_STEP`]; the machine integrates in fixed 1 ms steps up to `now`), then drain
+//! [`Vehicle::poll_transmit`]. It never reads a clock or touches a socket.
+
+mod commands;
+mod config;
+mod inbound;
+mod mode;
+mod telemetry;
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use nalgebra::{Vector3, Vector4};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+pub use config::{StartState, VehicleConfig, WindConfig};
+pub use mode::FlightMode;
+
+use crate::codec::Encoder;
+use crate::control::{AttitudeController, AttitudeSetpoint, Guidance, PositionGains, guide};
+use crate::params::ParamTable;
+use crate::physics::{Airframe, BodyState, Environment};
+use crate::profile::GRAVITY_MPS2;
+use crate::time::SimTime;
+use crate::world::World;
+
+/// The fixed physics and autopilot step.
+pub const PHYSICS_STEP: Duration = Duration::from_millis(1);
+/// Largest gap between setpoints that still counts as a stream (PX4's 2 Hz floor).
+const STREAM_GAP: Duration = Duration::from_millis(500);
+/// How long a stream must have lasted before OFFBOARD is accepted.
+const STREAM_MIN_AGE: Duration = Duration::from_secs(1);
+
+/// The two MAVLink links of a PX4 SITL instance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum LinkId {
+    /// The offboard/API link (binds 14580+i, sends to 14540+i).
+    Offboard = 0,
+    /// The ground-station link (binds 18570+i, sends to 14550).
+    Gcs = 1,
+}
+
+/// Bytes to send on a link.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Transmit {
+    /// The link.
+    pub link: LinkId,
+    /// One MAVLink frame.
+    pub bytes: Vec<u8>,
+}
+
+/// Something the driver or a test may want to know.
+#[derive(Debug, Clone, PartialEq)]
+pub enum VehicleEvent {
+    /// Armed.
+    Armed,
+    /// Disarmed, and why.
+    Disarmed(&'static str),
+    /// A new flight mode.
+    ModeChanged(FlightMode),
+    /// The offboard stream was lost; the failsafe took `FlightMode` (or disarmed).
+    OffboardLost {
+        /// When the loss was detected.
+        at: SimTime,
+        /// The last setpoint.
+        last_setpoint: SimTime,
+    },
+}
+
+/// Counters of what was refused or ignored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Counters {
+    /// Frames that failed to decode (CRC, truncation, unknown id, garbage).
+    pub bad_frames: u64,
+    /// Messages addressed to another system.
+    pub foreign_target: u64,
+    /// Attitude setpoints refused (non-finite, non-unit quaternion, thrust out of range).
+    pub rejected_setpoints: u64,
+    /// Commands answered UNSUPPORTED.
+    pub unsupported_commands: u64,
+}
+
+/// A snapshot for status lines and tests.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VehicleStatus {
+    /// System id.
+    pub system_id: u8,
+    /// Flight mode.
+    pub mode: FlightMode,
+    /// Armed.
+    pub armed: bool,
+    /// In the offboard-loss failsafe.
+    pub failsafe: bool,
+    /// On the ground.
+    pub landed: bool,
+    /// Height above the ground (m).
+    pub height_m: f64,
+    /// Position as a NED offset from the world reference (m).
+    pub pos_world_ned_m: Vector3<f64>,
+    /// Velocity in NED (m/s).
+    pub vel_ned_mps: Vector3<f64>,
+    /// Battery remaining (%).
+    pub battery_pct: f64,
+    /// When each link last heard anything valid.
+    pub last_heard: [Option<SimTime>; 2],
+    /// Counters.
+    pub counters: Counters,
+}
+
+/// One telemetry stream on one link.
+#[derive(Debug, Clone, Copy)]
+struct Stream {
+    msg_id: u32,
+    default_interval: Option<Duration>,
+    interval: Option<Duration>,
+    next_due: SimTime,
+}
+
+/// Per-link state.
+#[derive(Debug, Clone)]
+struct Link {
+    encoder: Encoder,
+    streams: Vec<Stream>,
+    last_heard: Option<SimTime>,
+}
+
+/// The battery model.
+#[derive(Debug, Clone, Copy)]
+struct Battery {
+    consumed_mah: f64,
+    current_a: f64,
+}
+
+/// One emulated vehicle.
+#[derive(Debug, Clone)]
+pub struct Vehicle {
+    cfg: VehicleConfig,
+    world: World,
+    frame: Airframe,
+    state: BodyState,
+    env: Environment,
+    controller: AttitudeController,
+    position_gains: PositionGains,
+    params: ParamTable,
+    armed: bool,
+    mode: FlightMode,
+    failsafe: bool,
+    landed: bool,
+    took_off: bool,
+    landed_since: Option<SimTime>,
+    armed_at: SimTime,
+    stream_first: Option<SimTime>,
+    stream_last: Option<SimTime>,
+    offboard_setpoint: AttitudeSetpoint,
+    guidance: Guidance,
+    heading_rad: f64,
+    battery: Battery,
+    gust_ned_mps: Vector3<f64>,
+    rng: ChaCha8Rng,
+    links: [Link; 2],
+    outbox: VecDeque<Transmit>,
+    events: VecDeque<VehicleEvent>,
+    last_step: SimTime,
+    counters: Counters,
+}
+
+impl Vehicle {
+    /// Builds a vehicle at time zero.
+    ///
+    /// # Errors
+    /// The message of [`VehicleConfig::validate`].
+    pub fn new(cfg: VehicleConfig, world: World) -> Result<Self, String> {
+        cfg.validate()?;
+        let frame = Airframe::new(cfg.profile.clone());
+        let start = &cfg.start;
+        let local_start = Vector3::zeros();
+        let ground_local_z = world.ground_down_m - start.pos_world_ned_m.z;
+        if ground_local_z < -1e-9 {
+            return Err(format!(
+                "vehicle {}: start position is below the ground",
+                cfg.system_id
+            ));
+        }
+        let mut state = BodyState::at_rest(local_start);
+        state.attitude = nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, start.yaw_rad);
+        let in_air = start.in_air && ground_local_z > 1e-9;
+        if in_air {
+            state.vel_ned_mps = start.vel_ned_mps;
+            state.motor_thrust_n = Vector4::repeat(cfg.profile.mass_kg * GRAVITY_MPS2 / 4.0);
+        } else {
+            state.pos_ned_m.z = ground_local_z;
+        }
+        let env = Environment {
+            wind_ned_mps: cfg.wind.steady_ned_mps,
+            ground_z_ned_m: ground_local_z,
+        };
+        let params = ParamTable::new(cfg.system_id, &cfg.profile);
+        let links = [LinkId::Offboard, LinkId::Gcs].map(|_| Link {
+            encoder: Encoder::new(cfg.system_id, 1),
+            streams: telemetry::default_streams(cfg.fast_rate_hz),
+            last_heard: None,
+        });
+        let rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+        let guidance = if in_air {
+            Guidance::Velocity(start.vel_ned_mps)
+        } else {
+            Guidance::Position(state.pos_ned_m)
+        };
+        Ok(Self {
+            world,
+            frame,
+            env,
+            controller: AttitudeController::default(),
+            position_gains: PositionGains::default(),
+            params,
+            armed: in_air,
+            mode: FlightMode::Position,
+            failsafe: false,
+            landed: !in_air,
+            took_off: in_air,
+            landed_since: None,
+            armed_at: SimTime::ZERO,
+            stream_first: None,
+            stream_last: None,
+            offboard_setpoint: AttitudeSetpoint::idle(start.yaw_rad),
+            guidance,
+            heading_rad: start.yaw_rad,
+            battery: Battery {
+                consumed_mah: 0.0,
+                current_a: 0.0,
+            },
+            gust_ned_mps: Vector3::zeros(),
+            rng,
+            links,
+            outbox: VecDeque::new(),
+            events: VecDeque::new(),
+            last_step: SimTime::ZERO,
+            counters: Counters::default(),
+            state,
+            cfg,
+        })
+    }
+
+    /// System id.
+    pub fn system_id(&self) -> u8 {
+        self.cfg.system_id
+    }
+
+    /// The next time [`Vehicle::handle_timeout`] must be called.
+    pub fn poll_timeout(&self) -> SimTime {
+        self.last_step + PHYSICS_STEP
+    }
+
+    /// The next frame to send, if any.
+    pub fn poll_transmit(&mut self) -> Option<Transmit> {
+        self.outbox.pop_front()
+    }
+
+    /// The next event, if any.
+    pub fn poll_event(&mut self) -> Option<VehicleEvent> {
+        self.events.pop_front()
+    }
+
+    /// Advances physics and the autopilot in fixed steps up to `now` and queues the
+    /// telemetry that has come due.
+    pub fn handle_timeout(&mut self, now: SimTime) {
+        while self.last_step + PHYSICS_STEP <= now {
+            let t = self.last_step + PHYSICS_STEP;
+            self.step(t);
+            self.last_step = t;
+            self.emit_due_telemetry(t);
+        }
+    }
+
+    /// A snapshot of the vehicle.
+    pub fn status(&self) -> VehicleStatus {
+        VehicleStatus {
+            system_id: self.cfg.system_id,
+            mode: self.mode,
+            armed: self.armed,
+            failsafe: self.failsafe,
+            landed: self.landed,
+            height_m: self.env.ground_z_ned_m - self.state.pos_ned_m.z,
+            pos_world_ned_m: self.cfg.start.pos_world_ned_m + self.state.pos_ned_m,
+            vel_ned_mps: self.state.vel_ned_mps,
+            battery_pct: self.battery_remaining_pct(),
+            last_heard: [self.links[0].last_heard, self.links[1].last_heard],
+            counters: self.counters,
+        }
+    }
+
+    /// The mechanical state (local NED).
+    pub fn body(&self) -> &BodyState {
+        &self.state
+    }
+
+    /// The parameter table.
+    pub fn params(&self) -> &ParamTable {
+        &self.params
+    }
+
+    fn dt_s() -> f64 {
+        PHYSICS_STEP.as_secs_f64()
+    }
+
+    /// One fixed step of autopilot logic, control and physics ending at `t`.
+    fn step(&mut self, t: SimTime) {
+        self.check_offboard_loss(t);
+        let setpoint = self.current_setpoint();
+        let dt = Self::dt_s();
+        let motors = if self.armed {
+            self.controller
+                .update(&self.frame, &self.state, &setpoint, dt)
+        } else {
+            self.controller.reset();
+            Vector4::zeros()
+        };
+        self.update_wind(dt);
+        self.state = self.frame.step(&self.state, &motors, &self.env, dt);
+        self.update_battery(dt);
+        self.update_landed(t);
+    }
+
+    /// What the attitude controller tracks in the current mode.
+    fn current_setpoint(&mut self) -> AttitudeSetpoint {
+        let hover = self.params.value("MPC_THR_HOVER");
+        if !self.armed {
+            return AttitudeSetpoint::idle(self.heading_rad);
+        }
+        match self.mode {
+            FlightMode::Offboard => self.offboard_setpoint,
+            _ if self.landed && !matches!(self.mode, FlightMode::Takeoff) => {
+                AttitudeSetpoint::idle(self.heading_rad)
+            }
+            _ => {
+                self.position_gains.max_tilt_rad =
+                    self.params.value("MPC_TILTMAX_AIR").to_radians();
+                guide(
+                    &self.position_gains,
+                    &self.guidance,
+                    &self.state,
+                    hover,
+                    self.heading_rad,
+                )
+            }
+        }
+    }
+
+    fn check_offboard_loss(&mut self, t: SimTime) {
+        if self.mode != FlightMode::Offboard || self.failsafe {
+            return;
+        }
+        let timeout = Duration::from_secs_f64(self.params.value("COM_OF_LOSS_T"));
+        let last = self.stream_last.unwrap_or(SimTime::ZERO);
+        if t - last <= timeout {
+            return;
+        }
+        self.failsafe = true;
+        self.events.push_back(VehicleEvent::OffboardLost {
+            at: t,
+            last_setpoint: last,
+        });
+        tracing::warn!(
+            sysid = self.cfg.system_id,
+            silent_ms = (t - last).as_millis() as u64,
+            "offboard setpoints lost"
+        );
+        match self.params.value("COM_OBL_RC_ACT") as i64 {
+            3 | 4 => self.enter_mode(FlightMode::Land),
+            5 => self.enter_mode(FlightMode::Hold),
+            6 | 7 => self.disarm("offboard loss failsafe"),
+            _ => self.enter_mode(FlightMode::Position),
+        }
+    }
+
+    /// Switches mode and sets the guidance target it holds.
+    fn enter_mode(&mut self, mode: FlightMode) {
+        let here = self.state.pos_ned_m;
+        self.guidance = match mode {
+            FlightMode::Land => Guidance::Descend {
+                xy_m: here.xy(),
+                speed_mps: self.params.value("MPC_LAND_SPEED"),
+            },
+            FlightMode::Takeoff => {
+                let alt = self.params.value("MIS_TAKEOFF_ALT");
+                Guidance::Position(Vector3::new(here.x, here.y, self.env.ground_z_ned_m - alt))
+            }
+            _ => Guidance::Position(here),
+        };
+        if self.mode != mode {
+            self.mode = mode;
+            self.events.push_back(VehicleEvent::ModeChanged(mode));
+            tracing::info!(
+                sysid = self.cfg.system_id,
+                mode = mode.name(),
+                "mode changed"
+            );
+        }
+    }
+
+    fn arm(&mut self, t: SimTime) {
+        if !self.armed {
+            self.armed = true;
+            self.armed_at = t;
+            self.took_off = !self.landed;
+            self.controller.reset();
+            self.events.push_back(VehicleEvent::Armed);
+            tracing::info!(sysid = self.cfg.system_id, "armed");
+        }
+    }
+
+    fn disarm(&mut self, why: &'static str) {
+        if self.armed {
+            self.armed = false;
+            self.failsafe = false;
+            self.controller.reset();
+            self.events.push_back(VehicleEvent::Disarmed(why));
+            tracing::info!(sysid = self.cfg.system_id, reason = why, "disarmed");
+        }
+    }
+
+    fn update_landed(&mut self, t: SimTime) {
+        let on_ground =
+            self.frame.on_ground(&self.state, &self.env) && self.state.vel_ned_mps.norm() < 0.5;
+        if on_ground != self.landed {
+            self.landed = on_ground;
+            self.landed_since = on_ground.then_some(t);
+            if !on_ground {
+                self.took_off = true;
+            }
+        }
+        if let (FlightMode::Takeoff, Guidance::Position(target)) = (self.mode, self.guidance)
+            && (self.state.pos_ned_m.z - target.z).abs() < 0.2
+        {
+            self.enter_mode(FlightMode::Hold);
+        }
+        if !self.armed {
+            return;
+        }
+        if self.landed && self.took_off {
+            let after = self.params.value("COM_DISARM_LAND");
+            if after >= 0.0
+                && self
+                    .landed_since
+                    .is_some_and(|since| t - since >= Duration::from_secs_f64(after))
+            {
+                self.disarm("landed");
+                self.enter_mode(FlightMode::Position);
+            }
+        } else if self.landed && !self.took_off {
+            let after = self.params.value("COM_DISARM_PRFLT");
+            if after > 0.0 && t - self.armed_at >= Duration::from_secs_f64(after) {
+                self.disarm("no takeoff after arming");
+            }
+        }
+    }
+
+    fn update_wind(&mut self, dt: f64) {
+        let w = self.cfg.wind;
+        if w.gust_std_mps > 0.0 {
+            let a = (-dt / w.gust_tau_s).exp();
+            let b = w.gust_std_mps * (1.0 - a * a).sqrt();
+            let noise = Vector3::from_fn(|_, _| self.rng.sample::<f64, _>(StandardNormal));
+            self.gust_ned_mps = self.gust_ned_mps * a + noise * b;
+        }
+        self.env.wind_ned_mps = w.steady_ned_mps + self.gust_ned_mps;
+    }
+
+    fn update_battery(&mut self, dt: f64) {
+        let p = &self.cfg.profile;
+        let thrust: f64 = self.state.motor_thrust_n.sum();
+        let hover = p.mass_kg * GRAVITY_MPS2;
+        let hover_current_a = 7.5 * p.mass_kg;
+        self.battery.current_a = if self.armed {
+            0.5 + hover_current_a * (thrust / hover).max(0.0).powf(1.5)
+        } else {
+            0.3
+        };
+        self.battery.consumed_mah += self.battery.current_a * dt / 3.6;
+    }
+
+    fn battery_remaining_pct(&self) -> f64 {
+        let capacity = self.params.value("BAT1_CAPACITY").max(1.0);
+        (100.0 * (1.0 - self.battery.consumed_mah / capacity)).clamp(0.0, 100.0)
+    }
+
+    /// Whether a live setpoint stream exists at `t`.
+    fn stream_is_live(&self, t: SimTime) -> bool {
+        match (self.stream_first, self.stream_last) {
+            (Some(first), Some(last)) => t - last <= STREAM_GAP && t - first >= STREAM_MIN_AGE,
+            _ => false,
+        }
+    }
+
+    /// Records one valid setpoint with thrust at `t`.
+    fn note_setpoint(&mut self, t: SimTime) {
+        let continuing = self.stream_last.is_some_and(|last| t - last <= STREAM_GAP);
+        if !continuing {
+            self.stream_first = Some(t);
+        }
+        self.stream_last = Some(t);
+    }
+}
+
+#[cfg(test)]
+mod tests;

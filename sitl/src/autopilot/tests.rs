@@ -1,0 +1,393 @@
+//! The autopilot machine driven by encoded frames in virtual time.
+
+use std::time::Duration;
+
+use mavlink::dialects::common::{
+    AttitudeTargetTypemask, COMMAND_LONG_DATA, MavCmd, MavMessage, MavResult,
+    PARAM_REQUEST_LIST_DATA, SET_ATTITUDE_TARGET_DATA,
+};
+use nalgebra::Vector3;
+
+use super::*;
+use crate::codec::{Encoder, decode_datagram};
+use crate::profile::Profile;
+
+const GCS: (u8, u8) = (255, 190);
+
+struct Rig {
+    vehicle: Vehicle,
+    now: SimTime,
+    gcs: Encoder,
+    received: Vec<(SimTime, LinkId, MavMessage)>,
+}
+
+impl Rig {
+    fn new(cfg: VehicleConfig) -> Self {
+        Self {
+            vehicle: Vehicle::new(cfg, World::default()).unwrap(),
+            now: SimTime::ZERO,
+            gcs: Encoder::new(GCS.0, GCS.1),
+            received: Vec::new(),
+        }
+    }
+
+    fn on_ground() -> Self {
+        Self::new(VehicleConfig::new(1, Profile::x500()))
+    }
+
+    fn send(&mut self, msg: MavMessage) {
+        let bytes = self.gcs.encode(&msg);
+        self.vehicle
+            .handle_datagram(self.now, LinkId::Offboard, &bytes);
+        self.drain();
+    }
+
+    fn drain(&mut self) {
+        while let Some(tx) = self.vehicle.poll_transmit() {
+            for frame in decode_datagram(&tx.bytes) {
+                self.received.push((self.now, tx.link, frame.unwrap().msg));
+            }
+        }
+    }
+
+    fn advance(&mut self, d: Duration) {
+        let end = self.now + d;
+        while self.now < end {
+            self.now = self.now + PHYSICS_STEP;
+            self.vehicle.handle_timeout(self.now);
+            self.drain();
+        }
+    }
+
+    /// Streams setpoints at `hz` for `d`.
+    fn stream(&mut self, d: Duration, hz: f64, thrust: f32) {
+        let period = Duration::from_secs_f64(1.0 / hz);
+        let end = self.now + d;
+        while self.now < end {
+            self.send(setpoint(1, thrust));
+            self.advance(period);
+        }
+    }
+
+    fn command(&mut self, command: MavCmd, params: [f32; 7]) -> MavResult {
+        self.send(MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            target_system: 1,
+            target_component: 1,
+            command,
+            confirmation: 0,
+            param1: params[0],
+            param2: params[1],
+            param3: params[2],
+            param4: params[3],
+            param5: params[4],
+            param6: params[5],
+            param7: params[6],
+        }));
+        self.received
+            .iter()
+            .rev()
+            .find_map(|(_, _, m)| match m {
+                MavMessage::COMMAND_ACK(a) if a.command == command => Some(a.result),
+                _ => None,
+            })
+            .expect("every command is acknowledged")
+    }
+
+    fn offboard(&mut self) -> MavResult {
+        self.command(
+            MavCmd::MAV_CMD_DO_SET_MODE,
+            [1.0, 6.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+    }
+
+    fn arm(&mut self) -> MavResult {
+        self.command(
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+    }
+}
+
+fn setpoint(target: u8, thrust: f32) -> MavMessage {
+    MavMessage::SET_ATTITUDE_TARGET(SET_ATTITUDE_TARGET_DATA {
+        time_boot_ms: 0,
+        q: [1.0, 0.0, 0.0, 0.0],
+        body_roll_rate: 0.0,
+        body_pitch_rate: 0.0,
+        body_yaw_rate: 0.0,
+        thrust,
+        target_system: target,
+        target_component: 1,
+        type_mask: AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
+            | AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
+            | AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE,
+        thrust_body: [0.0; 3],
+    })
+}
+
+#[test]
+fn offboard_refused_before_setpoints_stream_and_accepted_after_one_second() {
+    let mut rig = Rig::on_ground();
+    rig.advance(Duration::from_millis(100));
+    assert_eq!(rig.offboard(), MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
+    rig.stream(Duration::from_millis(800), 20.0, 0.0);
+    assert_eq!(
+        rig.offboard(),
+        MavResult::MAV_RESULT_TEMPORARILY_REJECTED,
+        "0.8 s of stream is not enough"
+    );
+    rig.stream(Duration::from_millis(300), 20.0, 0.0);
+    assert_eq!(rig.offboard(), MavResult::MAV_RESULT_ACCEPTED);
+    assert_eq!(rig.vehicle.status().mode, FlightMode::Offboard);
+}
+
+#[test]
+fn setpoints_without_thrust_do_not_count_as_a_stream() {
+    let mut rig = Rig::on_ground();
+    for _ in 0..40 {
+        let mut sp = setpoint(1, 0.5);
+        if let MavMessage::SET_ATTITUDE_TARGET(ref mut d) = sp {
+            d.type_mask |= AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE;
+        }
+        rig.send(sp);
+        rig.advance(Duration::from_millis(50));
+    }
+    assert_eq!(rig.offboard(), MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
+}
+
+#[test]
+fn failsafe_enters_between_loss_timeout_and_200_ms_later() {
+    for (action, expected) in [
+        (5, Some(FlightMode::Hold)),
+        (4, Some(FlightMode::Land)),
+        (7, None),
+    ] {
+        let mut rig = Rig::on_ground();
+        rig.vehicle
+            .params
+            .set(
+                "COM_OBL_RC_ACT",
+                f32::from_ne_bytes((action as i32).to_ne_bytes()),
+            )
+            .unwrap();
+        rig.stream(Duration::from_millis(1100), 50.0, 0.7);
+        assert_eq!(rig.arm(), MavResult::MAV_RESULT_ACCEPTED);
+        assert_eq!(rig.offboard(), MavResult::MAV_RESULT_ACCEPTED);
+        rig.stream(Duration::from_secs(2), 50.0, 0.6);
+        assert!(
+            !rig.vehicle.status().landed,
+            "climbing with thrust above hover"
+        );
+        let last = SimTime::from_micros(rig.now.as_micros() - 20_000);
+        rig.advance(Duration::from_millis(1500));
+        let lost_at = std::iter::from_fn(|| rig.vehicle.poll_event())
+            .find_map(|e| match e {
+                VehicleEvent::OffboardLost { at, last_setpoint } => Some((at, last_setpoint)),
+                _ => None,
+            })
+            .expect("failsafe event");
+        let delay = lost_at.0 - lost_at.1;
+        assert!(lost_at.1 >= last);
+        assert!(
+            delay > Duration::from_secs(1) && delay <= Duration::from_millis(1200),
+            "delay {delay:?}"
+        );
+        let status = rig.vehicle.status();
+        match expected {
+            Some(mode) => {
+                assert_eq!(status.mode, mode);
+                assert!(status.failsafe && status.armed);
+            }
+            None => assert!(!status.armed),
+        }
+    }
+}
+
+#[test]
+fn unknown_commands_are_acknowledged_unsupported_and_nan_params_are_unused() {
+    let mut rig = Rig::on_ground();
+    assert_eq!(
+        rig.command(MavCmd::MAV_CMD_DO_SET_SERVO, [1.0; 7]),
+        MavResult::MAV_RESULT_UNSUPPORTED
+    );
+    // MAVSDK's DO_SET_MODE: NaN in the unused params.
+    rig.stream(Duration::from_millis(1100), 20.0, 0.0);
+    let nan = f32::NAN;
+    assert_eq!(
+        rig.command(
+            MavCmd::MAV_CMD_DO_SET_MODE,
+            [129.0, 6.0, 0.0, nan, nan, nan, nan]
+        ),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(rig.vehicle.status().counters.unsupported_commands, 1);
+}
+
+#[test]
+fn messages_for_another_system_are_ignored() {
+    let mut rig = Rig::on_ground();
+    for _ in 0..30 {
+        rig.send(setpoint(2, 0.5));
+        rig.advance(Duration::from_millis(50));
+    }
+    assert_eq!(rig.offboard(), MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
+    assert_eq!(rig.vehicle.status().counters.foreign_target, 30);
+}
+
+#[test]
+fn bad_setpoints_are_refused_and_counted() {
+    let mut rig = Rig::on_ground();
+    for (q, thrust) in [
+        ([0.5f32, 0.0, 0.0, 0.0], 0.5f32),
+        ([1.0, 0.0, 0.0, 0.0], f32::NAN),
+        ([1.0, 0.0, 0.0, 0.0], 1.5),
+    ] {
+        let mut sp = setpoint(1, thrust);
+        if let MavMessage::SET_ATTITUDE_TARGET(ref mut d) = sp {
+            d.q = q;
+        }
+        rig.send(sp);
+    }
+    assert_eq!(rig.vehicle.status().counters.rejected_setpoints, 3);
+}
+
+#[test]
+fn disarm_in_the_air_is_denied_unless_forced_and_landing_disarms() {
+    let mut rig = Rig::on_ground();
+    rig.stream(Duration::from_millis(1100), 50.0, 0.6);
+    rig.arm();
+    rig.offboard();
+    rig.stream(Duration::from_secs(2), 50.0, 0.6);
+    assert_eq!(
+        rig.command(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]),
+        MavResult::MAV_RESULT_DENIED
+    );
+    assert_eq!(
+        rig.command(MavCmd::MAV_CMD_NAV_LAND, [0.0; 7]),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    rig.advance(Duration::from_secs(20));
+    let status = rig.vehicle.status();
+    assert!(status.landed && !status.armed, "{status:?}");
+    assert!(status.height_m.abs() < 1e-9);
+}
+
+#[test]
+fn preflight_disarm_after_ten_seconds_without_takeoff() {
+    let mut rig = Rig::on_ground();
+    rig.arm();
+    rig.advance(Duration::from_millis(9_900));
+    assert!(rig.vehicle.status().armed);
+    rig.advance(Duration::from_millis(200));
+    assert!(!rig.vehicle.status().armed);
+}
+
+#[test]
+fn heartbeat_at_one_hertz_and_fast_streams_at_fifty() {
+    let mut rig = Rig::on_ground();
+    rig.advance(Duration::from_secs(10));
+    let count = |name: &str| {
+        rig.received
+            .iter()
+            .filter(|(_, l, m)| *l == LinkId::Offboard && m.message_name() == name)
+            .count()
+    };
+    use mavlink::Message;
+    assert!(
+        (10..=11).contains(&count("HEARTBEAT")),
+        "{}",
+        count("HEARTBEAT")
+    );
+    assert!((500..=501).contains(&count("ATTITUDE")));
+    assert!((500..=501).contains(&count("GLOBAL_POSITION_INT")));
+}
+
+#[test]
+fn message_interval_changes_the_rate_on_that_link_only() {
+    use mavlink::Message;
+    let mut rig = Rig::on_ground();
+    // LOCAL_POSITION_NED (32) every 100 ms on the offboard link.
+    assert_eq!(
+        rig.command(
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            [32.0, 100_000.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+        ),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    let start = rig.now;
+    rig.advance(Duration::from_secs(10));
+    let on = |link: LinkId| {
+        rig.received
+            .iter()
+            .filter(|(t, l, m)| {
+                *t > start && *l == link && m.message_name() == "LOCAL_POSITION_NED"
+            })
+            .count()
+    };
+    assert!(
+        (99..=101).contains(&on(LinkId::Offboard)),
+        "{}",
+        on(LinkId::Offboard)
+    );
+    assert!((499..=501).contains(&on(LinkId::Gcs)));
+}
+
+#[test]
+fn parameter_list_and_set_are_answered() {
+    let mut rig = Rig::on_ground();
+    rig.send(MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA {
+        target_system: 1,
+        target_component: 1,
+    }));
+    let values: Vec<_> = rig
+        .received
+        .iter()
+        .filter_map(|(_, _, m)| match m {
+            MavMessage::PARAM_VALUE(p) => Some(p.clone()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(values.len(), rig.vehicle.params().len());
+    assert!(
+        values
+            .iter()
+            .all(|p| usize::from(p.param_count) == values.len())
+    );
+}
+
+#[test]
+fn a_vehicle_started_in_the_air_is_armed_and_holds_its_velocity() {
+    let mut cfg = VehicleConfig::new(1, Profile::ideal());
+    cfg.start = StartState {
+        pos_world_ned_m: Vector3::new(0.0, 0.0, -30.0),
+        vel_ned_mps: Vector3::new(4.0, 9.0, -7.0),
+        yaw_rad: 0.0,
+        in_air: true,
+    };
+    let mut rig = Rig::new(cfg);
+    assert!(rig.vehicle.status().armed);
+    rig.advance(Duration::from_secs(2));
+    let v = rig.vehicle.status().vel_ned_mps;
+    assert!((v - Vector3::new(4.0, 9.0, -7.0)).norm() < 0.5, "{v:?}");
+}
+
+#[test]
+fn timesync_request_is_answered_with_our_time() {
+    let mut rig = Rig::on_ground();
+    rig.advance(Duration::from_millis(1234));
+    rig.send(MavMessage::TIMESYNC(
+        mavlink::dialects::common::TIMESYNC_DATA {
+            tc1: 0,
+            ts1: 42,
+            target_system: 0,
+            target_component: 0,
+        },
+    ));
+    let reply = rig.received.iter().rev().find_map(|(_, _, m)| match m {
+        MavMessage::TIMESYNC(t) => Some(t.clone()),
+        _ => None,
+    });
+    let reply = reply.expect("timesync reply");
+    assert_eq!(reply.ts1, 42);
+    assert_eq!(reply.tc1, 1_234_000_000);
+}
