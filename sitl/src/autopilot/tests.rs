@@ -158,17 +158,14 @@ fn setpoints_without_thrust_do_not_count_as_a_stream() {
 #[test]
 fn failsafe_enters_between_loss_timeout_and_200_ms_later() {
     for (action, expected) in [
-        (5, Some(FlightMode::Hold)),
+        (5i32, Some(FlightMode::Hold)),
         (4, Some(FlightMode::Land)),
         (7, None),
     ] {
         let mut rig = Rig::on_ground();
         rig.vehicle
             .params
-            .set(
-                "COM_OBL_RC_ACT",
-                f32::from_ne_bytes((action as i32).to_ne_bytes()),
-            )
+            .set("COM_OBL_RC_ACT", f32::from_ne_bytes(action.to_ne_bytes()))
             .unwrap();
         rig.stream(Duration::from_millis(1100), 50.0, 0.7);
         assert_eq!(rig.arm(), MavResult::MAV_RESULT_ACCEPTED);
