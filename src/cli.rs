@@ -23,6 +23,43 @@ pub enum Command {
     /// Plan the gain k (and, if needed, one agent's new initial velocity) that makes the
     /// swarm reach a target velocity. Exit code 0 feasible, 1 infeasible.
     Plan(PlanArgs),
+    /// Run N emulated PX4-like quadrotors on PX4's SITL ports until Ctrl-C.
+    Sitl(SitlArgs),
+}
+
+/// Arguments of `ringswarm sitl`.
+#[derive(Debug, Args)]
+pub struct SitlArgs {
+    /// Number of vehicles (system ids 1..=N, PX4 ports for instances 0..N-1).
+    #[arg(long, default_value_t = 1)]
+    pub vehicles: u16,
+    /// Vehicle profile: ideal or x500.
+    #[arg(long, default_value = "x500")]
+    pub profile: String,
+    /// Simulated seconds per real second.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Address to bind and to send to.
+    #[arg(long, default_value = "127.0.0.1")]
+    pub host: std::net::IpAddr,
+    /// Distance between vehicles on the ground, along east (m).
+    #[arg(long, default_value_t = 5.0)]
+    pub spacing_m: f64,
+    /// Packet loss on every link, each direction (%).
+    #[arg(long, default_value_t = 0.0)]
+    pub loss_pct: f64,
+    /// One-way latency on every link (ms).
+    #[arg(long, default_value_t = 0.0)]
+    pub latency_ms: f64,
+    /// Uniform extra latency 0..jitter (ms).
+    #[arg(long, default_value_t = 0.0)]
+    pub jitter_ms: f64,
+    /// Duplicated datagrams (%).
+    #[arg(long, default_value_t = 0.0)]
+    pub duplicate_pct: f64,
+    /// Seed of the fault injection.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
 }
 
 /// Arguments of `ringswarm analyze`.

@@ -11,6 +11,7 @@
 //! - [`control`]: pure: altitude loop, actuator envelope and saturation, acceleration →
 //!   attitude quaternion and normalised thrust, frame conversions.
 //! - [`report`]: what the `analyze` and `plan` commands compute and print.
+//! - [`sitl_cmd`]: `ringswarm sitl`, the emulator on real UDP sockets (I/O edge).
 //! - [`cli`]: the command line (clap).
 //! - [`error`]: one error enum per layer.
 //!
@@ -30,3 +31,4 @@ pub mod consensus;
 pub mod control;
 pub mod error;
 pub mod report;
+pub mod sitl_cmd;

@@ -10,6 +10,8 @@
 //!   controller used by Hold, Land and the pilot.
 //! - [`profile`]: vehicle profiles (`ideal`, `x500`) with documented numbers.
 //! - [`codec`]: MAVLink framing of datagrams with the `mavlink` crate as payload codec.
+//! - [`autopilot`]: the sans-IO vehicle machine with PX4's wire behaviour.
+//! - [`udp`]: the tokio driver, one socket per link on PX4's ports, with fault injection.
 //! - [`params`], [`world`], [`time`]: parameter table, geodetic world, simulated time.
 //!
 //! It never depends on `ringswarm`.
@@ -23,4 +25,5 @@ pub mod params;
 pub mod physics;
 pub mod profile;
 pub mod time;
+pub mod udp;
 pub mod world;

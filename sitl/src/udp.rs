@@ -1,0 +1,288 @@
+//! The tokio UDP driver: one task per vehicle, one socket per link, PX4's port scheme.
+//!
+//! Vehicle `i` (0-based, system id `i+1`) binds its offboard link on `14580+i` and sends to
+//! `14540+i`, and binds its GCS link on `18570+i` and sends to `14550`. Like PX4, it replies
+//! to whoever last sent to it on that link. Faults are injected per link, in both
+//! directions, from a seeded RNG: loss, latency with jitter, duplication.
+//!
+//! Time: the task keeps a simulated clock running at `speed` times real time and calls the
+//! machine's `handle_timeout` on a 1 ms tick; datagrams are handed over as they arrive.
+
+use std::collections::VecDeque;
+use std::io;
+use std::net::{IpAddr, SocketAddr};
+use std::time::Duration;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use tokio::net::UdpSocket;
+use tokio::sync::watch;
+use tokio::time::{Instant, MissedTickBehavior};
+
+use crate::autopilot::{LinkId, Vehicle, VehicleStatus};
+use crate::time::SimTime;
+
+/// The four addresses of one vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PortPlan {
+    /// Where the offboard link listens.
+    pub offboard_bind: SocketAddr,
+    /// Where it sends until someone talks to it.
+    pub offboard_peer: SocketAddr,
+    /// Where the GCS link listens.
+    pub gcs_bind: SocketAddr,
+    /// Where it sends until someone talks to it.
+    pub gcs_peer: SocketAddr,
+}
+
+/// PX4's SITL ports for vehicle `instance` (0-based) on `host`.
+pub fn px4_ports(instance: u16, host: IpAddr) -> PortPlan {
+    PortPlan {
+        offboard_bind: SocketAddr::new(host, 14580 + instance),
+        offboard_peer: SocketAddr::new(host, 14540 + instance),
+        gcs_bind: SocketAddr::new(host, 18570 + instance),
+        gcs_peer: SocketAddr::new(host, 14550),
+    }
+}
+
+/// Faults injected on one link, in both directions.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LinkFaults {
+    /// Probability that a datagram is dropped (0..1).
+    pub loss: f64,
+    /// Fixed one-way latency.
+    pub latency: Duration,
+    /// Uniform extra latency in `0..jitter`.
+    pub jitter: Duration,
+    /// Probability that a datagram is delivered twice (0..1).
+    pub duplicate: f64,
+}
+
+impl LinkFaults {
+    fn is_clean(&self) -> bool {
+        self.loss == 0.0 && self.latency.is_zero() && self.jitter.is_zero() && self.duplicate == 0.0
+    }
+}
+
+/// A simulated clock running `speed` times faster than real time.
+#[derive(Debug, Clone, Copy)]
+pub struct SimClock {
+    start: Instant,
+    speed: f64,
+}
+
+impl SimClock {
+    /// Starts now.
+    pub fn new(speed: f64) -> Self {
+        Self {
+            start: Instant::now(),
+            speed,
+        }
+    }
+
+    /// Simulated time now.
+    pub fn now(&self) -> SimTime {
+        SimTime::from_secs_f64(self.start.elapsed().as_secs_f64() * self.speed)
+    }
+}
+
+/// A datagram held back by the latency fault.
+struct Delayed {
+    due: SimTime,
+    link: usize,
+    inbound: bool,
+    bytes: Vec<u8>,
+}
+
+/// What one vehicle task needs.
+pub struct VehicleTask {
+    /// The machine.
+    pub vehicle: Vehicle,
+    /// Offboard and GCS sockets, already bound.
+    pub sockets: [UdpSocket; 2],
+    /// Where each link sends until a peer talks to it.
+    pub default_peers: [SocketAddr; 2],
+    /// Faults per link.
+    pub faults: [LinkFaults; 2],
+    /// Seed of the fault RNG.
+    pub seed: u64,
+}
+
+/// Runs one vehicle until `shutdown` turns true. Publishes its status about ten times a
+/// second on `status`.
+///
+/// # Errors
+/// A socket receive error other than a transient one.
+pub async fn run_vehicle(
+    task: VehicleTask,
+    clock: SimClock,
+    status: watch::Sender<VehicleStatus>,
+    mut shutdown: watch::Receiver<bool>,
+) -> io::Result<()> {
+    let VehicleTask {
+        mut vehicle,
+        sockets,
+        default_peers,
+        faults,
+        seed,
+    } = task;
+    let mut peers = default_peers;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut delayed: VecDeque<Delayed> = VecDeque::new();
+    let mut tick = tokio::time::interval(Duration::from_millis(1));
+    tick.set_missed_tick_behavior(MissedTickBehavior::Skip);
+    let mut buf = [[0u8; 2048]; 2];
+    let mut last_status = SimTime::ZERO;
+    let sysid = vehicle.system_id();
+    loop {
+        let [buf0, buf1] = &mut buf;
+        tokio::select! {
+            changed = shutdown.changed() => {
+                if changed.is_err() || *shutdown.borrow() { break; }
+            }
+            received = sockets[0].recv_from(buf0) => {
+                let (n, from) = received?;
+                peers[0] = from;
+                inbound(&mut vehicle, &clock, 0, &buf0[..n], &faults[0], &mut rng, &mut delayed);
+            }
+            received = sockets[1].recv_from(buf1) => {
+                let (n, from) = received?;
+                peers[1] = from;
+                inbound(&mut vehicle, &clock, 1, &buf1[..n], &faults[1], &mut rng, &mut delayed);
+            }
+            _ = tick.tick() => {
+                let now = clock.now();
+                vehicle.handle_timeout(now);
+                deliver_delayed(&mut vehicle, now, &mut delayed, &sockets, &peers).await;
+                if now - last_status >= Duration::from_millis(100) {
+                    last_status = now;
+                    status.send_replace(vehicle.status());
+                }
+            }
+        }
+        let now = clock.now();
+        while let Some(tx) = vehicle.poll_transmit() {
+            let link = tx.link as usize;
+            for copy in fault_copies(&faults[link], &mut rng) {
+                if copy.is_zero() {
+                    send(&sockets[link], &tx.bytes, peers[link], sysid).await;
+                } else {
+                    delayed.push_back(Delayed {
+                        due: now + copy,
+                        link,
+                        inbound: false,
+                        bytes: tx.bytes.clone(),
+                    });
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The delays of the copies of one datagram that survive the faults (empty: lost).
+fn fault_copies(faults: &LinkFaults, rng: &mut ChaCha8Rng) -> Vec<Duration> {
+    if faults.is_clean() {
+        return vec![Duration::ZERO];
+    }
+    if rng.random::<f64>() < faults.loss {
+        return Vec::new();
+    }
+    let copies = if rng.random::<f64>() < faults.duplicate {
+        2
+    } else {
+        1
+    };
+    (0..copies)
+        .map(|_| {
+            let jitter = if faults.jitter.is_zero() {
+                Duration::ZERO
+            } else {
+                faults.jitter.mul_f64(rng.random::<f64>())
+            };
+            faults.latency + jitter
+        })
+        .collect()
+}
+
+fn inbound(
+    vehicle: &mut Vehicle,
+    clock: &SimClock,
+    link: usize,
+    bytes: &[u8],
+    faults: &LinkFaults,
+    rng: &mut ChaCha8Rng,
+    delayed: &mut VecDeque<Delayed>,
+) {
+    let now = clock.now();
+    for delay in fault_copies(faults, rng) {
+        if delay.is_zero() {
+            vehicle.handle_datagram(now, link_id(link), bytes);
+        } else {
+            delayed.push_back(Delayed {
+                due: now + delay,
+                link,
+                inbound: true,
+                bytes: bytes.to_vec(),
+            });
+        }
+    }
+}
+
+async fn deliver_delayed(
+    vehicle: &mut Vehicle,
+    now: SimTime,
+    delayed: &mut VecDeque<Delayed>,
+    sockets: &[UdpSocket; 2],
+    peers: &[SocketAddr; 2],
+) {
+    let mut i = 0;
+    while i < delayed.len() {
+        if delayed[i].due > now {
+            i += 1;
+            continue;
+        }
+        let Some(d) = delayed.remove(i) else { break };
+        if d.inbound {
+            vehicle.handle_datagram(now, link_id(d.link), &d.bytes);
+        } else {
+            send(
+                &sockets[d.link],
+                &d.bytes,
+                peers[d.link],
+                vehicle.system_id(),
+            )
+            .await;
+        }
+    }
+}
+
+async fn send(socket: &UdpSocket, bytes: &[u8], to: SocketAddr, sysid: u8) {
+    if let Err(err) = socket.send_to(bytes, to).await {
+        tracing::debug!(sysid, %to, error = %err, "send failed");
+    }
+}
+
+fn link_id(index: usize) -> LinkId {
+    if index == 0 {
+        LinkId::Offboard
+    } else {
+        LinkId::Gcs
+    }
+}
+
+/// Binds both sockets of a port plan.
+///
+/// # Errors
+/// The bind error, with the address that is in use.
+pub async fn bind(plan: &PortPlan) -> io::Result<[UdpSocket; 2]> {
+    let bind_one = |addr: SocketAddr| async move {
+        UdpSocket::bind(addr)
+            .await
+            .map_err(|e| io::Error::new(e.kind(), format!("cannot bind UDP {addr}: {e}")))
+    };
+    Ok([
+        bind_one(plan.offboard_bind).await?,
+        bind_one(plan.gcs_bind).await?,
+    ])
+}
