@@ -30,9 +30,14 @@ pub enum Command {
 /// Arguments of `ringswarm sitl`.
 #[derive(Debug, Args)]
 pub struct SitlArgs {
-    /// Number of vehicles (system ids 1..=N, PX4 ports for instances 0..N-1).
-    #[arg(long, default_value_t = 1)]
-    pub vehicles: u16,
+    /// Number of vehicles (system ids 1..=N, PX4 ports for instances 0..N-1); default 1,
+    /// or the number of [[vehicle]] tables of --config.
+    #[arg(long)]
+    pub vehicles: Option<u16>,
+    /// A TOML file describing the world, the faults and each vehicle (see
+    /// `sitl/src/config_file.rs`); the fault and profile flags then do not apply.
+    #[arg(long)]
+    pub config: Option<std::path::PathBuf>,
     /// Vehicle profile: ideal or x500.
     #[arg(long, default_value = "x500")]
     pub profile: String,

@@ -1,6 +1,6 @@
 //! `ringswarm sitl`: run N emulated vehicles on PX4's SITL ports until Ctrl-C, with a
 //! refreshing status line per vehicle. This is an I/O edge: it owns the tokio runtime,
-//! the sockets and the terminal.
+//! the sockets, stdin and the terminal.
 
 use std::io::{IsTerminal, Write};
 use std::time::Duration;
@@ -8,26 +8,63 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use nalgebra::Vector3;
 use ringswarm_sitl::autopilot::{Vehicle, VehicleConfig, VehicleStatus};
+use ringswarm_sitl::config_file::SitlConfig;
 use ringswarm_sitl::profile::Profile;
-use ringswarm_sitl::udp::{LinkFaults, SimClock, VehicleTask, bind, px4_ports, run_vehicle};
+use ringswarm_sitl::udp::{
+    LinkFaults, SimClock, VehicleControl, VehicleTask, bind, px4_ports, run_vehicle,
+};
 use ringswarm_sitl::world::World;
-use tokio::sync::watch;
+use tokio::io::AsyncBufReadExt;
+use tokio::sync::{mpsc, watch};
 
 use crate::cli::SitlArgs;
 
 /// Runs the emulator until Ctrl-C.
 ///
 /// # Errors
-/// Bad arguments (vehicle count, speed, profile), a port already in use.
+/// Bad arguments or configuration (vehicle count, speed, profile, faults), a port
+/// already in use.
 pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
-    if args.vehicles == 0 || args.vehicles > 250 {
-        bail!(
-            "--vehicles must be between 1 and 250, got {}",
-            args.vehicles
-        );
-    }
+    let setup = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("read {}", path.display()))?;
+            let config = SitlConfig::from_toml(&text)
+                .map_err(|e| anyhow::anyhow!("{}:\n{e}", path.display()))?;
+            if let Some(n) = args
+                .vehicles
+                .filter(|n| usize::from(*n) != config.vehicles.len())
+            {
+                bail!(
+                    "--vehicles {n} disagrees with the {} [[vehicle]] tables of {}",
+                    config.vehicles.len(),
+                    path.display()
+                );
+            }
+            config
+        }
+        None => config_from_flags(args)?,
+    };
     if !(args.speed.is_finite() && args.speed > 0.0 && args.speed <= 100.0) {
         bail!("--speed must be a number in (0, 100], got {}", args.speed);
+    }
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("start the tokio runtime")?;
+    let result = runtime.block_on(serve(args, setup));
+    // The stdin reader is a blocking read that only ends with the next line; do not wait
+    // for it (every vehicle task has already been awaited).
+    runtime.shutdown_background();
+    result
+}
+
+/// The configuration the flags describe: N vehicles of one profile on the ground, 5 m
+/// apart along east.
+fn config_from_flags(args: &SitlArgs) -> anyhow::Result<SitlConfig> {
+    let vehicles = args.vehicles.unwrap_or(1);
+    if vehicles == 0 || vehicles > 250 {
+        bail!("--vehicles must be between 1 and 250, got {vehicles}");
     }
     for (name, pct) in [
         ("--loss-pct", args.loss_pct),
@@ -45,39 +82,52 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
             bail!("{name} must be in [0, 10000] ms, got {ms}");
         }
     }
+    if !args.spacing_m.is_finite() {
+        bail!(
+            "--spacing-m must be a finite number, got {}",
+            args.spacing_m
+        );
+    }
     let profile: Profile = args.profile.parse()?;
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .build()
-        .context("start the tokio runtime")?;
-    runtime.block_on(serve(args, profile))
+    Ok(SitlConfig {
+        world: World::default(),
+        faults: LinkFaults {
+            loss: args.loss_pct / 100.0,
+            latency: Duration::from_secs_f64(args.latency_ms / 1000.0),
+            jitter: Duration::from_secs_f64(args.jitter_ms / 1000.0),
+            duplicate: args.duplicate_pct / 100.0,
+        },
+        fault_seed: args.seed,
+        vehicles: (0..vehicles)
+            .map(|i| {
+                let mut cfg = VehicleConfig::new((i + 1) as u8, profile.clone());
+                cfg.start.pos_world_ned_m = Vector3::new(0.0, args.spacing_m * f64::from(i), 0.0);
+                cfg
+            })
+            .collect(),
+    })
 }
 
-async fn serve(args: &SitlArgs, profile: Profile) -> anyhow::Result<()> {
-    let world = World::default();
-    let faults = LinkFaults {
-        loss: args.loss_pct / 100.0,
-        latency: Duration::from_secs_f64(args.latency_ms / 1000.0),
-        jitter: Duration::from_secs_f64(args.jitter_ms / 1000.0),
-        duplicate: args.duplicate_pct / 100.0,
-    };
+async fn serve(args: &SitlArgs, setup: SitlConfig) -> anyhow::Result<()> {
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let clock = SimClock::new(args.speed);
     let mut statuses = Vec::new();
     let mut tasks = Vec::new();
+    let mut controls = Vec::new();
+    let system_ids: Vec<u8> = setup.vehicles.iter().map(|v| v.system_id).collect();
     println!(
-        "ringswarm sitl: {} x {} vehicle(s), {}x real time",
-        args.vehicles, profile.name, args.speed
+        "ringswarm sitl: {} vehicle(s), {}x real time",
+        setup.vehicles.len(),
+        args.speed
     );
-    for i in 0..args.vehicles {
-        let system_id = (i + 1) as u8;
-        let mut cfg = VehicleConfig::new(system_id, profile.clone());
-        cfg.start.pos_world_ned_m = Vector3::new(0.0, args.spacing_m * f64::from(i), 0.0);
-        let vehicle = Vehicle::new(cfg, world).map_err(anyhow::Error::msg)?;
-        let plan = px4_ports(i, args.host);
+    for (i, cfg) in setup.vehicles.into_iter().enumerate() {
+        let system_id = cfg.system_id;
+        let profile = cfg.profile.name;
+        let vehicle = Vehicle::new(cfg, setup.world).map_err(anyhow::Error::msg)?;
+        let plan = px4_ports(i as u16, args.host);
         let sockets = bind(&plan).await?;
         println!(
-            "  vehicle {system_id}: offboard/API link udp {} -> {} (MAVSDK: udpin://0.0.0.0:{}), GCS link udp {} -> {}",
+            "  vehicle {system_id} ({profile}): offboard/API link udp {} -> {} (MAVSDK: udpin://0.0.0.0:{}), GCS link udp {} -> {}",
             plan.offboard_bind,
             plan.offboard_peer,
             plan.offboard_peer.port(),
@@ -86,12 +136,15 @@ async fn serve(args: &SitlArgs, profile: Profile) -> anyhow::Result<()> {
         );
         let (status_tx, status_rx) = watch::channel(vehicle.status());
         statuses.push(status_rx);
+        let (control_tx, control) = mpsc::channel(4);
+        controls.push(control_tx);
         let task = VehicleTask {
             vehicle,
             sockets,
             default_peers: [plan.offboard_peer, plan.gcs_peer],
-            faults: [faults, faults],
-            seed: args.seed.wrapping_add(u64::from(i)),
+            faults: [setup.faults, setup.faults],
+            seed: setup.fault_seed.wrapping_add(i as u64),
+            control,
         };
         tasks.push(tokio::spawn(run_vehicle(
             task,
@@ -100,14 +153,30 @@ async fn serve(args: &SitlArgs, profile: Profile) -> anyhow::Result<()> {
             shutdown_rx.clone(),
         )));
     }
-    println!("Ctrl-C stops.");
+    println!(
+        "Ctrl-C stops; on stdin, \"kill N\" powers vehicle N off and \"restart N\" boots it again."
+    );
+    let mut stdin = tokio::io::BufReader::new(tokio::io::stdin()).lines();
+    let mut stdin_open = true;
     let interactive = std::io::stdout().is_terminal();
     let mut every =
         tokio::time::interval(Duration::from_millis(if interactive { 250 } else { 5000 }));
     let mut drawn = 0;
+    // One listener for the whole run: a future made anew on every turn of the loop would
+    // miss a Ctrl-C that arrives while the loop body runs.
+    let ctrl_c = tokio::signal::ctrl_c();
+    tokio::pin!(ctrl_c);
     loop {
         tokio::select! {
-            _ = tokio::signal::ctrl_c() => break,
+            _ = &mut ctrl_c => break,
+            line = stdin.next_line(), if stdin_open => match line {
+                Ok(Some(line)) => {
+                    if let Err(err) = apply_control(&line, &system_ids, &controls).await {
+                        eprintln!("{err:#}");
+                    }
+                }
+                _ => stdin_open = false,
+            },
             _ = every.tick() => {
                 let lines: Vec<String> = statuses.iter().map(|s| status_line(&s.borrow(), clock.now().as_secs_f64())).collect();
                 let mut out = std::io::stdout().lock();
@@ -123,10 +192,37 @@ async fn serve(args: &SitlArgs, profile: Profile) -> anyhow::Result<()> {
         }
     }
     shutdown_tx.send_replace(true);
+    drop(controls);
     for task in tasks {
         task.await.context("vehicle task")??;
     }
     println!("stopped");
+    Ok(())
+}
+
+/// Parses `kill N` / `restart N` and sends it to the vehicle with system id N.
+async fn apply_control(
+    line: &str,
+    system_ids: &[u8],
+    controls: &[mpsc::Sender<VehicleControl>],
+) -> anyhow::Result<()> {
+    let words: Vec<&str> = line.split_whitespace().collect();
+    let (request, id) = match words.as_slice() {
+        [] => return Ok(()),
+        ["kill", id] => (VehicleControl::Kill, *id),
+        ["restart", id] => (VehicleControl::Restart, *id),
+        _ => bail!("unknown request \"{line}\" (expected \"kill N\" or \"restart N\")"),
+    };
+    let id: u8 = id
+        .parse()
+        .with_context(|| format!("\"{id}\" is not a system id"))?;
+    let Some(index) = system_ids.iter().position(|s| *s == id) else {
+        bail!("no vehicle with system id {id}");
+    };
+    controls[index]
+        .send(request)
+        .await
+        .context("the vehicle task has stopped")?;
     Ok(())
 }
 

@@ -160,3 +160,50 @@ fn plan_with_a_speed_limit_can_be_infeasible() {
     assert_eq!(v["feasible"], serde_json::json!(false));
     assert!(v["reason"].as_str().unwrap().contains("50 m/s"));
 }
+
+#[test]
+fn sitl_refuses_a_bad_config_listing_every_problem() {
+    let dir = std::env::temp_dir().join(format!("ringswarm-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("bad.toml");
+    std::fs::write(
+        &path,
+        "[faults]\nloss_pct = 150.0\n[[vehicle]]\nprofile = \"x600\"\n",
+    )
+    .unwrap();
+    let out = ringswarm(&["sitl", "--config", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr(&out);
+    assert!(
+        err.contains("faults.loss_pct must be a percentage"),
+        "{err}"
+    );
+    assert!(err.contains("unknown vehicle profile \"x600\""), "{err}");
+    std::fs::write(&path, "[[vehicle]]\nin_ar = true\n").unwrap();
+    let out = ringswarm(&["sitl", "--config", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("unknown field `in_ar`"),
+        "{}",
+        stderr(&out)
+    );
+    let out = ringswarm(&["sitl", "--vehicles", "1", "--profile", "x600"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("unknown vehicle profile"));
+}
+
+#[test]
+fn sitl_reports_a_port_already_in_use() {
+    // Instance 0's offboard port on a loopback address of its own, so that nothing else
+    // running on the machine can interfere.
+    let host = "127.0.0.57";
+    let _held =
+        std::net::UdpSocket::bind((host, 14580)).expect("all of 127.0.0.0/8 is loopback on Linux");
+    let out = ringswarm(&["sitl", "--vehicles", "1", "--host", host]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("cannot bind UDP 127.0.0.57:14580"),
+        "{}",
+        stderr(&out)
+    );
+}

@@ -11,6 +11,7 @@
 //! - [`profile`]: vehicle profiles (`ideal`, `x500`) with documented numbers.
 //! - [`codec`]: MAVLink framing of datagrams with the `mavlink` crate as payload codec.
 //! - [`autopilot`]: the sans-IO vehicle machine with PX4's wire behaviour.
+//! - [`config_file`]: the TOML configuration of `ringswarm sitl --config`.
 //! - [`udp`]: the tokio driver, one socket per link on PX4's ports, with fault injection.
 //! - [`params`], [`world`], [`time`]: parameter table, geodetic world, simulated time.
 //!
@@ -20,6 +21,7 @@
 
 pub mod autopilot;
 pub mod codec;
+pub mod config_file;
 pub mod control;
 pub mod params;
 pub mod physics;

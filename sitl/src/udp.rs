@@ -94,6 +94,15 @@ struct Delayed {
     bytes: Vec<u8>,
 }
 
+/// What a test (or an operator) can do to a running vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VehicleControl {
+    /// Power off: the vehicle stops answering and sending (its sockets stay bound).
+    Kill,
+    /// Power on again: a fresh boot from the configured start state.
+    Restart,
+}
+
 /// What one vehicle task needs.
 pub struct VehicleTask {
     /// The machine.
@@ -106,6 +115,8 @@ pub struct VehicleTask {
     pub faults: [LinkFaults; 2],
     /// Seed of the fault RNG.
     pub seed: u64,
+    /// Kill and restart requests.
+    pub control: tokio::sync::mpsc::Receiver<VehicleControl>,
 }
 
 /// Runs one vehicle until `shutdown` turns true. Publishes its status about ten times a
@@ -125,7 +136,9 @@ pub async fn run_vehicle(
         default_peers,
         faults,
         seed,
+        mut control,
     } = task;
+    let mut alive = true;
     let mut peers = default_peers;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut delayed: VecDeque<Delayed> = VecDeque::new();
@@ -140,17 +153,36 @@ pub async fn run_vehicle(
             changed = shutdown.changed() => {
                 if changed.is_err() || *shutdown.borrow() { break; }
             }
+            Some(request) = control.recv() => {
+                match request {
+                    VehicleControl::Kill => {
+                        alive = false;
+                        delayed.clear();
+                        while vehicle.poll_transmit().is_some() {}
+                        tracing::info!(sysid, "vehicle killed");
+                    }
+                    VehicleControl::Restart => {
+                        alive = true;
+                        vehicle.reboot(clock.now());
+                        tracing::info!(sysid, "vehicle restarted");
+                    }
+                }
+            }
             received = sockets[0].recv_from(buf0) => {
                 let (n, from) = received?;
-                peers[0] = from;
-                inbound(&mut vehicle, &clock, 0, &buf0[..n], &faults[0], &mut rng, &mut delayed);
+                if alive {
+                    peers[0] = from;
+                    inbound(&mut vehicle, &clock, 0, &buf0[..n], &faults[0], &mut rng, &mut delayed);
+                }
             }
             received = sockets[1].recv_from(buf1) => {
                 let (n, from) = received?;
-                peers[1] = from;
-                inbound(&mut vehicle, &clock, 1, &buf1[..n], &faults[1], &mut rng, &mut delayed);
+                if alive {
+                    peers[1] = from;
+                    inbound(&mut vehicle, &clock, 1, &buf1[..n], &faults[1], &mut rng, &mut delayed);
+                }
             }
-            _ = tick.tick() => {
+            _ = tick.tick(), if alive => {
                 let now = clock.now();
                 vehicle.handle_timeout(now);
                 deliver_delayed(&mut vehicle, now, &mut delayed, &sockets, &peers).await;

@@ -182,6 +182,7 @@ pub struct Vehicle {
     outbox: VecDeque<Transmit>,
     events: VecDeque<VehicleEvent>,
     last_step: SimTime,
+    boot_at: SimTime,
     counters: Counters,
 }
 
@@ -256,10 +257,32 @@ impl Vehicle {
             outbox: VecDeque::new(),
             events: VecDeque::new(),
             last_step: SimTime::ZERO,
+            boot_at: SimTime::ZERO,
             counters: Counters::default(),
             state,
             cfg,
         })
+    }
+
+    /// Reboots the vehicle at `now`: back to its configured start state, parameters and
+    /// telemetry defaults, with `time_boot_ms` counting from zero again (a test's way of
+    /// killing and restarting an autopilot).
+    pub fn reboot(&mut self, now: SimTime) {
+        let fresh = Vehicle::new(self.cfg.clone(), self.world)
+            .expect("the configuration was valid at the first boot");
+        *self = fresh;
+        self.last_step = now;
+        self.boot_at = now;
+        for link in &mut self.links {
+            for stream in &mut link.streams {
+                stream.next_due = now;
+            }
+        }
+    }
+
+    /// Milliseconds since boot at `now` (MAVLink's `time_boot_ms`).
+    fn boot_ms(&self, now: SimTime) -> u32 {
+        (now - self.boot_at).as_millis() as u32
     }
 
     /// System id.

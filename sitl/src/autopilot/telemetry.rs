@@ -195,7 +195,7 @@ impl Vehicle {
                 let (roll, pitch, yaw) = self.state.attitude.euler_angles();
                 let w = self.state.rate_frd_rps;
                 MavMessage::ATTITUDE(ATTITUDE_DATA {
-                    time_boot_ms: now.boot_ms(),
+                    time_boot_ms: self.boot_ms(now),
                     roll: roll as f32,
                     pitch: pitch as f32,
                     yaw: yaw as f32,
@@ -208,7 +208,7 @@ impl Vehicle {
                 let q = self.state.attitude;
                 let w = self.state.rate_frd_rps;
                 MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
-                    time_boot_ms: now.boot_ms(),
+                    time_boot_ms: self.boot_ms(now),
                     q1: q.w as f32,
                     q2: q.i as f32,
                     q3: q.j as f32,
@@ -222,7 +222,7 @@ impl Vehicle {
             LOCAL_POSITION_NED => {
                 let (p, v) = (self.state.pos_ned_m, self.state.vel_ned_mps);
                 MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
-                    time_boot_ms: now.boot_ms(),
+                    time_boot_ms: self.boot_ms(now),
                     x: p.x as f32,
                     y: p.y as f32,
                     z: p.z as f32,
@@ -334,7 +334,7 @@ impl Vehicle {
         let v = self.state.vel_ned_mps;
         let (_, _, yaw) = self.state.attitude.euler_angles();
         MavMessage::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
-            time_boot_ms: now.boot_ms(),
+            time_boot_ms: self.boot_ms(now),
             lat: geo.lat_e7(),
             lon: geo.lon_e7(),
             alt: geo.alt_mm(),
