@@ -91,12 +91,12 @@ fn config_from_flags(args: &SitlArgs) -> anyhow::Result<SitlConfig> {
     let profile: Profile = args.profile.parse()?;
     Ok(SitlConfig {
         world: World::default(),
-        faults: LinkFaults {
-            loss: args.loss_pct / 100.0,
-            latency: Duration::from_secs_f64(args.latency_ms / 1000.0),
-            jitter: Duration::from_secs_f64(args.jitter_ms / 1000.0),
-            duplicate: args.duplicate_pct / 100.0,
-        },
+        faults: LinkFaults::from_percent_and_ms(
+            args.loss_pct,
+            args.latency_ms,
+            args.jitter_ms,
+            args.duplicate_pct,
+        ),
         fault_seed: args.seed,
         vehicles: (0..vehicles)
             .map(|i| {

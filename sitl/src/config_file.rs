@@ -29,8 +29,6 @@
 //!
 //! Unknown keys are refused; every problem found after parsing is reported at once.
 
-use std::time::Duration;
-
 use nalgebra::Vector3;
 use serde::Deserialize;
 
@@ -248,12 +246,12 @@ impl SitlConfig {
         }
         Ok(Self {
             world,
-            faults: LinkFaults {
-                loss: f.loss_pct / 100.0,
-                latency: Duration::from_secs_f64(f.latency_ms / 1000.0),
-                jitter: Duration::from_secs_f64(f.jitter_ms / 1000.0),
-                duplicate: f.duplicate_pct / 100.0,
-            },
+            faults: LinkFaults::from_percent_and_ms(
+                f.loss_pct,
+                f.latency_ms,
+                f.jitter_ms,
+                f.duplicate_pct,
+            ),
             fault_seed: f.seed,
             vehicles,
         })
@@ -263,6 +261,7 @@ impl SitlConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::time::Duration;
 
     #[test]
     fn a_full_file_parses() {

@@ -59,6 +59,21 @@ pub struct LinkFaults {
 }
 
 impl LinkFaults {
+    /// From the units a user types: percentages and milliseconds.
+    pub fn from_percent_and_ms(
+        loss_pct: f64,
+        latency_ms: f64,
+        jitter_ms: f64,
+        duplicate_pct: f64,
+    ) -> Self {
+        Self {
+            loss: loss_pct / 100.0,
+            latency: Duration::from_secs_f64(latency_ms / 1000.0),
+            jitter: Duration::from_secs_f64(jitter_ms / 1000.0),
+            duplicate: duplicate_pct / 100.0,
+        }
+    }
+
     fn is_clean(&self) -> bool {
         self.loss == 0.0 && self.latency.is_zero() && self.jitter.is_zero() && self.duplicate == 0.0
     }

@@ -242,3 +242,32 @@ def test_a_vehicle_can_be_killed_and_restarted(sitl):
     after = latest(link, "ATTITUDE", timeout=0.5)
     # A fresh boot: time_boot_ms counts from zero again.
     assert after.time_boot_ms < 1000, (before.time_boot_ms, after.time_boot_ms)
+
+
+def test_hover_throttle_holds_altitude_from_rest_in_the_air(tmp_path):
+    """A vehicle started at rest 30 m up (config file, in_air) holds its altitude within a
+    few centimetres for 3 s on MPC_THR_HOVER alone."""
+    config = tmp_path / "air.toml"
+    config.write_text("[[vehicle]]\nprofile = \"ideal\"\nstart_ned_m = [0.0, 0.0, -30.0]\nin_air = true\n")
+    proc = subprocess.Popen([BIN, "sitl", "--config", str(config)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    link = mavutil.mavlink_connection("udpin:127.0.0.1:14540", source_system=255, source_component=190)
+    try:
+        hb = link.wait_heartbeat(timeout=10)
+        assert hb.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED, "started in the air: armed"
+        hover = read_param(link, "MPC_THR_HOVER")
+        assert hover == pytest.approx(0.2)  # ideal profile
+        stream(link, 1, 1.2, hover)
+        mode = command(link, 1, SET_MODE, 1, 6, 0)
+        assert mode is not None and mode.result == 0
+        stream(link, 1, 0.5, hover)
+        before = latest(link, "LOCAL_POSITION_NED")
+        stream(link, 1, 3.0, hover)
+        after = latest(link, "LOCAL_POSITION_NED")
+        assert mavutil.mode_string_v10(latest(link, "HEARTBEAT")) == "OFFBOARD"
+        assert abs(after.z - before.z) < 0.05, (before.z, after.z)
+        assert abs(after.vz) < 0.02
+    finally:
+        link.close()
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=10)
+        assert proc.returncode == 0, out

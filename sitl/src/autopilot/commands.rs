@@ -20,6 +20,16 @@ pub(super) struct Command {
     pub params: [Option<f32>; 7],
 }
 
+impl Command {
+    /// A command from its wire parameters; NaN marks an unused parameter.
+    pub fn from_wire(id: MavCmd, params: [f32; 7]) -> Self {
+        Self {
+            id,
+            params: params.map(|x| if x.is_nan() { None } else { Some(x) }),
+        }
+    }
+}
+
 impl Vehicle {
     pub(super) fn run_command(
         &mut self,

@@ -133,15 +133,7 @@ impl Vehicle {
         let params = [
             m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7,
         ];
-        self.run_command(
-            now,
-            link,
-            sender,
-            Command {
-                id: m.command,
-                params: params.map(unused_if_nan),
-            },
-        );
+        self.run_command(now, link, sender, Command::from_wire(m.command, params));
         true
     }
 
@@ -158,15 +150,7 @@ impl Vehicle {
         let params = [
             m.param1, m.param2, m.param3, m.param4, m.x as f32, m.y as f32, m.z,
         ];
-        self.run_command(
-            now,
-            link,
-            sender,
-            Command {
-                id: m.command,
-                params: params.map(unused_if_nan),
-            },
-        );
+        self.run_command(now, link, sender, Command::from_wire(m.command, params));
         true
     }
 
@@ -183,23 +167,19 @@ impl Vehicle {
         let main = (m.custom_mode >> 16) & 0xFF;
         let sub = m.custom_mode >> 24;
         let params = [
-            Some(1.0),
-            Some(main as f32),
-            Some(sub as f32),
-            None,
-            None,
-            None,
-            None,
+            1.0,
+            main as f32,
+            sub as f32,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
         ];
-        self.run_command(
-            now,
-            link,
-            sender,
-            Command {
-                id: mavlink::dialects::common::MavCmd::MAV_CMD_DO_SET_MODE,
-                params,
-            },
+        let command = Command::from_wire(
+            mavlink::dialects::common::MavCmd::MAV_CMD_DO_SET_MODE,
+            params,
         );
+        self.run_command(now, link, sender, command);
         true
     }
 
@@ -261,9 +241,4 @@ impl Vehicle {
         }
         true
     }
-}
-
-/// MAVLink uses NaN for "unused" command parameters.
-fn unused_if_nan(x: f32) -> Option<f32> {
-    if x.is_nan() { None } else { Some(x) }
 }
