@@ -10,6 +10,8 @@
 //!   bound, gain design, final velocity, achievable-velocity planner, per-agent law.
 //! - [`control`]: pure: altitude loop, actuator envelope and saturation, acceleration →
 //!   attitude quaternion and normalised thrust, frame conversions.
+//! - [`frame`]: the common frame built from each vehicle's geodetic origin (pure).
+//! - [`link`]: the MAVLink edge: framing and message ↔ domain conversions.
 //! - [`report`]: what the `analyze` and `plan` commands compute and print.
 //! - [`sitl_cmd`]: `ringswarm sitl`, the emulator on real UDP sockets (I/O edge).
 //! - [`cli`]: the command line (clap).
@@ -30,5 +32,7 @@ pub mod cli;
 pub mod consensus;
 pub mod control;
 pub mod error;
+pub mod frame;
+pub mod link;
 pub mod report;
 pub mod sitl_cmd;

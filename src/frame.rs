@@ -1,0 +1,149 @@
+//! The swarm's common frame.
+//!
+//! Every PX4 vehicle reports LOCAL_POSITION_NED relative to its own origin (where its
+//! estimator started), so local positions of two vehicles are not comparable. The
+//! coordinator places every origin in one frame: it projects each vehicle's
+//! GPS_GLOBAL_ORIGIN onto the tangent plane at a common reference with PX4's own map
+//! projection (azimuthal equidistant on a sphere of radius 6 371 000 m, as in PX4's
+//! `MapProjection`), and adds the vehicle's local position. The result is expressed in
+//! NED about the reference and, for the laws, in the paper's ENU frame.
+
+use nalgebra::Vector3;
+
+use crate::control::ned_to_enu;
+
+/// PX4's Earth radius for its local projection (m).
+pub const PX4_EARTH_RADIUS_M: f64 = 6_371_000.0;
+
+/// A geodetic position.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Geodetic {
+    /// Latitude (deg).
+    pub lat_deg: f64,
+    /// Longitude (deg).
+    pub lon_deg: f64,
+    /// Altitude above mean sea level (m).
+    pub alt_amsl_m: f64,
+}
+
+impl Geodetic {
+    /// From MAVLink's integer fields: degE7 and millimetres.
+    pub fn from_mavlink(lat_e7: i32, lon_e7: i32, alt_mm: i32) -> Self {
+        Self {
+            lat_deg: f64::from(lat_e7) * 1e-7,
+            lon_deg: f64::from(lon_e7) * 1e-7,
+            alt_amsl_m: f64::from(alt_mm) * 1e-3,
+        }
+    }
+}
+
+/// The common frame: a tangent plane at `reference`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CommonFrame {
+    reference: Geodetic,
+}
+
+impl CommonFrame {
+    /// A frame whose origin is `reference`.
+    pub fn new(reference: Geodetic) -> Self {
+        Self { reference }
+    }
+
+    /// The reference point.
+    pub fn reference(&self) -> Geodetic {
+        self.reference
+    }
+
+    /// The NED offset (m) of a geodetic point from the reference (PX4's azimuthal
+    /// equidistant projection; altitude as the negative height difference).
+    pub fn offset_ned_m(&self, point: &Geodetic) -> Vector3<f64> {
+        let (lat0, lon0) = (
+            self.reference.lat_deg.to_radians(),
+            self.reference.lon_deg.to_radians(),
+        );
+        let (lat, lon) = (point.lat_deg.to_radians(), point.lon_deg.to_radians());
+        let cos_c =
+            (lat0.sin() * lat.sin() + lat0.cos() * lat.cos() * (lon - lon0).cos()).clamp(-1.0, 1.0);
+        let c = cos_c.acos();
+        let k = if c.abs() < f64::EPSILON {
+            1.0
+        } else {
+            c / c.sin()
+        };
+        let north = k
+            * (lat0.cos() * lat.sin() - lat0.sin() * lat.cos() * (lon - lon0).cos())
+            * PX4_EARTH_RADIUS_M;
+        let east = k * lat.cos() * (lon - lon0).sin() * PX4_EARTH_RADIUS_M;
+        Vector3::new(north, east, self.reference.alt_amsl_m - point.alt_amsl_m)
+    }
+
+    /// A vehicle's position in the common frame (NED, m) from its origin and its local
+    /// NED position.
+    pub fn to_common_ned(&self, origin: &Geodetic, local_ned_m: &Vector3<f64>) -> Vector3<f64> {
+        self.offset_ned_m(origin) + local_ned_m
+    }
+
+    /// The same in the paper's ENU frame (x east, y north, z up).
+    pub fn to_common_enu(&self, origin: &Geodetic, local_ned_m: &Vector3<f64>) -> Vector3<f64> {
+        ned_to_enu(self.to_common_ned(origin, local_ned_m))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn zurich() -> Geodetic {
+        Geodetic {
+            lat_deg: 47.397742,
+            lon_deg: 8.545594,
+            alt_amsl_m: 488.0,
+        }
+    }
+
+    #[test]
+    fn one_arc_second_north_is_r_times_the_angle() {
+        let frame = CommonFrame::new(zurich());
+        let mut p = zurich();
+        p.lat_deg += 1.0 / 3600.0;
+        let d = frame.offset_ned_m(&p);
+        let expected = PX4_EARTH_RADIUS_M * (1.0f64 / 3600.0).to_radians();
+        assert!((d.x - expected).abs() < 1e-6 && d.y.abs() < 1e-6 && d.z == 0.0);
+    }
+
+    #[test]
+    fn east_offset_shrinks_with_the_cosine_of_latitude() {
+        let frame = CommonFrame::new(zurich());
+        let mut p = zurich();
+        p.lon_deg += 0.001;
+        let d = frame.offset_ned_m(&p);
+        let expected = PX4_EARTH_RADIUS_M * 0.001f64.to_radians() * 47.397742f64.to_radians().cos();
+        assert!((d.y - expected).abs() < 1e-3, "{} vs {expected}", d.y);
+        assert!(d.x.abs() < 1e-2); // the small northward bulge of the projection
+    }
+
+    #[test]
+    fn two_vehicles_with_different_origins_share_one_frame() {
+        // Vehicle B's origin is 30 m north, 40 m east and 2 m higher than A's; both hover
+        // over the same point, so their common positions agree.
+        let frame = CommonFrame::new(zurich());
+        let origin_a = zurich();
+        let origin_b = Geodetic {
+            lat_deg: zurich().lat_deg + (30.0 / PX4_EARTH_RADIUS_M).to_degrees(),
+            lon_deg: zurich().lon_deg
+                + (40.0 / (PX4_EARTH_RADIUS_M * 47.397742f64.to_radians().cos())).to_degrees(),
+            alt_amsl_m: 490.0,
+        };
+        let a = frame.to_common_ned(&origin_a, &Vector3::new(30.0, 40.0, -12.0));
+        let b = frame.to_common_ned(&origin_b, &Vector3::new(0.0, 0.0, -10.0));
+        assert!((a - b).norm() < 1e-3, "{a:?} vs {b:?}");
+        let enu = frame.to_common_enu(&origin_a, &Vector3::new(30.0, 40.0, -12.0));
+        assert!((enu - Vector3::new(40.0, 30.0, 12.0)).norm() < 1e-9);
+    }
+
+    #[test]
+    fn mavlink_integer_fields_convert_with_their_units() {
+        let g = Geodetic::from_mavlink(473_977_420, 85_455_940, 488_000);
+        assert!((g.lat_deg - 47.397742).abs() < 1e-12 && (g.alt_amsl_m - 488.0).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,166 @@
+//! One function per message we build, one dispatch for what we read. Each inbound
+//! conversion checks its values and returns a domain update; frames we do not use map to
+//! `None`.
+
+use mavlink::dialects::common::{
+    AttitudeTargetTypemask, MavMessage, MavModeFlag, SET_ATTITUDE_TARGET_DATA,
+};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+
+use crate::control::AttitudeThrust;
+use crate::frame::Geodetic;
+
+/// SET_ATTITUDE_TARGET with attitude and thrust, body rates ignored (type_mask 7).
+pub fn set_attitude_target(
+    sp: &AttitudeThrust,
+    target_system: u8,
+    time_boot_ms: u32,
+) -> MavMessage {
+    let q = sp.attitude_ned_frd;
+    MavMessage::SET_ATTITUDE_TARGET(SET_ATTITUDE_TARGET_DATA {
+        time_boot_ms,
+        q: [q.w as f32, q.i as f32, q.j as f32, q.k as f32],
+        body_roll_rate: 0.0,
+        body_pitch_rate: 0.0,
+        body_yaw_rate: 0.0,
+        thrust: sp.thrust_norm.clamp(0.0, 1.0) as f32,
+        target_system,
+        target_component: 1,
+        type_mask: AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
+            | AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
+            | AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE,
+        thrust_body: [0.0; 3],
+    })
+}
+
+/// What an inbound message tells the coordinator about a vehicle.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Inbound {
+    /// HEARTBEAT from an autopilot.
+    Heartbeat {
+        /// Armed flag.
+        armed: bool,
+        /// PX4 custom mode (main mode in bits 16–23, sub mode in 24–31).
+        custom_mode: u32,
+        /// MAV_AUTOPILOT value.
+        autopilot: u8,
+    },
+    /// LOCAL_POSITION_NED (m, m/s, the vehicle's own origin).
+    LocalPosition {
+        /// Position.
+        pos_ned_m: Vector3<f64>,
+        /// Velocity.
+        vel_ned_mps: Vector3<f64>,
+    },
+    /// ATTITUDE_QUATERNION (body FRD → NED).
+    Attitude(UnitQuaternion<f64>),
+    /// GPS_GLOBAL_ORIGIN: where the local frame starts.
+    Origin(Geodetic),
+    /// EXTENDED_SYS_STATE: on the ground or not.
+    Landed(bool),
+    /// COMMAND_ACK.
+    Ack {
+        /// MAV_CMD id.
+        command: u16,
+        /// MAV_RESULT value.
+        result: u8,
+    },
+}
+
+/// Converts an inbound message, refusing non-finite values; `None` for messages the
+/// coordinator does not use or cannot trust.
+pub fn inbound(msg: &MavMessage) -> Option<Inbound> {
+    match msg {
+        MavMessage::HEARTBEAT(h) => Some(Inbound::Heartbeat {
+            armed: h
+                .base_mode
+                .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED),
+            custom_mode: h.custom_mode,
+            autopilot: h.autopilot as u8,
+        }),
+        MavMessage::LOCAL_POSITION_NED(p) => {
+            let pos = Vector3::new(p.x, p.y, p.z).map(f64::from);
+            let vel = Vector3::new(p.vx, p.vy, p.vz).map(f64::from);
+            (pos.iter().chain(vel.iter()).all(|x| x.is_finite())).then_some(
+                Inbound::LocalPosition {
+                    pos_ned_m: pos,
+                    vel_ned_mps: vel,
+                },
+            )
+        }
+        MavMessage::ATTITUDE_QUATERNION(a) => {
+            let q = Quaternion::new(
+                f64::from(a.q1),
+                f64::from(a.q2),
+                f64::from(a.q3),
+                f64::from(a.q4),
+            );
+            (q.coords.iter().all(|x| x.is_finite()) && q.norm() > 0.5)
+                .then(|| Inbound::Attitude(UnitQuaternion::new_normalize(q)))
+        }
+        MavMessage::GPS_GLOBAL_ORIGIN(o) => Some(Inbound::Origin(Geodetic::from_mavlink(
+            o.latitude,
+            o.longitude,
+            o.altitude,
+        ))),
+        MavMessage::EXTENDED_SYS_STATE(s) => Some(Inbound::Landed(
+            s.landed_state == mavlink::dialects::common::MavLandedState::MAV_LANDED_STATE_ON_GROUND,
+        )),
+        MavMessage::COMMAND_ACK(a) => Some(Inbound::Ack {
+            command: a.command as u16,
+            result: a.result as u8,
+        }),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::{VehicleModel, attitude_thrust_from_acceleration};
+    use crate::link::{Encoder, decode_datagram};
+
+    #[test]
+    fn set_attitude_target_golden_bytes() {
+        // Level, thrust 0.5, to system 3, time_boot_ms 1000, from 255/190, sequence 0.
+        let sp = AttitudeThrust {
+            attitude_ned_frd: UnitQuaternion::identity(),
+            thrust_norm: 0.5,
+            thrust_n: 0.0,
+        };
+        let bytes = Encoder::new(255, 190).encode(&set_attitude_target(&sp, 3, 1000));
+        // Payload (wire order): time_boot_ms u32, q[4] f32, three rates f32, thrust f32,
+        // target_system, target_component, type_mask; the zero thrust_body extension and
+        // trailing zeros are trimmed by MAVLink 2.
+        let mut payload = Vec::new();
+        payload.extend(1000u32.to_le_bytes());
+        for x in [1.0f32, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5] {
+            payload.extend(x.to_le_bytes());
+        }
+        payload.extend([3, 1, 7]);
+        assert_eq!(
+            &bytes[..10],
+            &[0xFD, payload.len() as u8, 0, 0, 0, 255, 190, 82, 0, 0]
+        );
+        assert_eq!(&bytes[10..10 + payload.len()], payload.as_slice());
+        let crc = mavlink::calculate_crc(&bytes[1..10 + payload.len()], 49);
+        assert_eq!(&bytes[10 + payload.len()..], &crc.to_le_bytes());
+    }
+
+    #[test]
+    fn a_setpoint_round_trips_with_w_first() {
+        let model = VehicleModel::from_hover_throttle(2.0, 0.5).unwrap();
+        let sp = attitude_thrust_from_acceleration(Vector3::new(1.0, 2.0, 0.0), 0.3, &model);
+        let bytes = Encoder::new(255, 190).encode(&set_attitude_target(&sp, 1, 0));
+        let frame = decode_datagram(&bytes).remove(0).unwrap();
+        let MavMessage::SET_ATTITUDE_TARGET(d) = frame.msg else {
+            panic!("wrong message")
+        };
+        let q = UnitQuaternion::new_normalize(
+            Quaternion::new(d.q[0], d.q[1], d.q[2], d.q[3]).cast::<f64>(),
+        );
+        assert!(q.angle_to(&sp.attitude_ned_frd) < 1e-6);
+        assert_eq!(d.type_mask.bits(), 7);
+        assert!((f64::from(d.thrust) - sp.thrust_norm).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,8 @@
+//! The MAVLink edge of the coordinator: framing (the emulator crate's codec, which has no
+//! dependency on ringswarm) and conversions between MAVLink messages and domain types.
+//! MAVLink identifiers appear only here and in the emulator.
+
+mod convert;
+
+pub use convert::{Inbound, inbound, set_attitude_target};
+pub use ringswarm_sitl::codec::{Encoder, Frame, FrameError, decode_datagram};
