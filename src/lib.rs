@@ -12,6 +12,7 @@
 //!   attitude quaternion and normalised thrust, frame conversions.
 //! - [`frame`]: the common frame built from each vehicle's geodetic origin (pure).
 //! - [`link`]: the MAVLink edge: framing and message ↔ domain conversions.
+//! - [`vehicle`]: sans-IO machine for one vehicle: PX4 offboard handshake, link health.
 //! - [`report`]: what the `analyze` and `plan` commands compute and print.
 //! - [`sitl_cmd`]: `ringswarm sitl`, the emulator on real UDP sockets (I/O edge).
 //! - [`cli`]: the command line (clap).
@@ -36,3 +37,4 @@ pub mod frame;
 pub mod link;
 pub mod report;
 pub mod sitl_cmd;
+pub mod vehicle;

@@ -1,0 +1,474 @@
+//! The coordinator's side of one vehicle: a sans-IO machine for PX4's offboard handshake
+//! and link health.
+//!
+//! ```text
+//!  Discovering ──heartbeat from the expected system──► Streaming (setpoints at the stream rate,
+//!                                                      intervals requested, origin asked for)
+//!  Streaming ──pre_stream elapsed──► Arming ──ack ACCEPTED or heartbeat armed──► Offboarding
+//!  Offboarding ──ack ACCEPTED or heartbeat OFFBOARD──► Flying
+//!  Arming/Offboarding ──no ack, or refused, within ack_timeout──► resend with confirmation+1,
+//!                     up to max_attempts, then Failed (a clear reason in the event)
+//!  any but Discovering/Failed ──silent for link_timeout──► Lost ──heartbeat──► Streaming again
+//! ```
+//!
+//! Drive it with [`VehicleLink::handle_datagram`] for every datagram from the vehicle's
+//! address, [`VehicleLink::handle_timeout`] at [`VehicleLink::poll_timeout`], and send what
+//! [`VehicleLink::poll_transmit`] returns. It never reads a clock or touches a socket.
+//! Frames from another system id are never acted on, and nothing is ever addressed to a
+//! system other than the configured one.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd, MavMessage};
+use nalgebra::{UnitQuaternion, Vector3};
+use ringswarm_sitl::time::SimTime;
+
+use crate::control::AttitudeThrust;
+use crate::frame::Geodetic;
+use crate::link::{Encoder, Inbound, decode_datagram, inbound, set_attitude_target};
+
+/// PX4's OFFBOARD main mode.
+const PX4_MAIN_OFFBOARD: u32 = 6;
+/// MAV_RESULT_ACCEPTED.
+const ACCEPTED: u8 = 0;
+/// Message ids the coordinator asks to be streamed, and GPS_GLOBAL_ORIGIN asked once.
+const LOCAL_POSITION_NED: f32 = 32.0;
+const ATTITUDE_QUATERNION: f32 = 31.0;
+const GPS_GLOBAL_ORIGIN: f32 = 49.0;
+
+/// Timing and identity of one vehicle link.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkConfig {
+    /// The vehicle's system id (component 1).
+    pub system_id: u8,
+    /// Our own system and component ids.
+    pub own_ids: (u8, u8),
+    /// Period of the setpoint stream.
+    pub setpoint_interval: Duration,
+    /// Period asked for LOCAL_POSITION_NED and ATTITUDE_QUATERNION.
+    pub telemetry_interval: Duration,
+    /// How long to stream before arming (PX4 wants more than 1 s).
+    pub pre_stream: Duration,
+    /// How long to wait for an acknowledgement before resending.
+    pub ack_timeout: Duration,
+    /// Attempts per command before giving up.
+    pub max_attempts: u8,
+    /// Silence after which the vehicle is lost.
+    pub link_timeout: Duration,
+}
+
+impl LinkConfig {
+    /// Defaults for `system_id`: 50 Hz setpoints and telemetry, 1.2 s pre-stream, 0.5 s ack
+    /// timeout and 4 attempts (MAVSDK's), 1.5 s link timeout.
+    pub fn new(system_id: u8) -> Self {
+        Self {
+            system_id,
+            own_ids: (255, 190),
+            setpoint_interval: Duration::from_millis(20),
+            telemetry_interval: Duration::from_millis(20),
+            pre_stream: Duration::from_millis(1200),
+            ack_timeout: Duration::from_millis(500),
+            max_attempts: 4,
+            link_timeout: Duration::from_millis(1500),
+        }
+    }
+}
+
+/// Where the handshake is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// Waiting for a heartbeat from the expected system.
+    Discovering,
+    /// Streaming setpoints before arming, since the given time.
+    Streaming(SimTime),
+    /// Waiting for the arm acknowledgement.
+    Arming,
+    /// Waiting for the OFFBOARD acknowledgement.
+    Offboarding,
+    /// Armed and in OFFBOARD.
+    Flying,
+    /// Silent for longer than the link timeout.
+    Lost,
+    /// Gave up on a command.
+    Failed,
+}
+
+/// What the swarm should know.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LinkEvent {
+    /// First heartbeat from the expected system.
+    Discovered,
+    /// The vehicle reports armed.
+    Armed,
+    /// The vehicle is in OFFBOARD and armed.
+    Flying,
+    /// A command was refused or not acknowledged and is being resent.
+    Retrying {
+        /// MAV_CMD id.
+        command: u16,
+        /// The attempt about to be sent (1-based).
+        attempt: u8,
+    },
+    /// The handshake gave up.
+    Failed(String),
+    /// A frame from another system arrived on this vehicle's link (ignored).
+    WrongSystem {
+        /// Its system id.
+        system_id: u8,
+    },
+    /// Silent for longer than the link timeout.
+    Lost,
+    /// Heard again after being lost.
+    Recovered,
+}
+
+/// What the coordinator knows of the vehicle (its own frames: local NED, body FRD).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct VehicleState {
+    /// Position relative to the vehicle's own origin (m).
+    pub pos_local_ned_m: Vector3<f64>,
+    /// Velocity (m/s).
+    pub vel_ned_mps: Vector3<f64>,
+    /// Attitude.
+    pub attitude: Option<UnitQuaternion<f64>>,
+    /// The local frame's geodetic origin, once reported.
+    pub origin: Option<Geodetic>,
+    /// Armed, as the last heartbeat said.
+    pub armed: bool,
+    /// PX4 custom mode of the last heartbeat.
+    pub custom_mode: u32,
+    /// On the ground, as EXTENDED_SYS_STATE said.
+    pub landed: bool,
+    /// When the last heartbeat arrived.
+    pub last_heartbeat: Option<SimTime>,
+    /// When the last local position arrived.
+    pub last_position: Option<SimTime>,
+}
+
+impl VehicleState {
+    /// Whether the heartbeat says OFFBOARD.
+    pub fn in_offboard(&self) -> bool {
+        (self.custom_mode >> 16) & 0xFF == PX4_MAIN_OFFBOARD
+    }
+}
+
+/// A command waiting for its acknowledgement.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    command: MavCmd,
+    params: [f32; 7],
+    attempt: u8,
+    deadline: SimTime,
+}
+
+/// One vehicle link.
+#[derive(Debug, Clone)]
+pub struct VehicleLink {
+    cfg: LinkConfig,
+    phase: Phase,
+    state: VehicleState,
+    setpoint: AttitudeThrust,
+    next_setpoint: SimTime,
+    pending: Option<Pending>,
+    encoder: Encoder,
+    outbox: VecDeque<Vec<u8>>,
+    events: VecDeque<LinkEvent>,
+    ignored_frames: u64,
+}
+
+impl VehicleLink {
+    /// A link that starts discovering, with `idle` as the setpoint to stream until the law
+    /// takes over (normally level at hover throttle).
+    pub fn new(cfg: LinkConfig, idle: AttitudeThrust) -> Self {
+        let encoder = Encoder::new(cfg.own_ids.0, cfg.own_ids.1);
+        Self {
+            cfg,
+            phase: Phase::Discovering,
+            state: VehicleState::default(),
+            setpoint: idle,
+            next_setpoint: SimTime::ZERO,
+            pending: None,
+            encoder,
+            outbox: VecDeque::new(),
+            events: VecDeque::new(),
+            ignored_frames: 0,
+        }
+    }
+
+    /// The phase.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// What is known of the vehicle.
+    pub fn state(&self) -> &VehicleState {
+        &self.state
+    }
+
+    /// Frames ignored (undecodable, another system, another component).
+    pub fn ignored_frames(&self) -> u64 {
+        self.ignored_frames
+    }
+
+    /// Replaces the setpoint the stream resends.
+    pub fn set_setpoint(&mut self, setpoint: AttitudeThrust) {
+        self.setpoint = setpoint;
+    }
+
+    /// The next datagram to send to the vehicle.
+    pub fn poll_transmit(&mut self) -> Option<Vec<u8>> {
+        self.outbox.pop_front()
+    }
+
+    /// The next event.
+    pub fn poll_event(&mut self) -> Option<LinkEvent> {
+        self.events.pop_front()
+    }
+
+    /// When [`VehicleLink::handle_timeout`] must next be called.
+    pub fn poll_timeout(&self) -> SimTime {
+        let mut next = self
+            .state
+            .last_heartbeat
+            .map_or(SimTime::from_millis(100), |t| t + self.cfg.link_timeout);
+        if self.streams() {
+            next = next.min(self.next_setpoint);
+        }
+        if let Some(p) = self.pending {
+            next = next.min(p.deadline);
+        }
+        if let Phase::Streaming(since) = self.phase {
+            next = next.min(since + self.cfg.pre_stream);
+        }
+        next
+    }
+
+    fn streams(&self) -> bool {
+        !matches!(self.phase, Phase::Discovering | Phase::Lost | Phase::Failed)
+    }
+
+    /// Handles one datagram from the vehicle's address.
+    pub fn handle_datagram(&mut self, now: SimTime, bytes: &[u8]) {
+        for frame in decode_datagram(bytes) {
+            let Ok(frame) = frame else {
+                self.ignored_frames += 1;
+                continue;
+            };
+            let system_id = frame.header.system_id as u8;
+            if system_id != self.cfg.system_id {
+                self.ignored_frames += 1;
+                if self.ignored_frames == 1 || self.phase == Phase::Discovering {
+                    self.events.push_back(LinkEvent::WrongSystem { system_id });
+                }
+                continue;
+            }
+            if frame.header.component_id != 1 {
+                self.ignored_frames += 1;
+                continue;
+            }
+            if let MavMessage::COMMAND_ACK(ack) = &frame.msg
+                && (ack.target_system != 0 && ack.target_system != self.cfg.own_ids.0)
+            {
+                continue; // an acknowledgement meant for another ground station
+            }
+            if let Some(update) = inbound(&frame.msg) {
+                self.apply(now, update);
+            }
+        }
+    }
+
+    fn apply(&mut self, now: SimTime, update: Inbound) {
+        match update {
+            Inbound::Heartbeat {
+                armed, custom_mode, ..
+            } => {
+                self.state.last_heartbeat = Some(now);
+                self.state.custom_mode = custom_mode;
+                if armed && !self.state.armed {
+                    self.events.push_back(LinkEvent::Armed);
+                }
+                self.state.armed = armed;
+                match self.phase {
+                    Phase::Discovering => {
+                        self.events.push_back(LinkEvent::Discovered);
+                        self.start_streaming(now);
+                    }
+                    Phase::Lost => {
+                        self.events.push_back(LinkEvent::Recovered);
+                        self.start_streaming(now);
+                    }
+                    _ => self.advance_on_state(now),
+                }
+            }
+            Inbound::LocalPosition {
+                pos_ned_m,
+                vel_ned_mps,
+            } => {
+                self.state.pos_local_ned_m = pos_ned_m;
+                self.state.vel_ned_mps = vel_ned_mps;
+                self.state.last_position = Some(now);
+            }
+            Inbound::Attitude(q) => self.state.attitude = Some(q),
+            Inbound::Origin(origin) => self.state.origin = Some(origin),
+            Inbound::Landed(landed) => self.state.landed = landed,
+            Inbound::Ack { command, result } => self.on_ack(now, command, result),
+        }
+    }
+
+    fn start_streaming(&mut self, now: SimTime) {
+        self.phase = Phase::Streaming(now);
+        self.pending = None;
+        self.next_setpoint = now;
+        let interval_us = self.cfg.telemetry_interval.as_micros() as f32;
+        for id in [LOCAL_POSITION_NED, ATTITUDE_QUATERNION] {
+            self.send_command(
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                [id, interval_us, 0.0, 0.0, 0.0, 0.0, 0.0],
+                0,
+            );
+        }
+        self.send_command(
+            MavCmd::MAV_CMD_REQUEST_MESSAGE,
+            [GPS_GLOBAL_ORIGIN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            0,
+        );
+    }
+
+    /// A heartbeat may show that a command took effect even if its ack was lost.
+    fn advance_on_state(&mut self, now: SimTime) {
+        if self.phase == Phase::Arming && self.state.armed {
+            self.request_offboard(now);
+        }
+        if self.phase == Phase::Offboarding && self.state.armed && self.state.in_offboard() {
+            self.pending = None;
+            self.phase = Phase::Flying;
+            self.events.push_back(LinkEvent::Flying);
+        }
+    }
+
+    fn on_ack(&mut self, now: SimTime, command: u16, result: u8) {
+        let Some(pending) = self.pending else { return };
+        if pending.command as u16 != command {
+            return;
+        }
+        if result != ACCEPTED {
+            tracing::warn!(
+                sysid = self.cfg.system_id,
+                command,
+                result,
+                "command refused"
+            );
+            return; // resent at the deadline
+        }
+        match self.phase {
+            Phase::Arming => self.request_offboard(now),
+            Phase::Offboarding => {
+                self.pending = None;
+                self.phase = Phase::Flying;
+                self.events.push_back(LinkEvent::Flying);
+            }
+            _ => {}
+        }
+    }
+
+    fn request_arm(&mut self, now: SimTime) {
+        self.phase = Phase::Arming;
+        self.send_pending(
+            now,
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            1,
+        );
+    }
+
+    fn request_offboard(&mut self, now: SimTime) {
+        self.phase = Phase::Offboarding;
+        let params = [1.0, PX4_MAIN_OFFBOARD as f32, 0.0, 0.0, 0.0, 0.0, 0.0];
+        self.send_pending(now, MavCmd::MAV_CMD_DO_SET_MODE, params, 1);
+    }
+
+    fn send_pending(&mut self, now: SimTime, command: MavCmd, params: [f32; 7], attempt: u8) {
+        self.send_command(command, params, attempt - 1);
+        self.pending = Some(Pending {
+            command,
+            params,
+            attempt,
+            deadline: now + self.cfg.ack_timeout,
+        });
+    }
+
+    fn send_command(&mut self, command: MavCmd, params: [f32; 7], confirmation: u8) {
+        let msg = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            target_system: self.cfg.system_id,
+            target_component: 1,
+            command,
+            confirmation,
+            param1: params[0],
+            param2: params[1],
+            param3: params[2],
+            param4: params[3],
+            param5: params[4],
+            param6: params[5],
+            param7: params[6],
+        });
+        self.outbox.push_back(self.encoder.encode(&msg));
+    }
+
+    /// Runs the timers due at `now`: the setpoint stream, the pre-stream, command
+    /// deadlines and link loss.
+    pub fn handle_timeout(&mut self, now: SimTime) {
+        if let Some(last) = self.state.last_heartbeat
+            && now - last > self.cfg.link_timeout
+            && !matches!(self.phase, Phase::Lost | Phase::Failed | Phase::Discovering)
+        {
+            self.phase = Phase::Lost;
+            self.pending = None;
+            self.events.push_back(LinkEvent::Lost);
+            tracing::warn!(
+                sysid = self.cfg.system_id,
+                silent_ms = (now - last).as_millis() as u64,
+                "vehicle lost"
+            );
+        }
+        if let Phase::Streaming(since) = self.phase
+            && now - since >= self.cfg.pre_stream
+        {
+            if self.state.armed {
+                self.request_offboard(now)
+            } else {
+                self.request_arm(now)
+            }
+        }
+        if let Some(p) = self.pending
+            && now >= p.deadline
+        {
+            if p.attempt >= self.cfg.max_attempts {
+                self.pending = None;
+                self.phase = Phase::Failed;
+                let reason = format!(
+                    "vehicle {}: {:?} not accepted after {} attempts",
+                    self.cfg.system_id, p.command, p.attempt
+                );
+                tracing::error!(sysid = self.cfg.system_id, %reason, "handshake failed");
+                self.events.push_back(LinkEvent::Failed(reason));
+            } else {
+                self.events.push_back(LinkEvent::Retrying {
+                    command: p.command as u16,
+                    attempt: p.attempt + 1,
+                });
+                self.send_pending(now, p.command, p.params, p.attempt + 1);
+            }
+        }
+        if self.streams() && now >= self.next_setpoint {
+            let msg = set_attitude_target(&self.setpoint, self.cfg.system_id, now.boot_ms());
+            self.outbox.push_back(self.encoder.encode(&msg));
+            let next = self.next_setpoint + self.cfg.setpoint_interval;
+            self.next_setpoint = if next <= now {
+                now + self.cfg.setpoint_interval
+            } else {
+                next
+            };
+        }
+    }
+}
