@@ -13,6 +13,8 @@
 //! - [`frame`]: the common frame built from each vehicle's geodetic origin (pure).
 //! - [`link`]: the MAVLink edge: framing and message ↔ domain conversions.
 //! - [`vehicle`]: sans-IO machine for one vehicle: PX4 offboard handshake, link health.
+//! - [`swarm`]: sans-IO swarm machine: the laws at the control rate over every link.
+//! - [`driver`]: lockstep (virtual time, in-memory) driver of the swarm and the emulator.
 //! - [`report`]: what the `analyze` and `plan` commands compute and print.
 //! - [`sitl_cmd`]: `ringswarm sitl`, the emulator on real UDP sockets (I/O edge).
 //! - [`cli`]: the command line (clap).
@@ -32,9 +34,11 @@
 pub mod cli;
 pub mod consensus;
 pub mod control;
+pub mod driver;
 pub mod error;
 pub mod frame;
 pub mod link;
 pub mod report;
 pub mod sitl_cmd;
+pub mod swarm;
 pub mod vehicle;

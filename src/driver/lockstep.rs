@@ -1,0 +1,167 @@
+//! The lockstep driver: the swarm machine and the emulator's vehicle machines exchange
+//! encoded MAVLink frames in virtual time, 1 ms at a time, with a seeded latency and loss
+//! on every link. Same seed, same inputs: the same trajectory, bit for bit.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use ringswarm_sitl::autopilot::{LinkId, PHYSICS_STEP, Vehicle};
+use ringswarm_sitl::time::SimTime;
+
+use crate::swarm::Swarm;
+
+/// Link conditions between the coordinator and every vehicle (both directions).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkConditions {
+    /// One-way latency.
+    pub latency: Duration,
+    /// Uniform extra latency `0..jitter`.
+    pub jitter: Duration,
+    /// Probability that a datagram is lost.
+    pub loss: f64,
+    /// Seed of the loss and jitter draws.
+    pub seed: u64,
+}
+
+impl Default for LinkConditions {
+    fn default() -> Self {
+        Self {
+            latency: Duration::ZERO,
+            jitter: Duration::ZERO,
+            loss: 0.0,
+            seed: 1,
+        }
+    }
+}
+
+/// A datagram in flight.
+#[derive(Debug, Clone)]
+struct InFlight {
+    due: SimTime,
+    to_vehicle: bool,
+    index: usize,
+    bytes: Vec<u8>,
+}
+
+/// The coordinator and its vehicles in one virtual world.
+#[derive(Debug)]
+pub struct Lockstep {
+    swarm: Swarm,
+    vehicles: Vec<Vehicle>,
+    now: SimTime,
+    in_flight: VecDeque<InFlight>,
+    conditions: LinkConditions,
+    rng: ChaCha8Rng,
+    silenced: Vec<Option<(SimTime, SimTime)>>,
+}
+
+impl Lockstep {
+    /// Pairs the swarm's links with `vehicles` (link `i` talks to vehicle `i`'s offboard link).
+    pub fn new(swarm: Swarm, vehicles: Vec<Vehicle>, conditions: LinkConditions) -> Self {
+        let n = vehicles.len();
+        Self {
+            swarm,
+            vehicles,
+            now: SimTime::ZERO,
+            in_flight: VecDeque::new(),
+            rng: ChaCha8Rng::seed_from_u64(conditions.seed),
+            conditions,
+            silenced: vec![None; n],
+        }
+    }
+
+    /// Virtual time.
+    pub fn now(&self) -> SimTime {
+        self.now
+    }
+
+    /// The swarm machine.
+    pub fn swarm(&self) -> &Swarm {
+        &self.swarm
+    }
+
+    /// The emulated vehicles.
+    pub fn vehicles(&self) -> &[Vehicle] {
+        &self.vehicles
+    }
+
+    /// Drops everything vehicle `i` sends and receives between `from` and `until`.
+    pub fn silence(&mut self, i: usize, from: SimTime, until: SimTime) {
+        if let Some(slot) = self.silenced.get_mut(i) {
+            *slot = Some((from, until));
+        }
+    }
+
+    /// Advances by one physics step.
+    pub fn step(&mut self) {
+        self.now = self.now + PHYSICS_STEP;
+        let now = self.now;
+        for i in 0..self.vehicles.len() {
+            self.vehicles[i].handle_timeout(now);
+            while let Some(tx) = self.vehicles[i].poll_transmit() {
+                if tx.link == LinkId::Offboard {
+                    self.send(false, i, tx.bytes);
+                }
+            }
+        }
+        self.deliver(now);
+        if now >= self.swarm.poll_timeout() {
+            self.swarm.handle_timeout(now);
+        }
+        while let Some((i, bytes)) = self.swarm.poll_transmit() {
+            self.send(true, i, bytes);
+        }
+        self.deliver(now);
+    }
+
+    /// Runs until virtual time `end`, calling `observe` after every step.
+    pub fn run_until(&mut self, end: SimTime, mut observe: impl FnMut(&Self)) {
+        while self.now < end {
+            self.step();
+            observe(self);
+        }
+    }
+
+    fn is_silenced(&self, i: usize) -> bool {
+        self.silenced[i].is_some_and(|(from, until)| self.now >= from && self.now < until)
+    }
+
+    fn send(&mut self, to_vehicle: bool, index: usize, bytes: Vec<u8>) {
+        if self.is_silenced(index)
+            || (self.conditions.loss > 0.0 && self.rng.random::<f64>() < self.conditions.loss)
+        {
+            return;
+        }
+        let jitter = if self.conditions.jitter.is_zero() {
+            Duration::ZERO
+        } else {
+            self.conditions.jitter.mul_f64(self.rng.random::<f64>())
+        };
+        self.in_flight.push_back(InFlight {
+            due: self.now + self.conditions.latency + jitter,
+            to_vehicle,
+            index,
+            bytes,
+        });
+    }
+
+    fn deliver(&mut self, now: SimTime) {
+        let mut i = 0;
+        while i < self.in_flight.len() {
+            if self.in_flight[i].due > now {
+                i += 1;
+                continue;
+            }
+            let Some(d) = self.in_flight.remove(i) else {
+                break;
+            };
+            if d.to_vehicle {
+                self.vehicles[d.index].handle_datagram(now, LinkId::Offboard, &d.bytes);
+            } else {
+                self.swarm.handle_datagram(now, d.index, &d.bytes);
+            }
+        }
+    }
+}

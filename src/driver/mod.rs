@@ -1,0 +1,6 @@
+//! Drivers: what moves bytes and time between the sans-IO machines.
+//!
+//! - [`lockstep`]: the coordinator and N emulated vehicles in one process, virtual time,
+//!   encoded MAVLink frames in between, seeded latency and loss. Deterministic.
+
+pub mod lockstep;

@@ -1,0 +1,280 @@
+//! The swarm machine (sans-IO): owns one [`VehicleLink`] per vehicle and runs the laws at
+//! the control rate.
+//!
+//! ```text
+//!  Handshake ──every vehicle Flying──► Consensus ──(driver's end)
+//!  (each Flying vehicle: altitude loop only, horizontal acceleration zero)
+//! ```
+//!
+//! Each control tick puts every vehicle in the common frame (its GPS origin projected at
+//! the common reference, plus its local position), computes the horizontal consensus law
+//! over the ring and the altitude PD (z up), adds the drag feed-forward of the vehicle
+//! model, saturates the swarm's commands together (`conserve` keeps `Σ wᵢuᵢ`), and turns
+//! each acceleration into an attitude and normalised thrust for its link to stream.
+//! Horizontal acceleration zero before consensus keeps `w·v`, so the predicted final
+//! velocity is computed from the velocities at the start of consensus.
+
+use std::time::Duration;
+
+use nalgebra::{Vector2, Vector3};
+use ringswarm_sitl::time::SimTime;
+
+use crate::consensus::{
+    CouplingGains, HorizontalState, RingDigraph, predicted_final_velocity, ring_accelerations,
+};
+use crate::control::{
+    AltitudeGains, Envelope, SaturationMode, VehicleModel, attitude_thrust_from_acceleration,
+    saturate,
+};
+use crate::frame::CommonFrame;
+use crate::vehicle::{LinkConfig, Phase, VehicleLink};
+
+/// Everything the swarm machine needs, validated by the caller (see `config`).
+#[derive(Debug, Clone)]
+pub struct SwarmSetup {
+    /// The ring.
+    pub ring: RingDigraph,
+    /// `(α, β)`.
+    pub gains: CouplingGains,
+    /// `(k_pz, k_vz)`.
+    pub altitude_gains: AltitudeGains,
+    /// Commanded altitude in the common frame (m, z up).
+    pub altitude_m: f64,
+    /// Formation offsets `dᵢ` (m, ENU), one per vehicle.
+    pub offsets_m: Vec<Vector2<f64>>,
+    /// Vehicle models, one per vehicle.
+    pub models: Vec<VehicleModel>,
+    /// Linear drag of each vehicle (1/s), fed forward.
+    pub drag_per_s: Vec<f64>,
+    /// Envelope and saturation mode.
+    pub envelope: Envelope,
+    /// How commands are saturated.
+    pub saturation: SaturationMode,
+    /// Control period.
+    pub control_interval: Duration,
+    /// The common frame.
+    pub frame: CommonFrame,
+    /// One link configuration per vehicle.
+    pub links: Vec<LinkConfig>,
+}
+
+/// Where the swarm is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SwarmPhase {
+    /// Vehicles are being handshaken; the flying ones hold altitude.
+    Handshake,
+    /// The consensus law runs, since the given time.
+    Consensus(SimTime),
+}
+
+/// One vehicle's state in the common frame (ENU, m and m/s).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CommonState {
+    /// Position.
+    pub pos_enu_m: Vector3<f64>,
+    /// Velocity.
+    pub vel_enu_mps: Vector3<f64>,
+}
+
+/// The swarm.
+#[derive(Debug, Clone)]
+pub struct Swarm {
+    setup: SwarmSetup,
+    links: Vec<VehicleLink>,
+    phase: SwarmPhase,
+    next_control: SimTime,
+    predicted_final_velocity: Option<Vector2<f64>>,
+    horizontal: Vec<HorizontalState>,
+    accel: Vec<Vector2<f64>>,
+    commands: Vec<Vector3<f64>>,
+    states: Vec<Option<CommonState>>,
+    w: Vec<f64>,
+    saturated_ticks: u64,
+    consensus_ticks: u64,
+    next_link: usize,
+}
+
+impl Swarm {
+    /// A swarm that starts handshaking every vehicle.
+    pub fn new(setup: SwarmSetup) -> Self {
+        let n = setup.links.len();
+        let w = (0..n).map(|i| setup.ring.w(i)).collect();
+        let links: Vec<VehicleLink> = setup
+            .links
+            .iter()
+            .zip(&setup.models)
+            .map(|(cfg, model)| {
+                VehicleLink::new(
+                    cfg.clone(),
+                    attitude_thrust_from_acceleration(Vector3::zeros(), 0.0, model),
+                )
+            })
+            .collect();
+        Self {
+            w,
+            setup,
+            links,
+            phase: SwarmPhase::Handshake,
+            next_control: SimTime::ZERO,
+            predicted_final_velocity: None,
+            horizontal: vec![HorizontalState::default(); n],
+            accel: vec![Vector2::zeros(); n],
+            commands: vec![Vector3::zeros(); n],
+            states: vec![None; n],
+            saturated_ticks: 0,
+            consensus_ticks: 0,
+            next_link: 0,
+        }
+    }
+
+    /// The phase.
+    pub fn phase(&self) -> SwarmPhase {
+        self.phase
+    }
+
+    /// The links.
+    pub fn links(&self) -> &[VehicleLink] {
+        &self.links
+    }
+
+    /// The final velocity predicted at the start of consensus (m/s, ENU).
+    pub fn predicted_final_velocity(&self) -> Option<Vector2<f64>> {
+        self.predicted_final_velocity
+    }
+
+    /// Fraction of consensus ticks on which some command was saturated.
+    pub fn saturated_fraction(&self) -> f64 {
+        if self.consensus_ticks == 0 {
+            0.0
+        } else {
+            self.saturated_ticks as f64 / self.consensus_ticks as f64
+        }
+    }
+
+    /// The last accelerations commanded (m/s², ENU), after saturation.
+    pub fn commands(&self) -> &[Vector3<f64>] {
+        &self.commands
+    }
+
+    /// Vehicle `i` in the common frame, once its origin is known.
+    pub fn common_state(&self, i: usize) -> Option<CommonState> {
+        let state = self.links[i].state();
+        let origin = state.origin?;
+        Some(CommonState {
+            pos_enu_m: self
+                .setup
+                .frame
+                .to_common_enu(&origin, &state.pos_local_ned_m),
+            vel_enu_mps: crate::control::ned_to_enu(state.vel_ned_mps),
+        })
+    }
+
+    /// Hands a datagram from vehicle `i` to its link.
+    pub fn handle_datagram(&mut self, now: SimTime, i: usize, bytes: &[u8]) {
+        if let Some(link) = self.links.get_mut(i) {
+            link.handle_datagram(now, bytes);
+        }
+    }
+
+    /// When [`Swarm::handle_timeout`] must next be called.
+    pub fn poll_timeout(&self) -> SimTime {
+        self.links
+            .iter()
+            .map(VehicleLink::poll_timeout)
+            .fold(self.next_control, SimTime::min)
+    }
+
+    /// The next datagram and the vehicle it is for (round robin over the links).
+    pub fn poll_transmit(&mut self) -> Option<(usize, Vec<u8>)> {
+        let n = self.links.len();
+        for k in 0..n {
+            let i = (self.next_link + k) % n;
+            if let Some(bytes) = self.links[i].poll_transmit() {
+                self.next_link = (i + 1) % n;
+                return Some((i, bytes));
+            }
+        }
+        None
+    }
+
+    /// Runs the control tick and the links' timers due at `now`.
+    pub fn handle_timeout(&mut self, now: SimTime) {
+        if now >= self.next_control {
+            self.control(now);
+            self.next_control = now + self.setup.control_interval;
+        }
+        for link in &mut self.links {
+            if now >= link.poll_timeout() {
+                link.handle_timeout(now);
+            }
+        }
+    }
+
+    /// One control tick. Allocation-free: every buffer was sized at construction.
+    fn control(&mut self, now: SimTime) {
+        for i in 0..self.links.len() {
+            self.states[i] = self.common_state(i);
+        }
+        let states = &self.states;
+        let all_flying = self.links.iter().all(|l| l.phase() == Phase::Flying);
+        if self.phase == SwarmPhase::Handshake && all_flying && states.iter().all(Option::is_some) {
+            self.phase = SwarmPhase::Consensus(now);
+            let v0: Vec<Vector2<f64>> = states
+                .iter()
+                .flatten()
+                .map(|s| s.vel_enu_mps.xy())
+                .collect(); // once
+            self.predicted_final_velocity = predicted_final_velocity(&self.setup.ring, &v0).ok();
+            tracing::info!(predicted = ?self.predicted_final_velocity, "consensus started");
+        }
+        for (i, state) in states.iter().enumerate() {
+            let s = state.unwrap_or_default();
+            self.horizontal[i] = HorizontalState {
+                pos_m: s.pos_enu_m.xy(),
+                vel_mps: s.vel_enu_mps.xy(),
+                offset_m: self.setup.offsets_m[i],
+            };
+        }
+        if matches!(self.phase, SwarmPhase::Consensus(_)) {
+            ring_accelerations(
+                &self.setup.ring,
+                self.setup.gains,
+                &self.horizontal,
+                &mut self.accel,
+            );
+        } else {
+            self.accel.iter_mut().for_each(|a| *a = Vector2::zeros());
+        }
+        for (i, state) in states.iter().enumerate() {
+            let s = state.unwrap_or_default();
+            let u_z = self.setup.altitude_gains.acceleration(
+                s.pos_enu_m.z,
+                s.vel_enu_mps.z,
+                self.setup.altitude_m,
+            );
+            let drag = s.vel_enu_mps * self.setup.drag_per_s[i];
+            self.commands[i] = Vector3::new(self.accel[i].x, self.accel[i].y, u_z) + drag;
+        }
+        if let Ok(summary) = saturate(
+            self.setup.saturation,
+            &self.setup.envelope,
+            &self.setup.models,
+            &self.w,
+            &mut self.commands,
+        ) && matches!(self.phase, SwarmPhase::Consensus(_))
+        {
+            self.consensus_ticks += 1;
+            self.saturated_ticks +=
+                u64::from(summary.horizontal_limited + summary.vertical_limited > 0);
+        }
+        for (i, link) in self.links.iter_mut().enumerate() {
+            if states[i].is_some() {
+                link.set_setpoint(attitude_thrust_from_acceleration(
+                    self.commands[i],
+                    0.0,
+                    &self.setup.models[i],
+                ));
+            }
+        }
+    }
+}

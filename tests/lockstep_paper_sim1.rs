@@ -1,0 +1,182 @@
+//! The paper's first simulation flown in lockstep: the coordinator and six emulated
+//! `ideal` quadrotors exchanging MAVLink frames in virtual time.
+
+use std::f64::consts::PI;
+use std::time::Duration;
+
+use nalgebra::{Vector2, Vector3};
+use ringswarm::consensus::{CouplingGains, RingDigraph};
+use ringswarm::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel, enu_to_ned};
+use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
+use ringswarm::frame::{CommonFrame, Geodetic};
+use ringswarm::swarm::{Swarm, SwarmPhase, SwarmSetup};
+use ringswarm::vehicle::LinkConfig;
+use ringswarm_sitl::autopilot::{StartState, Vehicle, VehicleConfig};
+use ringswarm_sitl::profile::Profile;
+use ringswarm_sitl::time::SimTime;
+use ringswarm_sitl::world::World;
+
+const P0: [[f64; 3]; 6] = [
+    [0.0, 20.0, 0.0],
+    [50.0, -20.0, 0.0],
+    [10.0, 30.0, 0.0],
+    [10.0, 20.0, 0.0],
+    [20.0, 0.0, 0.0],
+    [20.0, 10.0, 0.0],
+];
+const V0: [[f64; 3]; 6] = [
+    [9.0, 4.0, 0.0],
+    [15.0, 8.0, 7.0],
+    [18.0, -2.0, 13.0],
+    [13.0, 1.0, 7.0],
+    [-8.0, -7.0, 6.0],
+    [14.0, 18.0, -6.0],
+];
+
+fn build(conditions: LinkConditions) -> Lockstep {
+    let world = World {
+        ground_down_m: 100.0,
+        ..World::default()
+    };
+    let reference = Geodetic {
+        lat_deg: world.reference.lat_deg,
+        lon_deg: world.reference.lon_deg,
+        alt_amsl_m: world.reference.alt_amsl_m,
+    };
+    let profile = Profile::ideal();
+    let vehicles = (0..6)
+        .map(|i| {
+            let mut cfg = VehicleConfig::new(i as u8 + 1, profile.clone());
+            cfg.start = StartState {
+                pos_world_ned_m: enu_to_ned(Vector3::from(P0[i])),
+                vel_ned_mps: enu_to_ned(Vector3::from(V0[i])),
+                yaw_rad: 0.0,
+                in_air: true,
+            };
+            Vehicle::new(cfg, world).unwrap()
+        })
+        .collect();
+    let model =
+        VehicleModel::from_hover_throttle(profile.mass_kg, profile.hover_throttle()).unwrap();
+    let setup = SwarmSetup {
+        ring: RingDigraph::new(3, 5.0).unwrap(),
+        gains: CouplingGains::new(1.0, 5.0).unwrap(),
+        altitude_gains: AltitudeGains::new(1.0, 4.0).unwrap(),
+        altitude_m: 50.0,
+        offsets_m: (0..6)
+            .map(|l| {
+                Vector2::new(
+                    (2.0 * PI * l as f64 / 6.0).cos(),
+                    (2.0 * PI * l as f64 / 6.0).sin(),
+                ) * 20.0
+            })
+            .collect(),
+        models: vec![model; 6],
+        drag_per_s: vec![0.0; 6],
+        envelope: Envelope::new(60f64.to_radians(), 0.1, 0.95).unwrap(),
+        saturation: SaturationMode::Conserve,
+        control_interval: Duration::from_millis(4),
+        frame: CommonFrame::new(reference),
+        links: (1..=6)
+            .map(|id| LinkConfig {
+                setpoint_interval: Duration::from_millis(4),
+                ..LinkConfig::new(id)
+            })
+            .collect(),
+    };
+    Lockstep::new(Swarm::new(setup), vehicles, conditions)
+}
+
+/// Positions and velocities of every vehicle, sampled every 100 ms.
+fn trajectory(run: &mut Lockstep, seconds: u64) -> Vec<[f64; 6]> {
+    let mut samples = Vec::new();
+    let mut next = SimTime::ZERO;
+    run.run_until(SimTime::from_millis(seconds * 1000), |r| {
+        if r.now() >= next {
+            next = next + Duration::from_millis(100);
+            for v in r.vehicles() {
+                let s = v.status();
+                samples.push([
+                    s.pos_world_ned_m.x,
+                    s.pos_world_ned_m.y,
+                    s.pos_world_ned_m.z,
+                    s.vel_ned_mps.x,
+                    s.vel_ned_mps.y,
+                    s.vel_ned_mps.z,
+                ]);
+            }
+        }
+    });
+    samples
+}
+
+#[test]
+fn six_vehicles_are_handshaken_and_consensus_starts_with_the_papers_prediction() {
+    let mut run = build(LinkConditions::default());
+    run.run_until(SimTime::from_millis(3000), |_| {});
+    let SwarmPhase::Consensus(start) = run.swarm().phase() else {
+        panic!(
+            "consensus did not start: {:?}",
+            run.swarm()
+                .links()
+                .iter()
+                .map(|l| l.phase())
+                .collect::<Vec<_>>()
+        )
+    };
+    // Discovery at the first heartbeat, 1.2 s of stream, then arm and OFFBOARD.
+    assert!(
+        (1.2..1.4).contains(&start.as_secs_f64()),
+        "consensus at {start:?}"
+    );
+    assert!(
+        run.vehicles().iter().all(|v| v.status().armed
+            && v.status().mode == ringswarm_sitl::autopilot::FlightMode::Offboard)
+    );
+    // Until consensus the pilots hold the initial velocities and the swarm commands no
+    // horizontal acceleration, so w·v is the paper's: v_f = (271, 157)/21 (hand-derived,
+    // w = (1, 6, 1, 6, 1, 6)).
+    let predicted = run.swarm().predicted_final_velocity().unwrap();
+    assert!(
+        (predicted - Vector2::new(271.0 / 21.0, 157.0 / 21.0)).norm() < 0.05,
+        "{predicted:?}"
+    );
+    // Every vehicle is placed in the common frame where the emulator put it, up to the
+    // age of its last LOCAL_POSITION_NED (at most one 20 ms telemetry period).
+    for (i, v) in run.vehicles().iter().enumerate() {
+        let common = run.swarm().common_state(i).unwrap().pos_enu_m;
+        let status = v.status();
+        let truth = ringswarm::control::ned_to_enu(status.pos_world_ned_m);
+        let allowance = status.vel_ned_mps.norm() * 0.021 + 0.01;
+        assert!(
+            (common - truth).norm() < allowance,
+            "vehicle {}: {common:?} vs {truth:?}",
+            i + 1
+        );
+    }
+}
+
+#[test]
+fn two_runs_with_the_same_seed_are_identical_bit_for_bit() {
+    // 10 % loss and 0-5 ms of jitter on every link, drawn from the seed.
+    let lossy = |seed| LinkConditions {
+        latency: Duration::from_millis(2),
+        jitter: Duration::from_millis(5),
+        loss: 0.1,
+        seed,
+    };
+    let same = |x: &[[f64; 6]], y: &[[f64; 6]]| {
+        x.iter()
+            .zip(y)
+            .all(|(p, q)| p.iter().zip(q).all(|(a, b)| a.to_bits() == b.to_bits()))
+    };
+    let a = trajectory(&mut build(lossy(7)), 6);
+    let b = trajectory(&mut build(lossy(7)), 6);
+    let c = trajectory(&mut build(lossy(8)), 6);
+    assert_eq!(a.len(), 6 * 61); // t = 1 ms, then every 100 ms up to 6 s
+    assert!(same(&a, &b), "same seed, different trajectories");
+    assert!(
+        !same(&a, &c),
+        "another seed must change the losses and so the trajectory"
+    );
+}
