@@ -117,6 +117,7 @@ impl Vehicle {
             self.note_setpoint(now);
         }
         self.offboard_setpoint = setpoint;
+        self.counters.setpoints += 1;
         true
     }
 

@@ -99,11 +99,15 @@ pub struct Counters {
     pub rejected_setpoints: u64,
     /// Commands answered UNSUPPORTED.
     pub unsupported_commands: u64,
+    /// Attitude setpoints accepted.
+    pub setpoints: u64,
 }
 
 /// A snapshot for status lines and tests.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VehicleStatus {
+    /// The simulated time of this snapshot.
+    pub at: SimTime,
     /// System id.
     pub system_id: u8,
     /// Flight mode.
@@ -319,6 +323,7 @@ impl Vehicle {
     /// A snapshot of the vehicle.
     pub fn status(&self) -> VehicleStatus {
         VehicleStatus {
+            at: self.last_step,
             system_id: self.cfg.system_id,
             mode: self.mode,
             armed: self.armed,

@@ -1,0 +1,131 @@
+//! The swarm over real UDP sockets against emulated vehicles in the same process.
+
+use std::time::Duration;
+
+use nalgebra::Vector2;
+use ringswarm::consensus::{CouplingGains, RingDigraph};
+use ringswarm::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel};
+use ringswarm::driver::udp::run_swarm;
+use ringswarm::frame::{CommonFrame, Geodetic};
+use ringswarm::swarm::{Swarm, SwarmSetup};
+use ringswarm::vehicle::{LinkConfig, Phase};
+use ringswarm_sitl::autopilot::{Vehicle, VehicleConfig};
+use ringswarm_sitl::profile::Profile;
+use ringswarm_sitl::udp::{LinkFaults, SimClock, VehicleTask, run_vehicle};
+use ringswarm_sitl::world::World;
+use tokio::net::UdpSocket;
+use tokio::sync::{mpsc, watch};
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_rate() {
+    const N: usize = 4;
+    let world = World::default();
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let clock = SimClock::new(1.0);
+    let mut coordinator_sockets = Vec::new();
+    let mut vehicle_addrs = Vec::new();
+    let mut statuses = Vec::new();
+    let mut vehicles = Vec::new();
+    for i in 0..N {
+        let ours = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+        let offboard = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+        let gcs = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+        vehicle_addrs.push(offboard.local_addr().unwrap());
+        let mut cfg = VehicleConfig::new(i as u8 + 1, Profile::x500());
+        cfg.start.pos_world_ned_m.y = 5.0 * i as f64;
+        let vehicle = Vehicle::new(cfg, world).unwrap();
+        let (status_tx, status_rx) = watch::channel(vehicle.status());
+        statuses.push(status_rx);
+        let (_control_tx, control) = mpsc::channel(1);
+        let task = VehicleTask {
+            vehicle,
+            default_peers: [ours.local_addr().unwrap(), gcs.local_addr().unwrap()],
+            sockets: [offboard, gcs],
+            faults: [LinkFaults::default(); 2],
+            seed: i as u64,
+            control,
+        };
+        vehicles.push(tokio::spawn(run_vehicle(
+            task,
+            clock,
+            status_tx,
+            stop_rx.clone(),
+        )));
+        coordinator_sockets.push(ours);
+    }
+    let model = VehicleModel::from_hover_throttle(2.0, 0.5).unwrap();
+    let setup = SwarmSetup {
+        ring: RingDigraph::for_agents(N, 1.0).unwrap(),
+        gains: CouplingGains::new(0.2, 1.0).unwrap(),
+        altitude_gains: AltitudeGains::new(1.0, 2.0).unwrap(),
+        altitude_m: 5.0,
+        offsets_m: (0..N).map(|i| Vector2::new(5.0 * i as f64, 0.0)).collect(),
+        models: vec![model; N],
+        drag_per_s: vec![0.1; N],
+        envelope: Envelope::new(35f64.to_radians(), 0.1, 0.9).unwrap(),
+        saturation: SaturationMode::Conserve,
+        control_interval: Duration::from_millis(20),
+        frame: CommonFrame::new(Geodetic {
+            lat_deg: world.reference.lat_deg,
+            lon_deg: world.reference.lon_deg,
+            alt_amsl_m: world.reference.alt_amsl_m,
+        }),
+        links: (1..=N as u8).map(LinkConfig::new).collect(),
+    };
+    let mut all_flying_at = None;
+    let swarm_task = tokio::spawn(run_swarm(
+        Swarm::new(setup),
+        coordinator_sockets,
+        vehicle_addrs,
+        stop_rx.clone(),
+        move |swarm, now| {
+            if all_flying_at.is_none() && swarm.links().iter().all(|l| l.phase() == Phase::Flying) {
+                all_flying_at = Some(now);
+                eprintln!("all flying at {:.3} s", now.as_secs_f64());
+            }
+        },
+    ));
+    // Every vehicle armed in OFFBOARD within 5 s (the handshake needs 1.2 s of stream).
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(5);
+    loop {
+        let all = statuses.iter().all(|s| {
+            let s = s.borrow();
+            s.armed && s.mode == ringswarm_sitl::autopilot::FlightMode::Offboard
+        });
+        if all {
+            break;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "not all vehicles in OFFBOARD within 5 s"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    // Setpoint rate seen by each vehicle over 2 s of its own clock: 50 Hz ± 5 %.
+    let snapshot = |s: &watch::Receiver<ringswarm_sitl::autopilot::VehicleStatus>| {
+        let s = s.borrow();
+        (s.counters.setpoints, s.at.as_secs_f64())
+    };
+    let first: Vec<(u64, f64)> = statuses.iter().map(snapshot).collect();
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    for (i, s) in statuses.iter().enumerate() {
+        let (count, t) = snapshot(s);
+        let rate = (count - first[i].0) as f64 / (t - first[i].1);
+        eprintln!(
+            "vehicle {}: {rate:.2} Hz over {:.2} s",
+            i + 1,
+            t - first[i].1
+        );
+        assert!(
+            (rate - 50.0).abs() <= 2.5,
+            "vehicle {}: {rate:.2} Hz",
+            i + 1
+        );
+    }
+    stop_tx.send_replace(true);
+    let swarm = swarm_task.await.unwrap().unwrap();
+    assert!(swarm.links().iter().all(|l| l.phase() == Phase::Flying));
+    for v in vehicles {
+        v.await.unwrap().unwrap();
+    }
+}
