@@ -17,6 +17,7 @@
 //! - [`driver`]: lockstep (virtual time, in-memory) driver of the swarm and the emulator.
 //! - [`report`]: what the `analyze` and `plan` commands compute and print.
 //! - [`sitl_cmd`]: `ringswarm sitl`, the emulator on real UDP sockets (I/O edge).
+//! - [`config`]: the coordinator's TOML configuration and its validation.
 //! - [`cli`]: the command line (clap).
 //! - [`error`]: one error enum per layer.
 //!
@@ -32,6 +33,7 @@
 #![warn(missing_docs)]
 
 pub mod cli;
+pub mod config;
 pub mod consensus;
 pub mod control;
 pub mod driver;

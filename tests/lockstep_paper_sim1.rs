@@ -1,89 +1,24 @@
-//! The paper's first simulation flown in lockstep: the coordinator and six emulated
-//! `ideal` quadrotors exchanging MAVLink frames in virtual time.
+//! The paper's first simulation (`config/paper-sim1.toml`) flown in lockstep: the
+//! coordinator and six emulated `ideal` quadrotors exchanging MAVLink frames in virtual time.
 
-use std::f64::consts::PI;
 use std::time::Duration;
 
-use nalgebra::{Vector2, Vector3};
-use ringswarm::consensus::{CouplingGains, RingDigraph};
-use ringswarm::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel, enu_to_ned};
+use nalgebra::Vector2;
+use ringswarm::config::Config;
 use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
-use ringswarm::frame::{CommonFrame, Geodetic};
-use ringswarm::swarm::{Swarm, SwarmPhase, SwarmSetup};
-use ringswarm::vehicle::LinkConfig;
-use ringswarm_sitl::autopilot::{StartState, Vehicle, VehicleConfig};
-use ringswarm_sitl::profile::Profile;
+use ringswarm::swarm::{Swarm, SwarmPhase};
+use ringswarm_sitl::autopilot::Vehicle;
 use ringswarm_sitl::time::SimTime;
-use ringswarm_sitl::world::World;
-
-const P0: [[f64; 3]; 6] = [
-    [0.0, 20.0, 0.0],
-    [50.0, -20.0, 0.0],
-    [10.0, 30.0, 0.0],
-    [10.0, 20.0, 0.0],
-    [20.0, 0.0, 0.0],
-    [20.0, 10.0, 0.0],
-];
-const V0: [[f64; 3]; 6] = [
-    [9.0, 4.0, 0.0],
-    [15.0, 8.0, 7.0],
-    [18.0, -2.0, 13.0],
-    [13.0, 1.0, 7.0],
-    [-8.0, -7.0, 6.0],
-    [14.0, 18.0, -6.0],
-];
 
 fn build(conditions: LinkConditions) -> Lockstep {
-    let world = World {
-        ground_down_m: 100.0,
-        ..World::default()
-    };
-    let reference = Geodetic {
-        lat_deg: world.reference.lat_deg,
-        lon_deg: world.reference.lon_deg,
-        alt_amsl_m: world.reference.alt_amsl_m,
-    };
-    let profile = Profile::ideal();
-    let vehicles = (0..6)
-        .map(|i| {
-            let mut cfg = VehicleConfig::new(i as u8 + 1, profile.clone());
-            cfg.start = StartState {
-                pos_world_ned_m: enu_to_ned(Vector3::from(P0[i])),
-                vel_ned_mps: enu_to_ned(Vector3::from(V0[i])),
-                yaw_rad: 0.0,
-                in_air: true,
-            };
-            Vehicle::new(cfg, world).unwrap()
-        })
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml");
+    let config = Config::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let setup = config.validate().unwrap();
+    let (world, vehicles) = config.emulator().unwrap();
+    let vehicles = vehicles
+        .into_iter()
+        .map(|v| Vehicle::new(v, world).unwrap())
         .collect();
-    let model =
-        VehicleModel::from_hover_throttle(profile.mass_kg, profile.hover_throttle()).unwrap();
-    let setup = SwarmSetup {
-        ring: RingDigraph::new(3, 5.0).unwrap(),
-        gains: CouplingGains::new(1.0, 5.0).unwrap(),
-        altitude_gains: AltitudeGains::new(1.0, 4.0).unwrap(),
-        altitude_m: 50.0,
-        offsets_m: (0..6)
-            .map(|l| {
-                Vector2::new(
-                    (2.0 * PI * l as f64 / 6.0).cos(),
-                    (2.0 * PI * l as f64 / 6.0).sin(),
-                ) * 20.0
-            })
-            .collect(),
-        models: vec![model; 6],
-        drag_per_s: vec![0.0; 6],
-        envelope: Envelope::new(60f64.to_radians(), 0.1, 0.95).unwrap(),
-        saturation: SaturationMode::Conserve,
-        control_interval: Duration::from_millis(4),
-        frame: CommonFrame::new(reference),
-        links: (1..=6)
-            .map(|id| LinkConfig {
-                setpoint_interval: Duration::from_millis(4),
-                ..LinkConfig::new(id)
-            })
-            .collect(),
-    };
     Lockstep::new(Swarm::new(setup), vehicles, conditions)
 }
 

@@ -1,0 +1,417 @@
+//! The coordinator's TOML configuration: serde structs with `deny_unknown_fields`, and
+//! [`Config::validate`], which reports every problem at once and produces the typed
+//! [`SwarmSetup`] (unstable gains are refused here, before anything is sent).
+//!
+//! Frames: vehicle start states and formation offsets are in the paper's ENU frame (x
+//! east, y north, z up, metres) about the common reference point.
+
+use std::f64::consts::PI;
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use nalgebra::{Vector2, Vector3};
+use serde::Deserialize;
+
+use ringswarm_sitl::autopilot::{StartState, VehicleConfig};
+use ringswarm_sitl::profile::Profile;
+use ringswarm_sitl::world::World;
+
+use crate::consensus::{CouplingGains, RingDigraph, analyze};
+use crate::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel, enu_to_ned};
+use crate::frame::{CommonFrame, Geodetic};
+use crate::swarm::SwarmSetup;
+use crate::vehicle::LinkConfig;
+
+/// The whole file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Rates, duration and end of flight.
+    #[serde(default)]
+    pub swarm: SwarmSection,
+    /// Consensus and altitude gains.
+    pub gains: GainsSection,
+    /// The formation and its altitude.
+    pub formation: FormationSection,
+    /// Tilt and thrust limits.
+    #[serde(default)]
+    pub envelope: EnvelopeSection,
+    /// The common frame's reference point.
+    #[serde(default)]
+    pub frame: FrameSection,
+    /// The world of the built-in emulator.
+    #[serde(default)]
+    pub emulator: EmulatorSection,
+    /// One table per vehicle, in ring order.
+    #[serde(default)]
+    pub vehicle: Vec<VehicleSection>,
+}
+
+/// `[swarm]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SwarmSection {
+    /// Control (and setpoint stream) rate, 1..=250 Hz.
+    pub control_rate_hz: f64,
+    /// Flight duration after consensus starts (s).
+    pub duration_s: f64,
+    /// Silence after which a vehicle is lost (ms).
+    pub link_timeout_ms: u64,
+}
+
+impl Default for SwarmSection {
+    fn default() -> Self {
+        Self {
+            control_rate_hz: 50.0,
+            duration_s: 60.0,
+            link_timeout_ms: 1500,
+        }
+    }
+}
+
+/// `[gains]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GainsSection {
+    /// Ring gain k.
+    pub k: f64,
+    /// Position coupling α (1/s²).
+    pub alpha: f64,
+    /// Velocity coupling β (1/s).
+    pub beta: f64,
+    /// Altitude P (1/s²).
+    pub k_pz: f64,
+    /// Altitude D (1/s).
+    pub k_vz: f64,
+}
+
+/// `[formation]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FormationSection {
+    /// `polygon` (radius_m), `line` (spacing_m) or `offsets` (offsets_m).
+    pub kind: String,
+    /// Polygon radius (m).
+    pub radius_m: Option<f64>,
+    /// Line spacing (m).
+    pub spacing_m: Option<f64>,
+    /// Explicit ENU offsets (m), one per vehicle.
+    pub offsets_m: Option<Vec<[f64; 2]>>,
+    /// Commanded altitude in the common frame (m, z up).
+    pub altitude_m: f64,
+}
+
+/// `[envelope]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EnvelopeSection {
+    /// Largest tilt (deg).
+    pub max_tilt_deg: f64,
+    /// Thrust limits, normalised 0..1.
+    pub min_thrust: f64,
+    /// Upper thrust limit, normalised.
+    pub max_thrust: f64,
+    /// `conserve` (default) or `clip`.
+    pub saturation: SaturationMode,
+}
+
+impl Default for EnvelopeSection {
+    fn default() -> Self {
+        Self {
+            max_tilt_deg: 35.0,
+            min_thrust: 0.1,
+            max_thrust: 0.9,
+            saturation: SaturationMode::Conserve,
+        }
+    }
+}
+
+/// `[frame]`: the common reference point.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FrameSection {
+    /// Latitude (deg).
+    pub latitude_deg: f64,
+    /// Longitude (deg).
+    pub longitude_deg: f64,
+    /// Altitude AMSL (m).
+    pub altitude_amsl_m: f64,
+}
+
+impl Default for FrameSection {
+    fn default() -> Self {
+        Self {
+            latitude_deg: 47.397742,
+            longitude_deg: 8.545594,
+            altitude_amsl_m: 488.0,
+        }
+    }
+}
+
+/// `[emulator]`.
+#[derive(Debug, Clone, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct EmulatorSection {
+    /// Height of the paper's z = 0 above the ground (m).
+    pub ground_below_m: f64,
+}
+
+/// `[[vehicle]]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VehicleSection {
+    /// MAVLink system id.
+    pub system_id: u8,
+    /// Where its offboard link listens (default PX4's 127.0.0.1:14580+i).
+    pub address: Option<SocketAddr>,
+    /// Emulator profile (`ideal`, `x500`).
+    #[serde(default = "default_profile")]
+    pub profile: String,
+    /// Mass (kg) for the law's thrust.
+    pub mass_kg: f64,
+    /// Hover throttle (0..1).
+    pub hover_throttle: f64,
+    /// Linear drag fed forward (1/s).
+    #[serde(default)]
+    pub drag_per_s: f64,
+    /// Start position (ENU, m) for the emulator.
+    #[serde(default)]
+    pub start_enu_m: [f64; 3],
+    /// Start velocity (ENU, m/s) for the emulator.
+    #[serde(default)]
+    pub start_velocity_enu_mps: [f64; 3],
+    /// Started in the air (armed, a pilot holds the start velocity).
+    #[serde(default)]
+    pub in_air: bool,
+}
+
+fn default_profile() -> String {
+    "x500".to_owned()
+}
+
+impl Config {
+    /// Parses a TOML text.
+    ///
+    /// # Errors
+    /// The parser's message (syntax, unknown keys, wrong types).
+    pub fn from_toml(text: &str) -> Result<Self, String> {
+        toml::from_str(text).map_err(|e| e.to_string())
+    }
+
+    /// Checks everything and builds the swarm's setup; every problem is reported, one per
+    /// line.
+    ///
+    /// # Errors
+    /// All problems found, each naming the key and the value.
+    pub fn validate(&self) -> Result<SwarmSetup, String> {
+        let mut problems = Vec::new();
+        let n = self.vehicle.len();
+        let ring = match RingDigraph::for_agents(n, self.gains.k) {
+            Ok(r) => Some(r),
+            Err(e) => {
+                problems.push(format!("vehicle count / gains.k: {e}"));
+                None
+            }
+        };
+        let gains = CouplingGains::new(self.gains.alpha, self.gains.beta)
+            .map_err(|e| problems.push(format!("gains: {e}")))
+            .ok();
+        if let (Some(ring), Some(gains)) = (&ring, gains) {
+            match analyze(ring, Some(gains)) {
+                Ok(report) if !report.stable => problems.push(format!(
+                    "gains are unstable: k = {} (bound k > {:.6}, margin {:+.6}), beta^2/alpha = {:.6} vs Yu's bound {}",
+                    self.gains.k,
+                    report.k_min,
+                    report.k_margin,
+                    gains.ratio(),
+                    report.yu_bound.map_or("none (k below the bound)".to_owned(), |b| format!("{b:.6}"))
+                )),
+                Ok(_) => {}
+                Err(e) => problems.push(format!("gains: {e}")),
+            }
+        }
+        let altitude_gains = AltitudeGains::new(self.gains.k_pz, self.gains.k_vz)
+            .map_err(|e| problems.push(format!("gains: {e}")))
+            .ok();
+        let offsets = self.offsets(n).map_err(|e| problems.push(e)).ok();
+        if !self.formation.altitude_m.is_finite() {
+            problems.push(format!(
+                "formation.altitude_m must be finite, got {}",
+                self.formation.altitude_m
+            ));
+        }
+        let e = &self.envelope;
+        let envelope = Envelope::new(e.max_tilt_deg.to_radians(), e.min_thrust, e.max_thrust)
+            .map_err(|err| problems.push(format!("envelope: {err}")))
+            .ok();
+        let s = &self.swarm;
+        if !(s.control_rate_hz >= 1.0 && s.control_rate_hz <= 250.0) {
+            problems.push(format!(
+                "swarm.control_rate_hz must be in [1, 250], got {}",
+                s.control_rate_hz
+            ));
+        }
+        if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
+            problems.push(format!(
+                "swarm.duration_s must be positive, got {}",
+                s.duration_s
+            ));
+        }
+        let mut models = Vec::new();
+        let mut ids = Vec::new();
+        for (i, v) in self.vehicle.iter().enumerate() {
+            if v.system_id == 0 || v.system_id > 250 {
+                problems.push(format!(
+                    "vehicle[{i}].system_id must be 1..=250, got {}",
+                    v.system_id
+                ));
+            }
+            if ids.contains(&v.system_id) {
+                problems.push(format!(
+                    "vehicle[{i}].system_id {} is used twice",
+                    v.system_id
+                ));
+            }
+            ids.push(v.system_id);
+            match VehicleModel::from_hover_throttle(v.mass_kg, v.hover_throttle) {
+                Ok(m) => {
+                    if let Some(env) = &envelope
+                        && let Err(err) = env.check_hover(&m)
+                    {
+                        problems.push(format!("vehicle[{i}]: {err}"));
+                    }
+                    models.push(m);
+                }
+                Err(err) => problems.push(format!("vehicle[{i}]: {err}")),
+            }
+            let finite = v
+                .start_enu_m
+                .iter()
+                .chain(&v.start_velocity_enu_mps)
+                .chain([&v.drag_per_s])
+                .all(|x| x.is_finite());
+            if !finite || v.drag_per_s < 0.0 {
+                problems.push(format!(
+                    "vehicle[{i}]: start state and drag_per_s must be finite (drag ≥ 0)"
+                ));
+            }
+        }
+        if !problems.is_empty() {
+            return Err(problems.join("\n"));
+        }
+        let (Some(ring), Some(gains), Some(altitude_gains), Some(offsets), Some(envelope)) =
+            (ring, gains, altitude_gains, offsets, envelope)
+        else {
+            return Err("invalid configuration".to_owned());
+        };
+        let interval = Duration::from_secs_f64(1.0 / s.control_rate_hz);
+        Ok(SwarmSetup {
+            ring,
+            gains,
+            altitude_gains,
+            altitude_m: self.formation.altitude_m,
+            offsets_m: offsets,
+            models,
+            drag_per_s: self.vehicle.iter().map(|v| v.drag_per_s).collect(),
+            envelope,
+            saturation: e.saturation,
+            control_interval: interval,
+            frame: CommonFrame::new(Geodetic {
+                lat_deg: self.frame.latitude_deg,
+                lon_deg: self.frame.longitude_deg,
+                alt_amsl_m: self.frame.altitude_amsl_m,
+            }),
+            links: self
+                .vehicle
+                .iter()
+                .map(|v| LinkConfig {
+                    setpoint_interval: interval,
+                    link_timeout: Duration::from_millis(s.link_timeout_ms),
+                    ..LinkConfig::new(v.system_id)
+                })
+                .collect(),
+        })
+    }
+
+    /// The formation offsets `dᵢ` (ENU, m).
+    fn offsets(&self, n: usize) -> Result<Vec<Vector2<f64>>, String> {
+        let f = &self.formation;
+        match f.kind.as_str() {
+            "polygon" => {
+                let r = f
+                    .radius_m
+                    .filter(|r| r.is_finite() && *r > 0.0)
+                    .ok_or("formation.radius_m must be a positive number for a polygon")?;
+                Ok((0..n)
+                    .map(|l| {
+                        Vector2::new(
+                            (2.0 * PI * l as f64 / n as f64).cos(),
+                            (2.0 * PI * l as f64 / n as f64).sin(),
+                        ) * r
+                    })
+                    .collect())
+            }
+            "line" => {
+                let d = f
+                    .spacing_m
+                    .filter(|d| d.is_finite() && *d > 0.0)
+                    .ok_or("formation.spacing_m must be a positive number for a line")?;
+                Ok((0..n).map(|i| Vector2::new(d * i as f64, 0.0)).collect())
+            }
+            "offsets" => {
+                let list = f
+                    .offsets_m
+                    .as_ref()
+                    .ok_or("formation.offsets_m is required for kind = \"offsets\"")?;
+                if list.len() != n {
+                    return Err(format!(
+                        "formation.offsets_m has {} entries for {n} vehicles",
+                        list.len()
+                    ));
+                }
+                Ok(list.iter().map(|o| Vector2::new(o[0], o[1])).collect())
+            }
+            other => Err(format!(
+                "formation.kind \"{other}\" is not one of polygon, line, offsets"
+            )),
+        }
+    }
+
+    /// The built-in emulator's world and vehicles for this configuration: the world
+    /// reference is the common frame's reference, the ground `ground_below_m` under it,
+    /// and each vehicle starts where `start_enu_m` puts it (converted to NED).
+    ///
+    /// # Errors
+    /// An unknown profile or a start state the emulator refuses, naming the vehicle.
+    pub fn emulator(&self) -> Result<(World, Vec<VehicleConfig>), String> {
+        let world = World {
+            reference: ringswarm_sitl::world::Geodetic {
+                lat_deg: self.frame.latitude_deg,
+                lon_deg: self.frame.longitude_deg,
+                alt_amsl_m: self.frame.altitude_amsl_m,
+            },
+            ground_down_m: self.emulator.ground_below_m,
+        };
+        let vehicles = self
+            .vehicle
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let profile = v
+                    .profile
+                    .parse::<Profile>()
+                    .map_err(|e| format!("vehicle[{i}].profile: {e}"))?;
+                let mut cfg = VehicleConfig::new(v.system_id, profile);
+                cfg.start = StartState {
+                    pos_world_ned_m: enu_to_ned(Vector3::from(v.start_enu_m)),
+                    vel_ned_mps: enu_to_ned(Vector3::from(v.start_velocity_enu_mps)),
+                    yaw_rad: 0.0,
+                    in_air: v.in_air,
+                };
+                cfg.validate().map_err(|e| format!("vehicle[{i}]: {e}"))?;
+                Ok(cfg)
+            })
+            .collect::<Result<Vec<_>, String>>()?;
+        Ok((world, vehicles))
+    }
+}

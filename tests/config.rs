@@ -1,0 +1,83 @@
+//! The coordinator's configuration files: the shipped scenarios load, bad files are refused
+//! with every problem named.
+
+use std::path::Path;
+
+use ringswarm::config::Config;
+
+fn load(name: &str) -> Config {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config")
+        .join(name);
+    Config::from_toml(&std::fs::read_to_string(&path).unwrap()).unwrap()
+}
+
+#[test]
+fn shipped_scenarios_validate() {
+    for name in ["paper-sim1.toml", "paper-sim2.toml", "hexagon-x500.toml"] {
+        let setup = load(name)
+            .validate()
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(setup.ring.agents(), 6, "{name}");
+        assert_eq!(setup.offsets_m.len(), 6);
+        // Hexagon of radius 20: vertex 2 at 60°.
+        assert!(
+            (setup.offsets_m[1] - nalgebra::Vector2::new(10.0, 20.0 * 3f64.sqrt() / 2.0)).norm()
+                < 1e-12
+        );
+    }
+    assert_eq!(
+        load("paper-sim2.toml").vehicle[0].start_velocity_enu_mps,
+        [59.0, 130.5, 0.0]
+    );
+}
+
+fn with(replace: &str, by: &str) -> String {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml");
+    let text = std::fs::read_to_string(path).unwrap();
+    assert!(text.contains(replace), "{replace}");
+    text.replacen(replace, by, 1)
+}
+
+#[test]
+fn unstable_gains_are_refused_with_the_numbers() {
+    let cfg = Config::from_toml(&with("beta = 5.0", "beta = 0.5")).unwrap();
+    let setup = with("k = 5.0", "k = -1.5");
+    let err = cfg.validate().unwrap_err();
+    assert!(
+        err.contains("gains are unstable") && err.contains("Yu's bound 1.221423"),
+        "{err}"
+    );
+    let err = Config::from_toml(&setup).unwrap().validate().unwrap_err();
+    assert!(
+        err.contains("bound k > -1.292893") && err.contains("margin -0.207107"),
+        "{err}"
+    );
+}
+
+#[test]
+fn unknown_keys_are_refused() {
+    let err = Config::from_toml(&with(
+        "kind = \"polygon\"",
+        "kind = \"polygon\"\nradius = 3.0",
+    ))
+    .unwrap_err();
+    assert!(err.contains("unknown field `radius`"), "{err}");
+}
+
+#[test]
+fn odd_vehicle_count_nan_and_duplicates_are_all_reported_at_once() {
+    let mut text = with("alpha = 1.0", "alpha = nan");
+    text = text.replacen("system_id = 2", "system_id = 1", 1);
+    let cut = text.rfind("[[vehicle]]").unwrap();
+    text.truncate(cut); // five vehicles
+    let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
+    let lines: Vec<&str> = err.lines().collect();
+    assert!(
+        err.contains("even number of agents (N = 2m); 5 given"),
+        "{err}"
+    );
+    assert!(err.contains("alpha must be a finite number"), "{err}");
+    assert!(err.contains("system_id 1 is used twice"), "{err}");
+    assert!(lines.len() >= 3, "{err}");
+}
