@@ -14,6 +14,7 @@
 //! Horizontal acceleration zero before consensus keeps `w·v`, so the predicted final
 //! velocity is computed from the velocities at the start of consensus.
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
 use nalgebra::{Vector2, Vector3};
@@ -27,7 +28,10 @@ use crate::control::{
     saturate,
 };
 use crate::frame::CommonFrame;
-use crate::vehicle::{LinkConfig, Phase, VehicleLink};
+use crate::vehicle::{LinkConfig, LinkEvent, Phase, VehicleLink};
+
+/// Link events kept for the driver before the oldest are dropped.
+pub const MAX_EVENTS: usize = 256;
 
 /// Everything the swarm machine needs, validated by the caller (see `config`).
 #[derive(Debug, Clone)]
@@ -92,6 +96,7 @@ pub struct Swarm {
     saturated_ticks: u64,
     consensus_ticks: u64,
     next_link: usize,
+    events: VecDeque<(usize, LinkEvent)>,
 }
 
 impl Swarm {
@@ -124,6 +129,7 @@ impl Swarm {
             saturated_ticks: 0,
             consensus_ticks: 0,
             next_link: 0,
+            events: VecDeque::new(),
         }
     }
 
@@ -203,11 +209,24 @@ impl Swarm {
             self.control(now);
             self.next_control = now + self.setup.control_interval;
         }
-        for link in &mut self.links {
+        for (i, link) in self.links.iter_mut().enumerate() {
             if now >= link.poll_timeout() {
                 link.handle_timeout(now);
             }
+            while let Some(event) = link.poll_event() {
+                tracing::info!(vehicle = i, ?event, "link event");
+                if self.events.len() == MAX_EVENTS {
+                    self.events.pop_front();
+                }
+                self.events.push_back((i, event));
+            }
         }
+    }
+
+    /// The next link event and the vehicle it concerns. Drivers should drain these; the
+    /// queue keeps at most [`MAX_EVENTS`] and drops the oldest beyond that.
+    pub fn poll_event(&mut self) -> Option<(usize, LinkEvent)> {
+        self.events.pop_front()
     }
 
     /// One control tick. Allocation-free: every buffer was sized at construction.

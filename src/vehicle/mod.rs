@@ -175,6 +175,7 @@ pub struct VehicleLink {
     outbox: VecDeque<Vec<u8>>,
     events: VecDeque<LinkEvent>,
     ignored_frames: u64,
+    wrong_system: Option<u8>,
 }
 
 impl VehicleLink {
@@ -193,6 +194,7 @@ impl VehicleLink {
             outbox: VecDeque::new(),
             events: VecDeque::new(),
             ignored_frames: 0,
+            wrong_system: None,
         }
     }
 
@@ -258,7 +260,9 @@ impl VehicleLink {
             let system_id = frame.header.system_id as u8;
             if system_id != self.cfg.system_id {
                 self.ignored_frames += 1;
-                if self.ignored_frames == 1 || self.phase == Phase::Discovering {
+                if self.wrong_system != Some(system_id) {
+                    // Reported once per foreign system id, not per frame.
+                    self.wrong_system = Some(system_id);
                     self.events.push_back(LinkEvent::WrongSystem { system_id });
                 }
                 continue;
