@@ -119,15 +119,18 @@ impl Vehicle {
             // param7 is an AMSL altitude; store it as a height above the home ground.
             let home_amsl = self.world.reference.alt_amsl_m - self.world.ground_down_m;
             let height = (f64::from(alt) - home_amsl).max(0.5);
-            let _ = self.params_set_takeoff(height);
+            // Out of MIS_TAKEOFF_ALT's range: keep the parameter's value, as PX4 clamps.
+            if self.params.set("MIS_TAKEOFF_ALT", height as f32).is_err() {
+                tracing::debug!(
+                    sysid = self.cfg.system_id,
+                    height,
+                    "takeoff altitude out of range"
+                );
+            }
         }
         self.failsafe = false;
         self.enter_mode(FlightMode::Takeoff);
         MavResult::MAV_RESULT_ACCEPTED
-    }
-
-    fn params_set_takeoff(&mut self, height_m: f64) -> bool {
-        self.params.set("MIS_TAKEOFF_ALT", height_m as f32).is_ok()
     }
 
     fn cmd_message_interval(&mut self, now: SimTime, link: LinkId, cmd: &Command) -> MavResult {

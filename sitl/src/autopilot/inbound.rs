@@ -6,7 +6,6 @@
 // ground stations send it, so the emulator does too.
 #![allow(deprecated)]
 
-use mavlink::MavlinkVersion;
 use mavlink::dialects::common::{
     AttitudeTargetTypemask, COMMAND_INT_DATA, COMMAND_LONG_DATA, MavMessage,
     PARAM_REQUEST_READ_DATA, PARAM_SET_DATA, SET_ATTITUDE_TARGET_DATA, SET_MODE_DATA,
@@ -31,7 +30,7 @@ impl Vehicle {
             match frame {
                 Ok(frame) => {
                     let sender = (frame.header.system_id as u8, frame.header.component_id);
-                    self.handle_message(now, link, sender, frame.msg, frame.version);
+                    self.handle_message(now, link, sender, frame.msg);
                 }
                 Err(err) => {
                     self.counters.bad_frames += 1;
@@ -49,15 +48,7 @@ impl Vehicle {
         ours
     }
 
-    fn handle_message(
-        &mut self,
-        now: SimTime,
-        link: LinkId,
-        sender: (u8, u8),
-        msg: MavMessage,
-        version: MavlinkVersion,
-    ) {
-        let _ = version;
+    fn handle_message(&mut self, now: SimTime, link: LinkId, sender: (u8, u8), msg: MavMessage) {
         let heard = match msg {
             MavMessage::HEARTBEAT(_) => true,
             MavMessage::SET_ATTITUDE_TARGET(m) => self.on_set_attitude_target(now, &m),
