@@ -326,6 +326,7 @@ impl Config {
                 .iter()
                 .map(|v| LinkConfig {
                     setpoint_interval: interval,
+                    telemetry_interval: interval,
                     link_timeout: Duration::from_millis(s.link_timeout_ms),
                     ..LinkConfig::new(v.system_id)
                 })

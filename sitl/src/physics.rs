@@ -113,31 +113,42 @@ impl Airframe {
         &self.profile
     }
 
-    /// Motor thrusts (N) for a collective thrust (N) and body torques (N·m), with the
-    /// torques kept and the collective traded first when a motor would saturate (PX4's
-    /// mixer without airmode), then everything clipped to `0..max`.
+    /// Motor thrusts (N) for a collective thrust (N) and body torques (N·m), desaturated
+    /// in PX4's order with airmode off: roll and pitch first, the collective only ever
+    /// lowered (never raised) to make room at the top, roll and pitch scaled down when a
+    /// motor would go below zero, and yaw last, with whatever headroom is left.
     pub fn mix(&self, thrust_n: f64, torque_frd_nm: Vector3<f64>) -> Vector4<f64> {
         let max = self.profile.max_motor_thrust_n;
-        let base = Vector4::repeat(thrust_n / 4.0);
-        let mut diff =
-            self.mixing * Vector4::new(0.0, torque_frd_nm.x, torque_frd_nm.y, torque_frd_nm.z);
-        // Yaw has the lowest priority: drop it first if the spread does not fit.
-        let spread = |d: &Vector4<f64>| d.max() - d.min();
-        if spread(&diff) > max {
-            let no_yaw = self.mixing * Vector4::new(0.0, torque_frd_nm.x, torque_frd_nm.y, 0.0);
-            diff = if spread(&no_yaw) > max {
-                no_yaw * (max / spread(&no_yaw))
-            } else {
-                no_yaw
-            };
+        let collective = (thrust_n / 4.0).clamp(0.0, max);
+        let roll_pitch = self.mixing * Vector4::new(0.0, torque_frd_nm.x, torque_frd_nm.y, 0.0);
+        // Largest share of roll/pitch that fits between 0 and max once the collective may
+        // be lowered: the spread must fit, and no motor may go below zero.
+        let spread = roll_pitch.max() - roll_pitch.min();
+        let mut scale = if spread > max { max / spread } else { 1.0 };
+        if roll_pitch.min() < 0.0 {
+            scale = scale.min(collective / -roll_pitch.min());
         }
-        let mut thrusts = base + diff;
-        let (hi, lo) = (thrusts.max(), thrusts.min());
-        if hi > max {
-            thrusts.add_scalar_mut(-(hi - max));
-        } else if lo < 0.0 {
-            thrusts.add_scalar_mut(-lo);
+        let mut thrusts = roll_pitch * scale + Vector4::repeat(collective);
+        let over = thrusts.max() - max;
+        if over > 0.0 {
+            thrusts.add_scalar_mut(-over);
         }
+        let yaw = self.mixing * Vector4::new(0.0, 0.0, 0.0, torque_frd_nm.z);
+        let yaw_scale = thrusts
+            .iter()
+            .zip(yaw.iter())
+            .map(|(t, y)| {
+                if *y > 0.0 {
+                    (max - t) / y
+                } else if *y < 0.0 {
+                    t / -y
+                } else {
+                    1.0
+                }
+            })
+            .fold(1.0_f64, f64::min)
+            .max(0.0);
+        thrusts += yaw * yaw_scale;
         thrusts.map(|t| t.clamp(0.0, max))
     }
 
@@ -341,6 +352,30 @@ mod tests {
         assert!((t - 20.0).abs() < 1e-9 && (tau - torque).norm() < 1e-9);
         // A positive roll torque needs more thrust on the left motors (2, 3).
         assert!(thrusts[1] > thrusts[0] && thrusts[2] > thrusts[3]);
+    }
+
+    #[test]
+    fn mixer_never_raises_the_collective_and_keeps_roll_pitch_before_yaw() {
+        let frame = Airframe::new(Profile::ideal());
+        // Low collective, a roll torque that needs more than it: roll is scaled down (same
+        // sign, smaller), the collective is not raised, pitch stays zero.
+        let thrusts = frame.mix(4.0, Vector3::new(2.0, 0.0, 0.0));
+        let (t, tau) = frame.wrench(&thrusts);
+        assert!(t <= 4.0 + 1e-9, "collective raised to {t}");
+        assert!(tau.x > 0.0 && tau.x < 2.0 && tau.y.abs() < 1e-9, "{tau:?}");
+        // Exactly: every motor is at 0 or 2 N, so τx = 2·2·d.
+        assert!((tau.x - 4.0 * frame.profile().motor_offset_m).abs() < 1e-9);
+        // At hover a yaw torque beyond the headroom still gets part of it (same sign),
+        // and roll and pitch are delivered in full.
+        let hover = GRAVITY_MPS2;
+        let thrusts = frame.mix(hover, Vector3::new(0.1, -0.05, 1.0));
+        let (t, tau) = frame.wrench(&thrusts);
+        assert!(
+            (tau.x - 0.1).abs() < 1e-9 && (tau.y + 0.05).abs() < 1e-9,
+            "{tau:?}"
+        );
+        assert!(tau.z > 0.05 && tau.z < 1.0, "yaw {}", tau.z);
+        assert!(t <= hover + 1e-9);
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //!
 //! | profile | mass | thrust/weight | hover | motor lag | drag | used for |
 //! |---|---|---|---|---|---|---|
-//! | `ideal` | 1.0 kg | 5 | 0.2 | 5 ms | 0 | reproducing the paper: large margin, fast attitude |
+//! | `ideal` | 1.0 kg | 5 | 0.2 | 3 ms | 0 | reproducing the paper: large margin, attitude fast enough (~40 rad/s) for the paper's gains |
 //! | `x500` | 2.0 kg | 2 | 0.5 | 30 ms | 0.10 /s | a Holybro X500-class frame |
 //!
 //! The x500 inertia, arm and moment constant follow PX4's Gazebo x500 model
@@ -71,18 +71,18 @@ impl Profile {
         Self {
             name: "ideal",
             mass_kg: 1.0,
-            inertia_kg_m2: Vector3::new(0.01, 0.01, 0.018),
+            inertia_kg_m2: Vector3::new(0.003, 0.003, 0.006),
             motor_offset_m: 0.15,
             max_motor_thrust_n: 5.0 * GRAVITY_MPS2 / 4.0,
             moment_constant_m: 0.016,
-            motor_time_constant_s: 0.005,
+            motor_time_constant_s: 0.003,
             linear_drag_per_s: 0.0,
             gains: AttitudeGains {
-                attitude_p: Vector3::new(12.0, 12.0, 5.0),
-                rate_p: Vector3::new(40.0, 40.0, 20.0),
-                rate_i: Vector3::new(20.0, 20.0, 10.0),
+                attitude_p: Vector3::new(40.0, 40.0, 8.0),
+                rate_p: Vector3::new(160.0, 160.0, 40.0),
+                rate_i: Vector3::new(40.0, 40.0, 10.0),
                 rate_d: Vector3::new(0.0, 0.0, 0.0),
-                max_rate_rps: Vector3::new(6.0, 6.0, 3.0),
+                max_rate_rps: Vector3::new(20.0, 20.0, 5.0),
             },
         }
     }

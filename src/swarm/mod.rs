@@ -207,7 +207,14 @@ impl Swarm {
     pub fn handle_timeout(&mut self, now: SimTime) {
         if now >= self.next_control {
             self.control(now);
-            self.next_control = now + self.setup.control_interval;
+            // A fixed schedule: lateness of one wake-up does not slow the rate down, and
+            // a long stall restarts the schedule instead of bursting.
+            let next = self.next_control + self.setup.control_interval;
+            self.next_control = if next <= now {
+                now + self.setup.control_interval
+            } else {
+                next
+            };
         }
         for (i, link) in self.links.iter_mut().enumerate() {
             if now >= link.poll_timeout() {
@@ -288,11 +295,10 @@ impl Swarm {
         }
         for (i, link) in self.links.iter_mut().enumerate() {
             if states[i].is_some() {
-                link.set_setpoint(attitude_thrust_from_acceleration(
-                    self.commands[i],
-                    0.0,
-                    &self.setup.models[i],
-                ));
+                link.set_setpoint(
+                    now,
+                    attitude_thrust_from_acceleration(self.commands[i], 0.0, &self.setup.models[i]),
+                );
             }
         }
     }

@@ -213,9 +213,20 @@ impl VehicleLink {
         self.ignored_frames
     }
 
-    /// Replaces the setpoint the stream resends.
-    pub fn set_setpoint(&mut self, setpoint: AttitudeThrust) {
+    /// Replaces the setpoint. While streaming it is sent at once, so the stream follows
+    /// the control ticks; the link's own timer only resends it if no new setpoint comes
+    /// within one and a half periods (it never doubles the rate when the two timers drift).
+    pub fn set_setpoint(&mut self, now: SimTime, setpoint: AttitudeThrust) {
         self.setpoint = setpoint;
+        if self.streams() {
+            self.send_setpoint(now);
+            self.next_setpoint = now + self.cfg.setpoint_interval.mul_f64(1.5);
+        }
+    }
+
+    fn send_setpoint(&mut self, now: SimTime) {
+        let msg = set_attitude_target(&self.setpoint, self.cfg.system_id, now.boot_ms());
+        self.outbox.push_back(self.encoder.encode(&msg));
     }
 
     /// The next datagram to send to the vehicle.
@@ -465,8 +476,7 @@ impl VehicleLink {
             }
         }
         if self.streams() && now >= self.next_setpoint {
-            let msg = set_attitude_target(&self.setpoint, self.cfg.system_id, now.boot_ms());
-            self.outbox.push_back(self.encoder.encode(&msg));
+            self.send_setpoint(now);
             let next = self.next_setpoint + self.cfg.setpoint_interval;
             self.next_setpoint = if next <= now {
                 now + self.cfg.setpoint_interval
