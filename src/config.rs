@@ -19,7 +19,7 @@ use ringswarm_sitl::world::World;
 use crate::consensus::{CouplingGains, RingDigraph, analyze};
 use crate::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel, enu_to_ned};
 use crate::frame::{CommonFrame, Geodetic};
-use crate::swarm::SwarmSetup;
+use crate::swarm::{EndAction, LossPolicy, SwarmSetup};
 use crate::vehicle::LinkConfig;
 
 /// The whole file.
@@ -57,6 +57,10 @@ pub struct SwarmSection {
     pub duration_s: f64,
     /// Silence after which a vehicle is lost (ms).
     pub link_timeout_ms: u64,
+    /// At the end of the duration: `land` (default) or `hold`.
+    pub end: EndAction,
+    /// When a vehicle is lost during consensus: `hold` (default) or `land`.
+    pub on_link_loss: LossPolicy,
 }
 
 impl Default for SwarmSection {
@@ -65,6 +69,8 @@ impl Default for SwarmSection {
             control_rate_hz: 50.0,
             duration_s: 60.0,
             link_timeout_ms: 1500,
+            end: EndAction::Land,
+            on_link_loss: LossPolicy::Hold,
         }
     }
 }
@@ -331,6 +337,9 @@ impl Config {
                     ..LinkConfig::new(v.system_id)
                 })
                 .collect(),
+            duration: Some(Duration::from_secs_f64(s.duration_s)),
+            end_action: s.end,
+            loss_policy: s.on_link_loss,
         })
     }
 

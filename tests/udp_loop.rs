@@ -7,7 +7,7 @@ use ringswarm::consensus::{CouplingGains, RingDigraph};
 use ringswarm::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel};
 use ringswarm::driver::udp::run_swarm;
 use ringswarm::frame::{CommonFrame, Geodetic};
-use ringswarm::swarm::{Swarm, SwarmSetup};
+use ringswarm::swarm::{EndAction, LossPolicy, Swarm, SwarmSetup};
 use ringswarm::vehicle::{LinkConfig, Phase};
 use ringswarm_sitl::autopilot::{Vehicle, VehicleConfig};
 use ringswarm_sitl::profile::Profile;
@@ -71,6 +71,9 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
             alt_amsl_m: world.reference.alt_amsl_m,
         }),
         links: (1..=N as u8).map(LinkConfig::new).collect(),
+        duration: None,
+        end_action: EndAction::Land,
+        loss_policy: LossPolicy::Hold,
     };
     let mut all_flying_at = None;
     let swarm_task = tokio::spawn(run_swarm(

@@ -236,3 +236,104 @@ fn silence_is_detected_as_loss_and_a_returning_vehicle_is_handshaken_again() {
     assert!(h.events.iter().any(|(_, e)| *e == LinkEvent::Recovered));
     assert_eq!(h.link.phase(), Phase::Flying, "{:?}", h.events);
 }
+
+#[test]
+fn land_is_resent_when_lost_then_the_vehicle_is_disarmed_on_the_ground() {
+    use mavlink::dialects::common::MavCmd;
+    let mut h = Harness::new(1, 1);
+    h.run(Duration::from_secs(2), &mut deliver_all);
+    assert_eq!(h.link.phase(), Phase::Flying);
+    // Climb for a second, then level off: the vehicle is in the air when told to land.
+    let climb = AttitudeThrust {
+        attitude_ned_frd: UnitQuaternion::identity(),
+        thrust_norm: 0.65,
+        thrust_n: 0.0,
+    };
+    h.link.set_setpoint(h.now, climb);
+    h.run(Duration::from_secs(1), &mut deliver_all);
+    h.link.set_setpoint(
+        h.now,
+        AttitudeThrust {
+            thrust_norm: 0.5,
+            ..climb
+        },
+    );
+    h.run(Duration::from_millis(500), &mut deliver_all);
+    assert!(!h.vehicle.status().landed && h.vehicle.status().height_m > 1.0);
+    h.link.land(h.now);
+    let told = h.now;
+    // The first NAV_LAND never reaches the vehicle.
+    let mut lands = 0;
+    let mut filter = |to_vehicle: bool, msg: &MavMessage| match msg {
+        MavMessage::COMMAND_LONG(c) if to_vehicle && c.command == MavCmd::MAV_CMD_NAV_LAND => {
+            lands += 1;
+            lands > 1
+        }
+        _ => true,
+    };
+    h.run(Duration::from_secs(15), &mut filter);
+    assert_eq!(h.link.phase(), Phase::Done);
+    let status = h.vehicle.status();
+    assert!(!status.armed && status.landed, "{status:?}");
+    let sent: Vec<(MavCmd, u8, f32)> = h
+        .sent_to_vehicle
+        .iter()
+        .filter_map(|m| match m {
+            MavMessage::COMMAND_LONG(c)
+                if matches!(
+                    c.command,
+                    MavCmd::MAV_CMD_NAV_LAND | MavCmd::MAV_CMD_COMPONENT_ARM_DISARM
+                ) =>
+            {
+                Some((c.command, c.confirmation, c.param1))
+            }
+            _ => None,
+        })
+        .collect();
+    // Arm (handshake), NAV_LAND twice (confirmation 0 then 1), then disarm (param1 0).
+    assert_eq!(
+        sent,
+        vec![
+            (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 0, 1.0),
+            (MavCmd::MAV_CMD_NAV_LAND, 0, 0.0),
+            (MavCmd::MAV_CMD_NAV_LAND, 1, 0.0),
+            (MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 0, 0.0),
+        ]
+    );
+    let kinds: Vec<&LinkEvent> = h
+        .events
+        .iter()
+        .filter(|(t, _)| *t > told)
+        .map(|(_, e)| e)
+        .collect();
+    assert!(
+        matches!(
+            kinds.as_slice(),
+            [
+                LinkEvent::Retrying { .. },
+                LinkEvent::Landing,
+                LinkEvent::Landed,
+                LinkEvent::Disarmed
+            ]
+        ),
+        "{kinds:?}"
+    );
+    // Once the vehicle took NAV_LAND no more setpoints are sent.
+    assert!(!matches!(
+        h.sent_to_vehicle.last(),
+        Some(MavMessage::SET_ATTITUDE_TARGET(_))
+    ));
+}
+
+#[test]
+fn a_vehicle_never_armed_is_done_at_once_when_told_to_land() {
+    let mut h = Harness::new(1, 1);
+    h.run(Duration::from_millis(500), &mut deliver_all);
+    assert!(matches!(h.link.phase(), Phase::Streaming(_)));
+    h.link.land(h.now);
+    assert_eq!(h.link.phase(), Phase::Done);
+    let before = h.sent_to_vehicle.len();
+    h.run(Duration::from_secs(2), &mut deliver_all);
+    assert_eq!(h.sent_to_vehicle.len(), before, "nothing sent after done");
+    assert!(!h.vehicle.status().armed);
+}

@@ -103,6 +103,8 @@ impl ParamTable {
                 true,
             ),
             p("MIS_TAKEOFF_ALT", Real32, 2.5, (0.0, 1000.0), false),
+            p("MPC_LAND_ALT1", Real32, 10.0, (0.0, 122.0), false),
+            p("MPC_LAND_ALT2", Real32, 5.0, (0.0, 122.0), false),
             p("MPC_LAND_SPEED", Real32, 0.7, (0.1, 5.0), false),
             p(
                 "MPC_THR_HOVER",
@@ -112,6 +114,7 @@ impl ParamTable {
                 false,
             ),
             p("MPC_TILTMAX_AIR", Real32, 45.0, (20.0, 89.0), false),
+            p("MPC_Z_V_AUTO_DN", Real32, 1.5, (0.5, 4.0), false),
             p(
                 "SIM_DRAG",
                 Real32,

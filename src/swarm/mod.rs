@@ -2,9 +2,17 @@
 //! the control rate.
 //!
 //! ```text
-//!  Handshake ──every vehicle Flying──► Consensus ──(driver's end)
-//!  (each Flying vehicle: altitude loop only, horizontal acceleration zero)
+//!  Handshake ──every vehicle Flying──► Consensus ──duration elapsed──► end action
+//!  (each Flying vehicle: altitude          │ a vehicle Lost
+//!   loop only, horizontal zero)            ├─ policy hold ─► Holding ──all Flying again──► Consensus
+//!                                          └─ policy land ─► Landing
+//!  end action: hold ─► Ended (hover in place) ;  land ─► Landing
+//!  land() (Ctrl-C) from anywhere ─► Landing ──every link Done──► finished
 //! ```
+//!
+//! Holding and Ended run the braking law `u = −k_v·v + k_p·(p_hold − p)`, each vehicle on
+//! its own (`clip` saturation), with `p_hold` taken once the vehicle is slower than
+//! 1 m/s, so it stops where its braking ends instead of flying back.
 //!
 //! Each control tick puts every vehicle in the common frame (its GPS origin projected at
 //! the common reference, plus its local position), computes the horizontal consensus law
@@ -60,7 +68,42 @@ pub struct SwarmSetup {
     pub frame: CommonFrame,
     /// One link configuration per vehicle.
     pub links: Vec<LinkConfig>,
+    /// How long consensus runs before the end action (`None`: until told to land).
+    pub duration: Option<Duration>,
+    /// What the swarm does when the duration is over.
+    pub end_action: EndAction,
+    /// What the swarm does when a vehicle is lost during consensus.
+    pub loss_policy: LossPolicy,
 }
+
+/// What the swarm does at the end of the configured duration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EndAction {
+    /// Every vehicle lands and disarms.
+    #[default]
+    Land,
+    /// Every vehicle brakes and hovers in place until told to land.
+    Hold,
+}
+
+/// What the swarm does when a vehicle's link is lost during consensus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LossPolicy {
+    /// The others brake and hover in place; when the vehicle is handshaken again the
+    /// consensus resumes (with a new predicted final velocity).
+    #[default]
+    Hold,
+    /// Every vehicle lands.
+    Land,
+}
+
+/// Braking law gains: velocity (1/s) and position (1/s²), about critically damped.
+const HOLD_K_V: f64 = 2.5;
+const HOLD_K_P: f64 = 1.5;
+/// Below this speed (m/s) a braking vehicle takes its hold point.
+const HOLD_CAPTURE_MPS: f64 = 1.0;
 
 /// Where the swarm is.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -69,6 +112,12 @@ pub enum SwarmPhase {
     Handshake,
     /// The consensus law runs, since the given time.
     Consensus(SimTime),
+    /// A vehicle was lost: the others hover in place until it flies again.
+    Holding(SimTime),
+    /// The duration is over; the vehicles hover in place until told to land.
+    Ended(SimTime),
+    /// Every vehicle was told to land, at the given time.
+    Landing(SimTime),
 }
 
 /// One vehicle's state in the common frame (ENU, m and m/s).
@@ -97,6 +146,9 @@ pub struct Swarm {
     consensus_ticks: u64,
     next_link: usize,
     events: VecDeque<(usize, LinkEvent)>,
+    first_consensus: Option<SimTime>,
+    hold_points: Vec<Option<Vector2<f64>>>,
+    control_ticks: u64,
 }
 
 impl Swarm {
@@ -130,6 +182,9 @@ impl Swarm {
             consensus_ticks: 0,
             next_link: 0,
             events: VecDeque::new(),
+            first_consensus: None,
+            hold_points: vec![None; n],
+            control_ticks: 0,
         }
     }
 
@@ -141,6 +196,42 @@ impl Swarm {
     /// The links.
     pub fn links(&self) -> &[VehicleLink] {
         &self.links
+    }
+
+    /// The setup.
+    pub fn setup(&self) -> &SwarmSetup {
+        &self.setup
+    }
+
+    /// Control ticks run so far (a recorder samples when this changes).
+    pub fn control_ticks(&self) -> u64 {
+        self.control_ticks
+    }
+
+    /// When consensus first started.
+    pub fn consensus_started(&self) -> Option<SimTime> {
+        self.first_consensus
+    }
+
+    /// Tells every vehicle to land and disarm (Ctrl-C, the end action or the land policy).
+    pub fn land(&mut self, now: SimTime) {
+        if !matches!(self.phase, SwarmPhase::Landing(_)) {
+            tracing::info!(at = ?now, "swarm landing");
+            self.phase = SwarmPhase::Landing(now);
+        }
+        for link in &mut self.links {
+            link.land(now);
+        }
+    }
+
+    /// Whether every vehicle has landed and disarmed (or was never armed), or can no
+    /// longer be reached (failed).
+    pub fn is_finished(&self) -> bool {
+        matches!(self.phase, SwarmPhase::Landing(_))
+            && self
+                .links
+                .iter()
+                .all(|l| matches!(l.phase(), Phase::Done | Phase::Failed))
     }
 
     /// The final velocity predicted at the start of consensus (m/s, ENU).
@@ -236,23 +327,72 @@ impl Swarm {
         self.events.pop_front()
     }
 
-    /// One control tick. Allocation-free: every buffer was sized at construction.
+    /// Moves between phases; runs at the start of every control tick.
+    fn transition(&mut self, now: SimTime) {
+        let all_flying = self.links.iter().all(|l| l.phase() == Phase::Flying)
+            && self.states.iter().all(Option::is_some);
+        let any_lost = self.links.iter().any(|l| l.phase() == Phase::Lost);
+        let over = |start: Option<SimTime>| {
+            start
+                .zip(self.setup.duration)
+                .is_some_and(|(t0, d)| now >= t0 + d)
+        };
+        match self.phase {
+            SwarmPhase::Handshake | SwarmPhase::Holding(_) if all_flying => {
+                if over(self.first_consensus) {
+                    self.end(now);
+                    return;
+                }
+                self.phase = SwarmPhase::Consensus(now);
+                self.first_consensus.get_or_insert(now);
+                let v0: Vec<Vector2<f64>> = self
+                    .states
+                    .iter()
+                    .flatten()
+                    .map(|s| s.vel_enu_mps.xy())
+                    .collect(); // once per (re)start
+                self.predicted_final_velocity =
+                    predicted_final_velocity(&self.setup.ring, &v0).ok();
+                tracing::info!(predicted = ?self.predicted_final_velocity, "consensus started");
+            }
+            SwarmPhase::Consensus(_) if any_lost => match self.setup.loss_policy {
+                LossPolicy::Hold => {
+                    tracing::warn!("a vehicle was lost: holding");
+                    self.hold_points.iter_mut().for_each(|p| *p = None);
+                    self.phase = SwarmPhase::Holding(now);
+                }
+                LossPolicy::Land => {
+                    tracing::warn!("a vehicle was lost: landing");
+                    self.land(now);
+                }
+            },
+            SwarmPhase::Consensus(_) | SwarmPhase::Holding(_) if over(self.first_consensus) => {
+                self.end(now)
+            }
+            _ => {}
+        }
+    }
+
+    fn end(&mut self, now: SimTime) {
+        match self.setup.end_action {
+            EndAction::Land => self.land(now),
+            EndAction::Hold => {
+                tracing::info!("duration over: holding");
+                self.hold_points.iter_mut().for_each(|p| *p = None);
+                self.phase = SwarmPhase::Ended(now);
+            }
+        }
+    }
+
+    /// One control tick. Allocation-free in consensus: every buffer was sized at
+    /// construction.
     fn control(&mut self, now: SimTime) {
+        self.control_ticks += 1;
         for i in 0..self.links.len() {
             self.states[i] = self.common_state(i);
         }
+        self.transition(now);
         let states = &self.states;
-        let all_flying = self.links.iter().all(|l| l.phase() == Phase::Flying);
-        if self.phase == SwarmPhase::Handshake && all_flying && states.iter().all(Option::is_some) {
-            self.phase = SwarmPhase::Consensus(now);
-            let v0: Vec<Vector2<f64>> = states
-                .iter()
-                .flatten()
-                .map(|s| s.vel_enu_mps.xy())
-                .collect(); // once
-            self.predicted_final_velocity = predicted_final_velocity(&self.setup.ring, &v0).ok();
-            tracing::info!(predicted = ?self.predicted_final_velocity, "consensus started");
-        }
         for (i, state) in states.iter().enumerate() {
             let s = state.unwrap_or_default();
             self.horizontal[i] = HorizontalState {
@@ -261,16 +401,36 @@ impl Swarm {
                 offset_m: self.setup.offsets_m[i],
             };
         }
-        if matches!(self.phase, SwarmPhase::Consensus(_)) {
-            ring_accelerations(
-                &self.setup.ring,
-                self.setup.gains,
-                &self.horizontal,
-                &mut self.accel,
-            );
-        } else {
-            self.accel.iter_mut().for_each(|a| *a = Vector2::zeros());
-        }
+        let saturation = match self.phase {
+            SwarmPhase::Consensus(_) => {
+                ring_accelerations(
+                    &self.setup.ring,
+                    self.setup.gains,
+                    &self.horizontal,
+                    &mut self.accel,
+                );
+                self.setup.saturation
+            }
+            SwarmPhase::Holding(_) | SwarmPhase::Ended(_) | SwarmPhase::Landing(_) => {
+                for ((a, h), hold) in self
+                    .accel
+                    .iter_mut()
+                    .zip(&self.horizontal)
+                    .zip(&mut self.hold_points)
+                {
+                    if hold.is_none() && h.vel_mps.norm() < HOLD_CAPTURE_MPS {
+                        *hold = Some(h.pos_m);
+                    }
+                    *a = -HOLD_K_V * h.vel_mps
+                        + hold.map_or(Vector2::zeros(), |p| HOLD_K_P * (p - h.pos_m));
+                }
+                SaturationMode::Clip
+            }
+            SwarmPhase::Handshake => {
+                self.accel.iter_mut().for_each(|a| *a = Vector2::zeros());
+                self.setup.saturation
+            }
+        };
         for (i, state) in states.iter().enumerate() {
             let s = state.unwrap_or_default();
             let u_z = self.setup.altitude_gains.acceleration(
@@ -282,7 +442,7 @@ impl Swarm {
             self.commands[i] = Vector3::new(self.accel[i].x, self.accel[i].y, u_z) + drag;
         }
         if let Ok(summary) = saturate(
-            self.setup.saturation,
+            saturation,
             &self.setup.envelope,
             &self.setup.models,
             &self.w,

@@ -8,7 +8,11 @@
 //!  Offboarding ──ack ACCEPTED or heartbeat OFFBOARD──► Flying
 //!  Arming/Offboarding ──no ack, or refused, within ack_timeout──► resend with confirmation+1,
 //!                     up to max_attempts, then Failed (a clear reason in the event)
-//!  any but Discovering/Failed ──silent for link_timeout──► Lost ──heartbeat──► Streaming again
+//!  any but Discovering/Failed ──nothing heard for link_timeout──► Lost ──heartbeat──► Streaming again
+//!
+//!  land() ──► Landing (NAV_LAND, acked or heartbeat AUTO.LAND; setpoints until then)
+//!  Landing ──EXTENDED_SYS_STATE on ground──► Disarming (ARM_DISARM 0, acked or heartbeat
+//!  disarmed) ──► Done. A vehicle lost while landing is sent NAV_LAND again when heard.
 //! ```
 //!
 //! Drive it with [`VehicleLink::handle_datagram`] for every datagram from the vehicle's
@@ -36,6 +40,9 @@ const ACCEPTED: u8 = 0;
 const LOCAL_POSITION_NED: f32 = 32.0;
 const ATTITUDE_QUATERNION: f32 = 31.0;
 const GPS_GLOBAL_ORIGIN: f32 = 49.0;
+/// PX4's AUTO main mode and its LAND sub mode.
+const PX4_MAIN_AUTO: u32 = 4;
+const PX4_SUB_AUTO_LAND: u32 = 6;
 
 /// Timing and identity of one vehicle link.
 #[derive(Debug, Clone, PartialEq)]
@@ -92,6 +99,12 @@ pub enum Phase {
     Lost,
     /// Gave up on a command.
     Failed,
+    /// Told to land; waiting for the touchdown.
+    Landing,
+    /// On the ground, waiting for the disarm.
+    Disarming,
+    /// Landed and disarmed (or never armed when told to land).
+    Done,
 }
 
 /// What the swarm should know.
@@ -121,6 +134,12 @@ pub enum LinkEvent {
     Lost,
     /// Heard again after being lost.
     Recovered,
+    /// NAV_LAND accepted: the vehicle is descending.
+    Landing,
+    /// On the ground (EXTENDED_SYS_STATE).
+    Landed,
+    /// Disarmed on the ground: the link is done.
+    Disarmed,
 }
 
 /// What the coordinator knows of the vehicle (its own frames: local NED, body FRD).
@@ -142,6 +161,8 @@ pub struct VehicleState {
     pub landed: bool,
     /// When the last heartbeat arrived.
     pub last_heartbeat: Option<SimTime>,
+    /// When any valid frame from the vehicle last arrived (link health).
+    pub last_heard: Option<SimTime>,
     /// When the last local position arrived.
     pub last_position: Option<SimTime>,
 }
@@ -150,6 +171,12 @@ impl VehicleState {
     /// Whether the heartbeat says OFFBOARD.
     pub fn in_offboard(&self) -> bool {
         (self.custom_mode >> 16) & 0xFF == PX4_MAIN_OFFBOARD
+    }
+
+    /// Whether the heartbeat says AUTO.LAND.
+    pub fn in_land(&self) -> bool {
+        (self.custom_mode >> 16) & 0xFF == PX4_MAIN_AUTO
+            && (self.custom_mode >> 24) & 0xFF == PX4_SUB_AUTO_LAND
     }
 }
 
@@ -176,6 +203,7 @@ pub struct VehicleLink {
     events: VecDeque<LinkEvent>,
     ignored_frames: u64,
     wrong_system: Option<u8>,
+    land_requested: bool,
 }
 
 impl VehicleLink {
@@ -195,6 +223,7 @@ impl VehicleLink {
             events: VecDeque::new(),
             ignored_frames: 0,
             wrong_system: None,
+            land_requested: false,
         }
     }
 
@@ -243,7 +272,7 @@ impl VehicleLink {
     pub fn poll_timeout(&self) -> SimTime {
         let mut next = self
             .state
-            .last_heartbeat
+            .last_heard
             .map_or(SimTime::from_millis(100), |t| t + self.cfg.link_timeout);
         if self.streams() {
             next = next.min(self.next_setpoint);
@@ -258,7 +287,57 @@ impl VehicleLink {
     }
 
     fn streams(&self) -> bool {
-        !matches!(self.phase, Phase::Discovering | Phase::Lost | Phase::Failed)
+        match self.phase {
+            Phase::Discovering | Phase::Lost | Phase::Failed | Phase::Disarming | Phase::Done => {
+                false
+            }
+            // Keep OFFBOARD fed until the vehicle has taken NAV_LAND.
+            Phase::Landing => self.pending.is_some() && self.state.in_offboard(),
+            _ => true,
+        }
+    }
+
+    /// Tells the vehicle to land where it is and to disarm on the ground. Idempotent. A
+    /// vehicle never heard from, or heard but never armed, is done at once.
+    pub fn land(&mut self, now: SimTime) {
+        if self.land_requested {
+            return;
+        }
+        self.land_requested = true;
+        match self.phase {
+            Phase::Discovering => self.phase = Phase::Done,
+            Phase::Streaming(_) if !self.state.armed => {
+                self.pending = None;
+                self.phase = Phase::Done;
+            }
+            Phase::Lost => {} // sent when the vehicle is heard again
+            _ => self.request_land(now),
+        }
+    }
+
+    /// Whether [`VehicleLink::land`] was called.
+    pub fn land_requested(&self) -> bool {
+        self.land_requested
+    }
+
+    fn request_land(&mut self, now: SimTime) {
+        self.phase = Phase::Landing;
+        let nan = f32::NAN; // PX4: NaN lat/lon/alt/yaw = here, current heading
+        let params = [0.0, 0.0, 0.0, nan, nan, nan, nan];
+        self.send_pending(now, MavCmd::MAV_CMD_NAV_LAND, params, 1);
+    }
+
+    fn request_disarm(&mut self, now: SimTime) {
+        self.phase = Phase::Disarming;
+        self.events.push_back(LinkEvent::Landed);
+        let params = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        self.send_pending(now, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, params, 1);
+    }
+
+    fn finish(&mut self) {
+        self.pending = None;
+        self.phase = Phase::Done;
+        self.events.push_back(LinkEvent::Disarmed);
     }
 
     /// Handles one datagram from the vehicle's address.
@@ -287,6 +366,7 @@ impl VehicleLink {
             {
                 continue; // an acknowledgement meant for another ground station
             }
+            self.state.last_heard = Some(now);
             if let Some(update) = inbound(&frame.msg) {
                 self.apply(now, update);
             }
@@ -311,7 +391,11 @@ impl VehicleLink {
                     }
                     Phase::Lost => {
                         self.events.push_back(LinkEvent::Recovered);
-                        self.start_streaming(now);
+                        if self.land_requested {
+                            self.request_land(now);
+                        } else {
+                            self.start_streaming(now);
+                        }
                     }
                     _ => self.advance_on_state(now),
                 }
@@ -326,7 +410,10 @@ impl VehicleLink {
             }
             Inbound::Attitude(q) => self.state.attitude = Some(q),
             Inbound::Origin(origin) => self.state.origin = Some(origin),
-            Inbound::Landed(landed) => self.state.landed = landed,
+            Inbound::Landed(landed) => {
+                self.state.landed = landed;
+                self.advance_on_state(now);
+            }
             Inbound::Ack { command, result } => self.on_ack(now, command, result),
         }
     }
@@ -360,6 +447,27 @@ impl VehicleLink {
             self.phase = Phase::Flying;
             self.events.push_back(LinkEvent::Flying);
         }
+        if self.phase == Phase::Landing {
+            if self
+                .pending
+                .is_some_and(|p| p.command == MavCmd::MAV_CMD_NAV_LAND)
+                && self.state.in_land()
+            {
+                self.pending = None;
+                self.events.push_back(LinkEvent::Landing);
+            }
+            if self.state.landed {
+                if self.state.armed {
+                    self.request_disarm(now);
+                } else {
+                    self.events.push_back(LinkEvent::Landed);
+                    self.finish();
+                }
+            }
+        }
+        if self.phase == Phase::Disarming && !self.state.armed {
+            self.finish();
+        }
     }
 
     fn on_ack(&mut self, now: SimTime, command: u16, result: u8) {
@@ -383,6 +491,11 @@ impl VehicleLink {
                 self.phase = Phase::Flying;
                 self.events.push_back(LinkEvent::Flying);
             }
+            Phase::Landing => {
+                self.pending = None;
+                self.events.push_back(LinkEvent::Landing);
+            }
+            Phase::Disarming => self.finish(),
             _ => {}
         }
     }
@@ -433,9 +546,12 @@ impl VehicleLink {
     /// Runs the timers due at `now`: the setpoint stream, the pre-stream, command
     /// deadlines and link loss.
     pub fn handle_timeout(&mut self, now: SimTime) {
-        if let Some(last) = self.state.last_heartbeat
+        if let Some(last) = self.state.last_heard
             && now - last > self.cfg.link_timeout
-            && !matches!(self.phase, Phase::Lost | Phase::Failed | Phase::Discovering)
+            && !matches!(
+                self.phase,
+                Phase::Lost | Phase::Failed | Phase::Discovering | Phase::Done
+            )
         {
             self.phase = Phase::Lost;
             self.pending = None;

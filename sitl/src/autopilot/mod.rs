@@ -382,6 +382,10 @@ impl Vehicle {
                 AttitudeSetpoint::idle(self.heading_rad)
             }
             _ => {
+                let land_speed = self.land_speed_mps();
+                if let Guidance::Descend { speed_mps, .. } = &mut self.guidance {
+                    *speed_mps = land_speed;
+                }
                 self.position_gains.max_tilt_rad =
                     self.params.value("MPC_TILTMAX_AIR").to_radians();
                 guide(
@@ -419,6 +423,27 @@ impl Vehicle {
             5 => self.enter_mode(FlightMode::Hold),
             6 | 7 => self.disarm("offboard loss failsafe"),
             _ => self.enter_mode(FlightMode::Position),
+        }
+    }
+
+    /// PX4's landing descent speed: MPC_Z_V_AUTO_DN above MPC_LAND_ALT1, MPC_LAND_SPEED
+    /// below MPC_LAND_ALT2, linear in between (m/s, positive down).
+    fn land_speed_mps(&self) -> f64 {
+        let height = self.env.ground_z_ned_m - self.state.pos_ned_m.z;
+        let (fast, slow) = (
+            self.params.value("MPC_Z_V_AUTO_DN"),
+            self.params.value("MPC_LAND_SPEED"),
+        );
+        let (alt1, alt2) = (
+            self.params.value("MPC_LAND_ALT1"),
+            self.params.value("MPC_LAND_ALT2"),
+        );
+        if height >= alt1 {
+            fast
+        } else if height <= alt2 || alt1 <= alt2 {
+            slow
+        } else {
+            slow + (fast - slow) * (height - alt2) / (alt1 - alt2)
         }
     }
 
