@@ -25,6 +25,23 @@ pub enum Command {
     Plan(PlanArgs),
     /// Run N emulated PX4-like quadrotors on PX4's SITL ports until Ctrl-C.
     Sitl(SitlArgs),
+    /// Fly the vehicles of a config over UDP (PX4, PX4 SITL or `ringswarm sitl`) with the
+    /// consensus law, then land them; writes a run directory.
+    Fly(FlyArgs),
+}
+
+/// Arguments of `ringswarm fly`.
+#[derive(Debug, Args)]
+pub struct FlyArgs {
+    /// The coordinator's TOML file (see config/*.toml).
+    #[arg(long)]
+    pub config: std::path::PathBuf,
+    /// The run directory (default runs/<config name>-<unix time>).
+    #[arg(long)]
+    pub out: Option<std::path::PathBuf>,
+    /// Seconds of consensus before the end action (overrides swarm.duration_s).
+    #[arg(long)]
+    pub duration_s: Option<f64>,
 }
 
 /// Arguments of `ringswarm sitl`.

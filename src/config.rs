@@ -170,6 +170,9 @@ pub struct VehicleSection {
     pub system_id: u8,
     /// Where its offboard link listens (default PX4's 127.0.0.1:14580+i).
     pub address: Option<SocketAddr>,
+    /// Where the coordinator's socket for it is bound (default 0.0.0.0:14540+i, the
+    /// port PX4 SITL sends its offboard link to).
+    pub bind: Option<SocketAddr>,
     /// Emulator profile (`ideal`, `x500`).
     #[serde(default = "default_profile")]
     pub profile: String,
@@ -341,6 +344,22 @@ impl Config {
             end_action: s.end,
             loss_policy: s.on_link_loss,
         })
+    }
+
+    /// Vehicle `i`'s address and the coordinator's bind address for it (PX4 SITL
+    /// defaults: the vehicle listens on 14580+i and sends to 14540+i).
+    pub fn udp_endpoints(&self, i: usize) -> Option<(SocketAddr, SocketAddr)> {
+        let v = self.vehicle.get(i)?;
+        let port = |base: u16| u16::try_from(i).ok().and_then(|i| base.checked_add(i));
+        let peer = match v.address {
+            Some(a) => a,
+            None => SocketAddr::from(([127, 0, 0, 1], port(14580)?)),
+        };
+        let bind = match v.bind {
+            Some(a) => a,
+            None => SocketAddr::from(([0, 0, 0, 0], port(14540)?)),
+        };
+        Some((peer, bind))
     }
 
     /// The formation offsets `dᵢ` (ENU, m).

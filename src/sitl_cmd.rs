@@ -29,8 +29,8 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("read {}", path.display()))?;
-            let config = SitlConfig::from_toml(&text)
-                .map_err(|e| anyhow::anyhow!("{}:\n{e}", path.display()))?;
+            let config =
+                sitl_config(&text).map_err(|e| anyhow::anyhow!("{}:\n{e}", path.display()))?;
             if let Some(n) = args
                 .vehicles
                 .filter(|n| usize::from(*n) != config.vehicles.len())
@@ -57,6 +57,26 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
     // for it (every vehicle task has already been awaited).
     runtime.shutdown_background();
     result
+}
+
+/// An emulator file, or a coordinator file (it has `[gains]`): then the emulator flies its
+/// `[[vehicle]]` start states in its `[emulator]` world, without faults, so that
+/// `ringswarm sitl --config F` and `ringswarm fly --config F` go together.
+fn sitl_config(text: &str) -> Result<SitlConfig, String> {
+    let is_coordinator = text
+        .parse::<toml::Table>()
+        .is_ok_and(|t| t.contains_key("gains"));
+    if !is_coordinator {
+        return SitlConfig::from_toml(text);
+    }
+    let config = crate::config::Config::from_toml(text)?;
+    let (world, vehicles) = config.emulator()?;
+    Ok(SitlConfig {
+        world,
+        faults: LinkFaults::default(),
+        fault_seed: 1,
+        vehicles,
+    })
 }
 
 /// The configuration the flags describe: N vehicles of one profile on the ground, 5 m

@@ -5,12 +5,13 @@ use std::time::Duration;
 use nalgebra::Vector2;
 use ringswarm::consensus::{CouplingGains, RingDigraph};
 use ringswarm::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel};
-use ringswarm::driver::udp::run_swarm;
+use ringswarm::driver::udp::{DriverCommand, run_swarm};
 use ringswarm::frame::{CommonFrame, Geodetic};
 use ringswarm::swarm::{EndAction, LossPolicy, Swarm, SwarmSetup};
 use ringswarm::vehicle::{LinkConfig, Phase};
 use ringswarm_sitl::autopilot::{Vehicle, VehicleConfig};
 use ringswarm_sitl::profile::Profile;
+use ringswarm_sitl::time::SimTime;
 use ringswarm_sitl::udp::{LinkFaults, SimClock, VehicleTask, run_vehicle};
 use ringswarm_sitl::world::World;
 use tokio::net::UdpSocket;
@@ -76,12 +77,13 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         loss_policy: LossPolicy::Hold,
     };
     let mut all_flying_at = None;
+    let (command_tx, command_rx) = watch::channel(DriverCommand::Fly);
     let swarm_task = tokio::spawn(run_swarm(
         Swarm::new(setup),
         coordinator_sockets,
         vehicle_addrs,
-        stop_rx.clone(),
-        move |swarm, now| {
+        command_rx,
+        move |swarm: &Swarm, now: SimTime| {
             if all_flying_at.is_none() && swarm.links().iter().all(|l| l.phase() == Phase::Flying) {
                 all_flying_at = Some(now);
                 eprintln!("all flying at {:.3} s", now.as_secs_f64());
@@ -125,8 +127,9 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
             i + 1
         );
     }
+    command_tx.send_replace(DriverCommand::Stop);
     stop_tx.send_replace(true);
-    let swarm = swarm_task.await.unwrap().unwrap();
+    let (swarm, _) = swarm_task.await.unwrap().unwrap();
     assert!(swarm.links().iter().all(|l| l.phase() == Phase::Flying));
     for v in vehicles {
         v.await.unwrap().unwrap();

@@ -100,16 +100,48 @@ pub fn decode_datagram(bytes: &[u8]) -> Vec<Result<Frame, FrameError>> {
     out
 }
 
+/// The complete frames of a datagram as raw bytes (what a `.tlog` records), skipping
+/// bytes outside frames and a truncated tail. Checksums are not checked.
+pub fn raw_frames(bytes: &[u8]) -> Vec<&[u8]> {
+    let mut out = Vec::new();
+    let mut at = 0;
+    while let Some(skip) = bytes[at..]
+        .iter()
+        .position(|b| *b == STX_V1 || *b == STX_V2)
+    {
+        at += skip;
+        match frame_len(&bytes[at..]) {
+            Some(n) if n <= bytes.len() - at => {
+                out.push(&bytes[at..at + n]);
+                at += n;
+            }
+            _ => break,
+        }
+    }
+    out
+}
+
+/// Header length and total length of the frame starting at `bytes[0]` (an STX), once
+/// the header is there.
+fn frame_len(bytes: &[u8]) -> Option<usize> {
+    let v2 = bytes[0] == STX_V2;
+    let header_len = if v2 { 10 } else { 6 };
+    if bytes.len() < header_len {
+        return None;
+    }
+    let payload_len = usize::from(bytes[1]);
+    let signed = v2 && bytes[2] & INCOMPAT_SIGNED != 0;
+    Some(header_len + payload_len + 2 + if signed { SIGNATURE_LEN } else { 0 })
+}
+
 /// Decodes one frame at the start of `bytes`; returns its length when it is known.
 fn decode_frame(bytes: &[u8]) -> (Result<Frame, FrameError>, Option<usize>) {
     let v2 = bytes[0] == STX_V2;
     let header_len = if v2 { 10 } else { 6 };
-    if bytes.len() < header_len {
+    let Some(total) = frame_len(bytes) else {
         return (Err(FrameError::Truncated), None);
-    }
+    };
     let payload_len = usize::from(bytes[1]);
-    let signed = v2 && bytes[2] & INCOMPAT_SIGNED != 0;
-    let total = header_len + payload_len + 2 + if signed { SIGNATURE_LEN } else { 0 };
     if bytes.len() < total {
         return (Err(FrameError::Truncated), None);
     }
@@ -199,6 +231,21 @@ mod tests {
             system_status: MavState::MAV_STATE_STANDBY,
             mavlink_version: 3,
         })
+    }
+
+    #[test]
+    fn raw_frames_splits_a_datagram_and_drops_garbage_and_a_truncated_tail() {
+        let mut enc = Encoder::new(1, 1);
+        let a = enc.encode(&heartbeat());
+        let b = enc.encode(&heartbeat());
+        let mut datagram = vec![0x00, 0x11];
+        datagram.extend_from_slice(&a);
+        datagram.extend_from_slice(&b);
+        datagram.extend_from_slice(&a[..5]);
+        let frames = raw_frames(&datagram);
+        assert_eq!(frames, vec![a.as_slice(), b.as_slice()]);
+        // 10-byte header + 9-byte heartbeat payload + 2-byte CRC.
+        assert_eq!(a.len(), 21);
     }
 
     #[test]

@@ -16,24 +16,39 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 use tokio::time::Instant;
 
+use super::Observer;
 use crate::swarm::Swarm;
+
+/// What the owner of a running swarm asks of it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DriverCommand {
+    /// Keep flying.
+    #[default]
+    Fly,
+    /// Land every vehicle (Ctrl-C); the driver returns once they are all disarmed.
+    Land,
+    /// Return at once (a second Ctrl-C, or a test that is done).
+    Stop,
+}
 
 /// Largest datagram read.
 const MAX_DATAGRAM: usize = 2048;
 
-/// Runs `swarm` over `sockets[i]` ↔ `peers[i]` until `shutdown` turns true; returns the
-/// swarm for its final state. `observe` is called after every change, with the swarm and
-/// the time since start.
+/// Runs `swarm` over `sockets[i]` ↔ `peers[i]` until the swarm has landed every vehicle,
+/// or `commands` says [`DriverCommand::Stop`]; returns the swarm and the observer. The
+/// observer sees every datagram and the swarm after every change, with the time since
+/// start.
 ///
 /// # Errors
-/// A send error other than a transient one, or a receive task's error.
-pub async fn run_swarm(
+/// A receive task's error (send errors are logged: a vehicle may be unreachable for a
+/// while).
+pub async fn run_swarm<O: Observer>(
     mut swarm: Swarm,
     sockets: Vec<UdpSocket>,
     peers: Vec<SocketAddr>,
-    mut shutdown: watch::Receiver<bool>,
-    mut observe: impl FnMut(&Swarm, SimTime),
-) -> io::Result<Swarm> {
+    mut commands: watch::Receiver<DriverCommand>,
+    mut observer: O,
+) -> io::Result<(Swarm, O)> {
     let start = Instant::now();
     let now = || SimTime::from_micros(start.elapsed().as_micros() as u64);
     let sockets: Vec<Arc<UdpSocket>> = sockets.into_iter().map(Arc::new).collect();
@@ -59,21 +74,34 @@ pub async fn run_swarm(
     loop {
         let deadline = start + std::time::Duration::from_micros(swarm.poll_timeout().as_micros());
         tokio::select! {
-            changed = shutdown.changed() => {
-                if changed.is_err() || *shutdown.borrow() { break; }
+            changed = commands.changed() => {
+                let command = if changed.is_err() { DriverCommand::Stop } else { *commands.borrow() };
+                match command {
+                    DriverCommand::Fly => {}
+                    DriverCommand::Land => swarm.land(now()),
+                    DriverCommand::Stop => break,
+                }
             }
             received = rx.recv() => match received {
-                Some((i, bytes)) => swarm.handle_datagram(now(), i, &bytes),
+                Some((i, bytes)) => {
+                    let t = now();
+                    observer.datagram(t, i, false, &bytes);
+                    swarm.handle_datagram(t, i, &bytes);
+                }
                 None => break,
             },
             _ = tokio::time::sleep_until(deadline) => swarm.handle_timeout(now()),
         }
         while let Some((i, bytes)) = swarm.poll_transmit() {
+            observer.datagram(now(), i, true, &bytes);
             if let Err(err) = sockets[i].send_to(&bytes, peers[i]).await {
                 tracing::warn!(vehicle = i, error = %err, "send failed");
             }
         }
-        observe(&swarm, now());
+        observer.swarm(&swarm, now());
+        if swarm.is_finished() {
+            break;
+        }
     }
     receivers.abort_all();
     while let Some(joined) = receivers.join_next().await {
@@ -81,5 +109,5 @@ pub async fn run_swarm(
             return Err(err);
         }
     }
-    Ok(swarm)
+    Ok((swarm, observer))
 }

@@ -5,4 +5,4 @@
 mod convert;
 
 pub use convert::{Inbound, inbound, set_attitude_target};
-pub use ringswarm_sitl::codec::{Encoder, Frame, FrameError, decode_datagram};
+pub use ringswarm_sitl::codec::{Encoder, Frame, FrameError, decode_datagram, raw_frames};

@@ -32,8 +32,8 @@ use crate::consensus::{
     CouplingGains, HorizontalState, RingDigraph, predicted_final_velocity, ring_accelerations,
 };
 use crate::control::{
-    AltitudeGains, Envelope, SaturationMode, VehicleModel, attitude_thrust_from_acceleration,
-    saturate,
+    AltitudeGains, AttitudeThrust, Envelope, SaturationMode, VehicleModel,
+    attitude_thrust_from_acceleration, saturate,
 };
 use crate::frame::CommonFrame;
 use crate::vehicle::{LinkConfig, LinkEvent, Phase, VehicleLink};
@@ -140,6 +140,7 @@ pub struct Swarm {
     horizontal: Vec<HorizontalState>,
     accel: Vec<Vector2<f64>>,
     commands: Vec<Vector3<f64>>,
+    setpoints: Vec<AttitudeThrust>,
     states: Vec<Option<CommonState>>,
     w: Vec<f64>,
     saturated_ticks: u64,
@@ -167,6 +168,7 @@ impl Swarm {
                 )
             })
             .collect();
+        let setpoints = links.iter().map(VehicleLink::setpoint).collect();
         Self {
             w,
             setup,
@@ -177,6 +179,7 @@ impl Swarm {
             horizontal: vec![HorizontalState::default(); n],
             accel: vec![Vector2::zeros(); n],
             commands: vec![Vector3::zeros(); n],
+            setpoints,
             states: vec![None; n],
             saturated_ticks: 0,
             consensus_ticks: 0,
@@ -251,6 +254,11 @@ impl Swarm {
     /// The last accelerations commanded (m/s², ENU), after saturation.
     pub fn commands(&self) -> &[Vector3<f64>] {
         &self.commands
+    }
+
+    /// The last attitude and thrust setpoint of each vehicle.
+    pub fn setpoints(&self) -> &[AttitudeThrust] {
+        &self.setpoints
     }
 
     /// Vehicle `i` in the common frame, once its origin is known.
@@ -455,10 +463,9 @@ impl Swarm {
         }
         for (i, link) in self.links.iter_mut().enumerate() {
             if states[i].is_some() {
-                link.set_setpoint(
-                    now,
-                    attitude_thrust_from_acceleration(self.commands[i], 0.0, &self.setup.models[i]),
-                );
+                self.setpoints[i] =
+                    attitude_thrust_from_acceleration(self.commands[i], 0.0, &self.setup.models[i]);
+                link.set_setpoint(now, self.setpoints[i]);
             }
         }
     }

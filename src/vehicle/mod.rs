@@ -237,6 +237,11 @@ impl VehicleLink {
         &self.state
     }
 
+    /// The setpoint being streamed.
+    pub fn setpoint(&self) -> AttitudeThrust {
+        self.setpoint
+    }
+
     /// Frames ignored (undecodable, another system, another component).
     pub fn ignored_frames(&self) -> u64 {
         self.ignored_frames

@@ -1,0 +1,194 @@
+//! `ringswarm fly`: fly the vehicles of a coordinator config over UDP (real PX4, PX4 SITL
+//! or `ringswarm sitl`), with a status line every second and a run directory. An I/O
+//! edge: it owns the runtime, the sockets, the terminal and the files.
+//!
+//! Ctrl-C once: every vehicle lands and disarms (the command returns when they have);
+//! twice: return at once.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use anyhow::{Context, bail};
+use ringswarm_sitl::time::SimTime;
+use tokio::net::UdpSocket;
+use tokio::sync::watch;
+
+use crate::cli::FlyArgs;
+use crate::config::Config;
+use crate::driver::Observer;
+use crate::driver::udp::{DriverCommand, run_swarm};
+use crate::record::Recorder;
+use crate::record::metrics::Summary;
+use crate::swarm::{Swarm, SwarmPhase};
+use crate::vehicle::Phase;
+
+/// Flies until every vehicle has landed (end of the duration, link-loss policy `land`, or
+/// Ctrl-C) and prints the summary.
+///
+/// # Errors
+/// An unreadable or invalid config (every problem listed), a port that cannot be bound,
+/// a run directory that cannot be written.
+pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(&args.config)
+        .with_context(|| format!("read {}", args.config.display()))?;
+    let config =
+        Config::from_toml(&text).map_err(|e| anyhow::anyhow!("{}:\n{e}", args.config.display()))?;
+    let mut setup = config
+        .validate()
+        .map_err(|e| anyhow::anyhow!("{}:\n{e}", args.config.display()))?;
+    if let Some(d) = args.duration_s {
+        if !(d.is_finite() && d > 0.0) {
+            bail!("--duration-s must be positive, got {d}");
+        }
+        setup.duration = Some(Duration::from_secs_f64(d));
+    }
+    let endpoints: Vec<_> = (0..config.vehicle.len())
+        .map(|i| {
+            config
+                .udp_endpoints(i)
+                .with_context(|| format!("vehicle {}: no default port", i + 1))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| default_run_dir(&args.config));
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("start the tokio runtime")?;
+    let summary = runtime.block_on(fly(Swarm::new(setup), endpoints, &out))?;
+    runtime.shutdown_background();
+    println!("{}", serde_json::to_string_pretty(&summary)?);
+    println!("run directory: {}", out.display());
+    Ok(())
+}
+
+/// `runs/<config stem>-<unix seconds>`.
+fn default_run_dir(config: &Path) -> PathBuf {
+    let stem = config
+        .file_stem()
+        .map_or("run".into(), |s| s.to_string_lossy());
+    let secs = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    PathBuf::from("runs").join(format!("{stem}-{secs}"))
+}
+
+async fn fly(
+    swarm: Swarm,
+    endpoints: Vec<(std::net::SocketAddr, std::net::SocketAddr)>,
+    out: &Path,
+) -> anyhow::Result<Summary> {
+    let mut sockets = Vec::new();
+    let mut peers = Vec::new();
+    for (i, (peer, bind)) in endpoints.into_iter().enumerate() {
+        let socket = UdpSocket::bind(bind).await.with_context(|| {
+            format!(
+                "bind {bind} for vehicle {} (another ground station on that port? set \
+                 [[vehicle]] bind)",
+                i + 1
+            )
+        })?;
+        sockets.push(socket);
+        peers.push(peer);
+    }
+    let epoch_us = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64);
+    let recorder = Recorder::create(out, &swarm, epoch_us)
+        .with_context(|| format!("create the run directory {}", out.display()))?;
+    eprintln!(
+        "flying {} vehicles; Ctrl-C lands them, twice stops at once. Run directory: {}",
+        swarm.links().len(),
+        out.display()
+    );
+    let (command_tx, command_rx) = watch::channel(DriverCommand::Fly);
+    tokio::spawn(async move {
+        for command in [DriverCommand::Land, DriverCommand::Stop] {
+            if tokio::signal::ctrl_c().await.is_err() {
+                return;
+            }
+            eprintln!(
+                "\n{}",
+                match command {
+                    DriverCommand::Land => "Ctrl-C: landing every vehicle (again to stop now)",
+                    _ => "Ctrl-C: stopping",
+                }
+            );
+            command_tx.send_replace(command);
+        }
+    });
+    let observer = FlyObserver {
+        recorder,
+        next_status: SimTime::ZERO,
+        last: SimTime::ZERO,
+    };
+    let wall = Instant::now();
+    let (swarm, observer) = run_swarm(swarm, sockets, peers, command_rx, observer).await?;
+    let now = observer.last;
+    let summary = observer
+        .recorder
+        .finish(&swarm, now, wall.elapsed().as_secs_f64())
+        .with_context(|| format!("write the run directory {}", out.display()))?;
+    Ok(summary)
+}
+
+struct FlyObserver {
+    recorder: Recorder,
+    next_status: SimTime,
+    last: SimTime,
+}
+
+impl Observer for FlyObserver {
+    fn datagram(&mut self, now: SimTime, _vehicle: usize, _to_vehicle: bool, bytes: &[u8]) {
+        self.recorder.datagram(now, bytes);
+    }
+
+    fn swarm(&mut self, swarm: &Swarm, now: SimTime) {
+        self.last = now;
+        self.recorder.sample(swarm, now);
+        if now >= self.next_status {
+            self.next_status = now + Duration::from_secs(1);
+            eprintln!("{}", status_line(swarm, &self.recorder, now));
+        }
+    }
+}
+
+/// One line: time, phase, each link's phase, and the figures.
+fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
+    let phase = match swarm.phase() {
+        SwarmPhase::Handshake => "handshake",
+        SwarmPhase::Consensus(_) => "consensus",
+        SwarmPhase::Holding(_) => "HOLDING (vehicle lost)",
+        SwarmPhase::Ended(_) => "ended, hovering",
+        SwarmPhase::Landing(_) => "landing",
+    };
+    let links: String = swarm
+        .links()
+        .iter()
+        .map(|l| match l.phase() {
+            Phase::Discovering => '?',
+            Phase::Streaming(_) => 's',
+            Phase::Arming => 'a',
+            Phase::Offboarding => 'o',
+            Phase::Flying => 'F',
+            Phase::Lost => 'X',
+            Phase::Failed => '!',
+            Phase::Landing => 'L',
+            Phase::Disarming => 'd',
+            Phase::Done => '.',
+        })
+        .collect();
+    let mut line = format!("[{:7.1} s] {phase:<10} links {links}", now.as_secs_f64());
+    if let Some(s) = recorder.tracker().latest() {
+        line += &format!(
+            " | v ({:6.2}, {:6.2}) m/s | formation {:7.2} m | altitude ±{:5.2} m",
+            s.mean_velocity_mps[0], s.mean_velocity_mps[1], s.formation_error_m, s.altitude_error_m
+        );
+    }
+    if let Some(p) = swarm.predicted_final_velocity() {
+        line += &format!(" | predicted ({:.2}, {:.2})", p.x, p.y);
+    }
+    line
+}

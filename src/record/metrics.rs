@@ -1,0 +1,224 @@
+//! Figures of a flight, computed from the coordinator's view of the swarm (common frame,
+//! ENU, metres): pure functions and a tracker fed once per control tick.
+
+use nalgebra::{Vector2, Vector3};
+use ringswarm_sitl::time::SimTime;
+use serde::Serialize;
+
+use crate::swarm::{Swarm, SwarmPhase};
+
+/// Largest horizontal distance of any `pᵢ − dᵢ` from their mean (m): zero when the
+/// vehicles are exactly in formation (the formation may sit anywhere).
+pub fn formation_error_m(pos_m: &[Vector2<f64>], offsets_m: &[Vector2<f64>]) -> f64 {
+    let n = pos_m.len().min(offsets_m.len());
+    if n == 0 {
+        return 0.0;
+    }
+    let centre = pos_m
+        .iter()
+        .zip(offsets_m)
+        .map(|(p, d)| p - d)
+        .sum::<Vector2<f64>>()
+        / n as f64;
+    pos_m
+        .iter()
+        .zip(offsets_m)
+        .map(|(p, d)| (p - d - centre).norm())
+        .fold(0.0, f64::max)
+}
+
+/// Largest `|zᵢ − altitude|` (m).
+pub fn altitude_error_m(z_m: &[f64], altitude_m: f64) -> f64 {
+    z_m.iter()
+        .map(|z| (z - altitude_m).abs())
+        .fold(0.0, f64::max)
+}
+
+/// Smallest distance between two vehicles (m); infinite with fewer than two.
+pub fn min_separation_m(pos_m: &[Vector3<f64>]) -> f64 {
+    let mut min = f64::INFINITY;
+    for (i, a) in pos_m.iter().enumerate() {
+        for b in &pos_m[i + 1..] {
+            min = min.min((a - b).norm());
+        }
+    }
+    min
+}
+
+/// The swarm's figures at one instant.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Snapshot {
+    /// When (s since start).
+    pub t_s: f64,
+    /// Mean horizontal velocity (m/s, ENU).
+    pub mean_velocity_mps: [f64; 2],
+    /// See [`formation_error_m`].
+    pub formation_error_m: f64,
+    /// See [`altitude_error_m`].
+    pub altitude_error_m: f64,
+}
+
+/// Follows a flight tick by tick: the smallest separation seen and the last snapshot taken
+/// during consensus (the flight's result, before any landing).
+#[derive(Debug, Clone)]
+pub struct RunTracker {
+    min_separation_m: f64,
+    last_consensus: Option<Snapshot>,
+    latest: Option<Snapshot>,
+    pos: Vec<Vector3<f64>>,
+    xy: Vec<Vector2<f64>>,
+    z: Vec<f64>,
+}
+
+impl RunTracker {
+    /// A tracker for `n` vehicles.
+    pub fn new(n: usize) -> Self {
+        Self {
+            min_separation_m: f64::INFINITY,
+            last_consensus: None,
+            latest: None,
+            pos: Vec::with_capacity(n),
+            xy: Vec::with_capacity(n),
+            z: Vec::with_capacity(n),
+        }
+    }
+
+    /// Takes the swarm's state at `now`. Vehicles whose origin is not known yet make the
+    /// snapshot incomplete and it is skipped.
+    pub fn observe(&mut self, swarm: &Swarm, now: SimTime) {
+        let n = swarm.links().len();
+        self.pos.clear();
+        let mut vel = Vector2::zeros();
+        for i in 0..n {
+            let Some(s) = swarm.common_state(i) else {
+                return;
+            };
+            self.pos.push(s.pos_enu_m);
+            vel += s.vel_enu_mps.xy() / n as f64;
+        }
+        self.xy.clear();
+        self.xy.extend(self.pos.iter().map(|p| p.xy()));
+        self.z.clear();
+        self.z.extend(self.pos.iter().map(|p| p.z));
+        let setup = swarm.setup();
+        let airborne = !matches!(swarm.phase(), SwarmPhase::Landing(_));
+        if airborne {
+            self.min_separation_m = self.min_separation_m.min(min_separation_m(&self.pos));
+        }
+        let snapshot = Snapshot {
+            t_s: now.as_secs_f64(),
+            mean_velocity_mps: [vel.x, vel.y],
+            formation_error_m: formation_error_m(&self.xy, &setup.offsets_m),
+            altitude_error_m: altitude_error_m(&self.z, setup.altitude_m),
+        };
+        self.latest = Some(snapshot);
+        if matches!(swarm.phase(), SwarmPhase::Consensus(_)) {
+            self.last_consensus = Some(snapshot);
+        }
+    }
+
+    /// The smallest separation seen while flying (not landing).
+    pub fn min_separation_m(&self) -> f64 {
+        self.min_separation_m
+    }
+
+    /// The last snapshot taken during consensus.
+    pub fn last_consensus(&self) -> Option<Snapshot> {
+        self.last_consensus
+    }
+
+    /// The latest snapshot.
+    pub fn latest(&self) -> Option<Snapshot> {
+        self.latest
+    }
+}
+
+/// `summary.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// Number of vehicles.
+    pub vehicles: usize,
+    /// Control rate (Hz).
+    pub control_rate_hz: f64,
+    /// The final velocity predicted at the (last) start of consensus (m/s, ENU).
+    pub predicted_final_velocity: Option<[f64; 2]>,
+    /// The mean velocity at the end of consensus (m/s, ENU).
+    pub achieved_final_velocity: Option<[f64; 2]>,
+    /// `|achieved − predicted| / |predicted|`.
+    pub velocity_error_fraction: Option<f64>,
+    /// Formation error at the end of consensus (m).
+    pub formation_error_m: Option<f64>,
+    /// Altitude error at the end of consensus (m).
+    pub altitude_error_m: Option<f64>,
+    /// Smallest separation while flying (m); `null` if never known.
+    pub min_separation_m: Option<f64>,
+    /// Fraction of consensus ticks with a saturated command.
+    pub saturated_fraction: f64,
+    /// When consensus first started (s).
+    pub consensus_started_s: Option<f64>,
+    /// When consensus last ran (s).
+    pub consensus_ended_s: Option<f64>,
+    /// Simulated (or, over UDP, flown) seconds.
+    pub sim_seconds: f64,
+    /// Wall-clock seconds.
+    pub wall_seconds: f64,
+    /// The swarm's final phase.
+    pub final_phase: String,
+}
+
+impl Summary {
+    /// The summary of a flight.
+    pub fn new(swarm: &Swarm, tracker: &RunTracker, now: SimTime, wall_seconds: f64) -> Self {
+        let predicted = swarm.predicted_final_velocity();
+        let end = tracker.last_consensus();
+        let achieved = end.map(|s| Vector2::from(s.mean_velocity_mps));
+        let velocity_error_fraction = predicted
+            .zip(achieved)
+            .filter(|(p, _)| p.norm() > 0.0)
+            .map(|(p, a)| (a - p).norm() / p.norm());
+        Self {
+            vehicles: swarm.links().len(),
+            control_rate_hz: 1.0 / swarm.setup().control_interval.as_secs_f64(),
+            predicted_final_velocity: predicted.map(|v| [v.x, v.y]),
+            achieved_final_velocity: achieved.map(|v| [v.x, v.y]),
+            velocity_error_fraction,
+            formation_error_m: end.map(|s| s.formation_error_m),
+            altitude_error_m: end.map(|s| s.altitude_error_m),
+            min_separation_m: Some(tracker.min_separation_m()).filter(|m| m.is_finite()),
+            saturated_fraction: swarm.saturated_fraction(),
+            consensus_started_s: swarm.consensus_started().map(SimTime::as_secs_f64),
+            consensus_ended_s: end.map(|s| s.t_s),
+            sim_seconds: now.as_secs_f64(),
+            wall_seconds,
+            final_phase: format!("{:?}", swarm.phase()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn formation_error_ignores_where_the_formation_is() {
+        let d = [Vector2::new(1.0, 0.0), Vector2::new(-1.0, 0.0)];
+        let shifted = [Vector2::new(11.0, 5.0), Vector2::new(9.0, 5.0)];
+        assert_eq!(formation_error_m(&shifted, &d), 0.0);
+        // One vehicle 2 m east of its slot: p − d = (2, 0) and (0, 0), mean (1, 0), so
+        // each is 1 m from the mean.
+        let off = [Vector2::new(3.0, 0.0), Vector2::new(-1.0, 0.0)];
+        assert!((formation_error_m(&off, &d) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn separation_and_altitude() {
+        let p = [
+            Vector3::new(0.0, 0.0, 50.0),
+            Vector3::new(3.0, 4.0, 50.0),
+            Vector3::new(0.0, 0.0, 62.0),
+        ];
+        assert_eq!(min_separation_m(&p), 5.0);
+        assert_eq!(min_separation_m(&p[..1]), f64::INFINITY);
+        assert_eq!(altitude_error_m(&[49.0, 50.5, 47.5], 50.0), 2.5);
+    }
+}

@@ -1,0 +1,190 @@
+//! The run directory: everything a flight leaves behind.
+//!
+//! ```text
+//! <dir>/traffic.tlog        every frame sent and received: 8-byte big-endian Unix time (µs)
+//!                           + the raw MAVLink frame (what MAVProxy and QGC write)
+//! <dir>/vehicle-<id>.csv    one row per control tick: state, attitude, command, setpoint
+//! <dir>/summary.json        the flight's figures (see [`metrics::Summary`])
+//! ```
+//!
+//! A disk error never stops a flight: the first one is kept, recording stops, and
+//! [`Recorder::finish`] reports it.
+
+pub mod metrics;
+
+use std::fs::File;
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use ringswarm_sitl::time::SimTime;
+
+use crate::link::raw_frames;
+use crate::swarm::Swarm;
+use metrics::{RunTracker, Summary};
+
+/// The CSV header (frames: position and velocity ENU in the common frame; attitude and
+/// setpoint as NED/FRD Euler angles; commands ENU after saturation).
+pub const CSV_HEADER: &str = "t_s,swarm_phase,link_phase,x_m,y_m,z_m,vx_mps,vy_mps,vz_mps,\
+roll_rad,pitch_rad,yaw_rad,cmd_ax_mps2,cmd_ay_mps2,cmd_az_mps2,sp_roll_rad,sp_pitch_rad,\
+sp_thrust_norm,last_heard_age_ms";
+
+/// Writes a run directory while the swarm flies.
+#[derive(Debug)]
+pub struct Recorder {
+    dir: PathBuf,
+    tlog: Option<BufWriter<File>>,
+    csv: Vec<BufWriter<File>>,
+    epoch_us: u64,
+    tracker: RunTracker,
+    last_tick: u64,
+    error: Option<io::Error>,
+}
+
+impl Recorder {
+    /// Creates `dir` (and its parents) and the files for the swarm's vehicles. Frames are
+    /// stamped `epoch_us` (Unix µs) plus the swarm's time.
+    ///
+    /// # Errors
+    /// The directory or a file cannot be created.
+    pub fn create(dir: &Path, swarm: &Swarm, epoch_us: u64) -> io::Result<Self> {
+        std::fs::create_dir_all(dir)?;
+        let tlog = BufWriter::new(File::create(dir.join("traffic.tlog"))?);
+        let mut csv = Vec::new();
+        for cfg in &swarm.setup().links {
+            let mut w = BufWriter::new(File::create(
+                dir.join(format!("vehicle-{}.csv", cfg.system_id)),
+            )?);
+            writeln!(w, "{CSV_HEADER}")?;
+            csv.push(w);
+        }
+        Ok(Self {
+            dir: dir.to_owned(),
+            tlog: Some(tlog),
+            csv,
+            epoch_us,
+            tracker: RunTracker::new(swarm.links().len()),
+            last_tick: 0,
+            error: None,
+        })
+    }
+
+    /// The directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The tracker (for live status).
+    pub fn tracker(&self) -> &RunTracker {
+        &self.tracker
+    }
+
+    fn keep(&mut self, result: io::Result<()>) {
+        if let Err(err) = result {
+            tracing::error!(error = %err, dir = %self.dir.display(), "recording stopped");
+            self.error.get_or_insert(err);
+            self.tlog = None;
+            self.csv.clear();
+        }
+    }
+
+    /// Records a datagram sent or received at `now`, frame by frame.
+    pub fn datagram(&mut self, now: SimTime, bytes: &[u8]) {
+        let stamp = (self.epoch_us + now.as_micros()).to_be_bytes();
+        let Some(tlog) = self.tlog.as_mut() else {
+            return;
+        };
+        let result = raw_frames(bytes).into_iter().try_for_each(|frame| {
+            tlog.write_all(&stamp)?;
+            tlog.write_all(frame)
+        });
+        self.keep(result);
+    }
+
+    /// Samples the swarm if a control tick ran since the last call.
+    pub fn sample(&mut self, swarm: &Swarm, now: SimTime) {
+        if swarm.control_ticks() == self.last_tick {
+            return;
+        }
+        self.last_tick = swarm.control_ticks();
+        self.tracker.observe(swarm, now);
+        let result = self.write_rows(swarm, now);
+        self.keep(result);
+    }
+
+    fn write_rows(&mut self, swarm: &Swarm, now: SimTime) -> io::Result<()> {
+        let phase = phase_name(swarm);
+        for (i, w) in self.csv.iter_mut().enumerate() {
+            let link = &swarm.links()[i];
+            let Some(s) = swarm.common_state(i) else {
+                continue;
+            };
+            let (roll, pitch, yaw) = link
+                .state()
+                .attitude
+                .map_or((f64::NAN, f64::NAN, f64::NAN), |q| q.euler_angles());
+            let c = swarm.commands()[i];
+            let sp = swarm.setpoints()[i];
+            let (sp_roll, sp_pitch, _) = sp.attitude_ned_frd.euler_angles();
+            let age_ms = link
+                .state()
+                .last_heard
+                .map_or(f64::NAN, |t| (now - t).as_secs_f64() * 1e3);
+            writeln!(
+                w,
+                "{:.4},{phase},{:?},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.5},{:.5},\
+                 {:.4},{:.4},{:.4},{:.5},{:.5},{:.4},{:.1}",
+                now.as_secs_f64(),
+                link.phase(),
+                s.pos_enu_m.x,
+                s.pos_enu_m.y,
+                s.pos_enu_m.z,
+                s.vel_enu_mps.x,
+                s.vel_enu_mps.y,
+                s.vel_enu_mps.z,
+                roll,
+                pitch,
+                yaw,
+                c.x,
+                c.y,
+                c.z,
+                sp_roll,
+                sp_pitch,
+                sp.thrust_norm,
+                age_ms
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Flushes everything and writes `summary.json`.
+    ///
+    /// # Errors
+    /// The first write error of the run, or one while finishing.
+    pub fn finish(mut self, swarm: &Swarm, now: SimTime, wall_seconds: f64) -> io::Result<Summary> {
+        let summary = Summary::new(swarm, &self.tracker, now, wall_seconds);
+        if let Some(err) = self.error.take() {
+            return Err(err);
+        }
+        if let Some(mut tlog) = self.tlog.take() {
+            tlog.flush()?;
+        }
+        for mut w in self.csv.drain(..) {
+            w.flush()?;
+        }
+        let json = serde_json::to_string_pretty(&summary).map_err(io::Error::other)?;
+        std::fs::write(self.dir.join("summary.json"), json + "\n")?;
+        Ok(summary)
+    }
+}
+
+/// A short name of the swarm's phase for the CSV.
+fn phase_name(swarm: &Swarm) -> &'static str {
+    use crate::swarm::SwarmPhase::*;
+    match swarm.phase() {
+        Handshake => "handshake",
+        Consensus(_) => "consensus",
+        Holding(_) => "holding",
+        Ended(_) => "ended",
+        Landing(_) => "landing",
+    }
+}
