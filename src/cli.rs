@@ -28,6 +28,23 @@ pub enum Command {
     /// Fly the vehicles of a config over UDP (PX4, PX4 SITL or `ringswarm sitl`) with the
     /// consensus law, then land them; writes a run directory.
     Fly(FlyArgs),
+    /// Fly a built-in scenario in lockstep with the emulator (virtual time), print the
+    /// summary and write a run directory.
+    Demo(DemoArgs),
+}
+
+/// Arguments of `ringswarm demo`.
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// The scenario (see --list).
+    #[arg(long, default_value = "paper-sim1")]
+    pub scenario: String,
+    /// List the scenarios and exit.
+    #[arg(long)]
+    pub list: bool,
+    /// The run directory (default runs/demo-<scenario>-<unix time>).
+    #[arg(long)]
+    pub out: Option<std::path::PathBuf>,
 }
 
 /// Arguments of `ringswarm fly`.

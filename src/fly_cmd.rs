@@ -158,11 +158,9 @@ impl Observer for FlyObserver {
 /// One line: time, phase, each link's phase, and the figures.
 fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
     let phase = match swarm.phase() {
-        SwarmPhase::Handshake => "handshake",
-        SwarmPhase::Consensus(_) => "consensus",
-        SwarmPhase::Holding(_) => "HOLDING (vehicle lost)",
-        SwarmPhase::Ended(_) => "ended, hovering",
-        SwarmPhase::Landing(_) => "landing",
+        SwarmPhase::Holding(_) => "HOLDING (a vehicle is lost)",
+        SwarmPhase::Ended(_) => "ended (hovering)",
+        other => other.name(),
     };
     let links: String = swarm
         .links()

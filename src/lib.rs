@@ -36,6 +36,7 @@ pub mod cli;
 pub mod config;
 pub mod consensus;
 pub mod control;
+pub mod demo_cmd;
 pub mod driver;
 pub mod error;
 pub mod fly_cmd;

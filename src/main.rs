@@ -22,6 +22,7 @@ fn main() -> ExitCode {
         Command::Plan(args) => plan(&args),
         Command::Sitl(args) => ringswarm::sitl_cmd::run(&args).map(|()| true),
         Command::Fly(args) => ringswarm::fly_cmd::run(&args).map(|()| true),
+        Command::Demo(args) => ringswarm::demo_cmd::run(&args).map(|()| true),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,

@@ -10,6 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use ringswarm_sitl::autopilot::{LinkId, PHYSICS_STEP, Vehicle};
 use ringswarm_sitl::time::SimTime;
 
+use super::Observer;
 use crate::swarm::Swarm;
 
 /// Link conditions between the coordinator and every vehicle (both directions).
@@ -96,6 +97,19 @@ impl Lockstep {
 
     /// Advances by one physics step.
     pub fn step(&mut self) {
+        self.step_observed(&mut ());
+    }
+
+    /// Runs until virtual time `end`; `observer` sees every datagram the swarm sends or
+    /// receives (when it is sent, and when it is delivered) and the swarm after each step.
+    pub fn run_observed(&mut self, end: SimTime, observer: &mut impl Observer) {
+        while self.now < end {
+            self.step_observed(observer);
+            observer.swarm(&self.swarm, self.now);
+        }
+    }
+
+    fn step_observed(&mut self, observer: &mut impl Observer) {
         self.now = self.now + PHYSICS_STEP;
         let now = self.now;
         for i in 0..self.vehicles.len() {
@@ -106,14 +120,15 @@ impl Lockstep {
                 }
             }
         }
-        self.deliver(now);
+        self.deliver(now, observer);
         if now >= self.swarm.poll_timeout() {
             self.swarm.handle_timeout(now);
         }
         while let Some((i, bytes)) = self.swarm.poll_transmit() {
+            observer.datagram(now, i, true, &bytes);
             self.send(true, i, bytes);
         }
-        self.deliver(now);
+        self.deliver(now, observer);
     }
 
     /// Runs until virtual time `end`, calling `observe` after every step.
@@ -147,7 +162,7 @@ impl Lockstep {
         });
     }
 
-    fn deliver(&mut self, now: SimTime) {
+    fn deliver(&mut self, now: SimTime, observer: &mut impl Observer) {
         let mut i = 0;
         while i < self.in_flight.len() {
             if self.in_flight[i].due > now {
@@ -160,6 +175,7 @@ impl Lockstep {
             if d.to_vehicle {
                 self.vehicles[d.index].handle_datagram(now, LinkId::Offboard, &d.bytes);
             } else {
+                observer.datagram(now, d.index, false, &d.bytes);
                 self.swarm.handle_datagram(now, d.index, &d.bytes);
             }
         }

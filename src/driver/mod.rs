@@ -26,3 +26,6 @@ impl<F: FnMut(&Swarm, SimTime)> Observer for F {
         self(swarm, now);
     }
 }
+
+/// Observes nothing.
+impl Observer for () {}

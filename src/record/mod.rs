@@ -112,7 +112,7 @@ impl Recorder {
     }
 
     fn write_rows(&mut self, swarm: &Swarm, now: SimTime) -> io::Result<()> {
-        let phase = phase_name(swarm);
+        let phase = swarm.phase().name();
         for (i, w) in self.csv.iter_mut().enumerate() {
             let link = &swarm.links()[i];
             let Some(s) = swarm.common_state(i) else {
@@ -174,17 +174,5 @@ impl Recorder {
         let json = serde_json::to_string_pretty(&summary).map_err(io::Error::other)?;
         std::fs::write(self.dir.join("summary.json"), json + "\n")?;
         Ok(summary)
-    }
-}
-
-/// A short name of the swarm's phase for the CSV.
-fn phase_name(swarm: &Swarm) -> &'static str {
-    use crate::swarm::SwarmPhase::*;
-    match swarm.phase() {
-        Handshake => "handshake",
-        Consensus(_) => "consensus",
-        Holding(_) => "holding",
-        Ended(_) => "ended",
-        Landing(_) => "landing",
     }
 }

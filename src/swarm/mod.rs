@@ -120,6 +120,19 @@ pub enum SwarmPhase {
     Landing(SimTime),
 }
 
+impl SwarmPhase {
+    /// A short lower-case name (`handshake`, `consensus`, `holding`, `ended`, `landing`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Handshake => "handshake",
+            Self::Consensus(_) => "consensus",
+            Self::Holding(_) => "holding",
+            Self::Ended(_) => "ended",
+            Self::Landing(_) => "landing",
+        }
+    }
+}
+
 /// One vehicle's state in the common frame (ENU, m and m/s).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CommonState {

@@ -1,0 +1,215 @@
+//! `ringswarm demo`: a built-in scenario flown in lockstep, the coordinator and the
+//! emulated vehicles exchanging MAVLink frames in virtual time, then a summary table and
+//! a run directory. An I/O edge (terminal, files).
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use anyhow::{Context, bail};
+use ringswarm_sitl::autopilot::Vehicle;
+use ringswarm_sitl::time::SimTime;
+
+use crate::cli::DemoArgs;
+use crate::config::Config;
+use crate::driver::Observer;
+use crate::driver::lockstep::{LinkConditions, Lockstep};
+use crate::record::Recorder;
+use crate::record::metrics::Summary;
+use crate::swarm::Swarm;
+
+/// A built-in scenario: name, one line, the config file's text.
+pub struct Scenario {
+    /// Name (`--scenario`), also the file name in `config/`.
+    pub name: &'static str,
+    /// What it shows.
+    pub about: &'static str,
+    /// The TOML.
+    pub toml: &'static str,
+}
+
+/// The scenarios shipped in `config/`.
+pub const SCENARIOS: &[Scenario] = &[
+    Scenario {
+        name: "paper-sim1",
+        about: "the paper's first simulation: six ideal quadrotors, k = 5, hexagon at 50 m",
+        toml: include_str!("../config/paper-sim1.toml"),
+    },
+    Scenario {
+        name: "paper-sim2",
+        about: "the paper's second simulation: k = -0.5, quadrotor 1 re-targeted for v_f = (20, 30)",
+        toml: include_str!("../config/paper-sim2.toml"),
+    },
+    Scenario {
+        name: "hexagon-x500",
+        about: "the first simulation's start and gains flown by x500 vehicles, 35° tilt",
+        toml: include_str!("../config/hexagon-x500.toml"),
+    },
+];
+
+/// Longest the landing may take after the flight (simulated seconds).
+const LANDING_ALLOWANCE: Duration = Duration::from_secs(600);
+
+/// Runs the demo and prints its summary.
+///
+/// # Errors
+/// An unknown scenario, an invalid config, a run directory that cannot be written.
+pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
+    if args.list {
+        for s in SCENARIOS {
+            println!("{:<14} {}", s.name, s.about);
+        }
+        return Ok(());
+    }
+    let Some(scenario) = SCENARIOS.iter().find(|s| s.name == args.scenario) else {
+        let known: Vec<&str> = SCENARIOS.iter().map(|s| s.name).collect();
+        bail!(
+            "unknown scenario \"{}\" (known: {})",
+            args.scenario,
+            known.join(", ")
+        );
+    };
+    let config = Config::from_toml(scenario.toml)
+        .map_err(|e| anyhow::anyhow!("scenario {}: {e}", scenario.name))?;
+    let setup = config
+        .validate()
+        .map_err(|e| anyhow::anyhow!("scenario {}: {e}", scenario.name))?;
+    let (world, vehicle_configs) = config
+        .emulator()
+        .map_err(|e| anyhow::anyhow!("scenario {}: {e}", scenario.name))?;
+    let vehicles = vehicle_configs
+        .into_iter()
+        .map(|v| Vehicle::new(v, world))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| anyhow::anyhow!("scenario {}: {e}", scenario.name))?;
+    let limit = SimTime::ZERO
+        + setup.duration.unwrap_or(Duration::from_secs(60))
+        + Duration::from_secs(10)
+        + LANDING_ALLOWANCE;
+    let swarm = Swarm::new(setup);
+    let epoch_us = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64);
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from("runs").join(format!("demo-{}-{}", scenario.name, epoch_us / 1_000_000))
+    });
+    let recorder = Recorder::create(&out, &swarm, epoch_us)
+        .with_context(|| format!("create the run directory {}", out.display()))?;
+    let mut run = Lockstep::new(swarm, vehicles, LinkConditions::default());
+    let mut observer = DemoObserver {
+        recorder,
+        next_progress: SimTime::ZERO,
+        terminal: std::io::stderr().is_terminal(),
+    };
+    let wall = Instant::now();
+    while run.now() < limit && !run.swarm().is_finished() {
+        let next = run.now() + Duration::from_millis(100);
+        run.run_observed(next, &mut observer);
+    }
+    let wall_s = wall.elapsed().as_secs_f64();
+    let summary = observer
+        .recorder
+        .finish(run.swarm(), run.now(), wall_s)
+        .with_context(|| format!("write the run directory {}", out.display()))?;
+    if observer.terminal {
+        eprintln!();
+    }
+    println!("{}", table(scenario, &summary));
+    println!("run directory: {}", out.display());
+    if !run.swarm().is_finished() {
+        bail!(
+            "the vehicles had not all landed after {:.0} simulated seconds",
+            run.now().as_secs_f64()
+        );
+    }
+    Ok(())
+}
+
+struct DemoObserver {
+    recorder: Recorder,
+    next_progress: SimTime,
+    terminal: bool,
+}
+
+impl Observer for DemoObserver {
+    fn datagram(&mut self, now: SimTime, _vehicle: usize, _to_vehicle: bool, bytes: &[u8]) {
+        self.recorder.datagram(now, bytes);
+    }
+
+    fn swarm(&mut self, swarm: &Swarm, now: SimTime) {
+        self.recorder.sample(swarm, now);
+        if now >= self.next_progress {
+            // A refreshing line on a terminal, one line per 10 s in a log.
+            let every = if self.terminal { 1 } else { 10 };
+            self.next_progress = now + Duration::from_secs(every);
+            if let Some(s) = self.recorder.tracker().latest() {
+                let line = format!(
+                    "[{:6.1} s simulated] {:<9} formation error {:8.2} m, mean velocity ({:6.2}, {:6.2}) m/s",
+                    now.as_secs_f64(),
+                    swarm.phase().name(),
+                    s.formation_error_m,
+                    s.mean_velocity_mps[0],
+                    s.mean_velocity_mps[1],
+                );
+                if self.terminal {
+                    eprint!("\r{line}");
+                } else {
+                    eprintln!("{line}");
+                }
+            }
+        }
+    }
+}
+
+/// The summary as a Markdown table.
+fn table(scenario: &Scenario, s: &Summary) -> String {
+    let pair = |v: Option<[f64; 2]>| {
+        v.map_or("-".to_owned(), |v| {
+            format!("({:.3}, {:.3}) m/s", v[0], v[1])
+        })
+    };
+    let metres = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.3} m"));
+    let mut rows = vec![
+        (
+            "scenario",
+            format!(
+                "{} ({} vehicles, {:.0} Hz control)",
+                scenario.name, s.vehicles, s.control_rate_hz
+            ),
+        ),
+        ("predicted final velocity", pair(s.predicted_final_velocity)),
+        ("achieved final velocity", pair(s.achieved_final_velocity)),
+        (
+            "velocity error",
+            s.velocity_error_fraction
+                .map_or("-".to_owned(), |e| format!("{:.3} %", 100.0 * e)),
+        ),
+        (
+            "formation error (end of consensus)",
+            metres(s.formation_error_m),
+        ),
+        (
+            "altitude error (end of consensus)",
+            metres(s.altitude_error_m),
+        ),
+        ("minimum separation", metres(s.min_separation_m)),
+        (
+            "time saturated",
+            format!("{:.1} % of consensus ticks", 100.0 * s.saturated_fraction),
+        ),
+    ];
+    rows.push((
+        "simulated / wall",
+        format!(
+            "{:.1} s in {:.2} s ({:.0}x real time)",
+            s.sim_seconds,
+            s.wall_seconds,
+            s.sim_seconds / s.wall_seconds.max(1e-9)
+        ),
+    ));
+    let mut out = String::from("| quantity | value |\n|---|---|\n");
+    for (k, v) in rows {
+        out += &format!("| {k} | {v} |\n");
+    }
+    out
+}
