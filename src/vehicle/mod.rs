@@ -63,6 +63,8 @@ pub struct LinkConfig {
     pub max_attempts: u8,
     /// Silence after which the vehicle is lost.
     pub link_timeout: Duration,
+    /// How long to wait for a first heartbeat before reporting the vehicle as never heard.
+    pub discovery_warning: Duration,
 }
 
 impl LinkConfig {
@@ -78,6 +80,7 @@ impl LinkConfig {
             ack_timeout: Duration::from_millis(500),
             max_attempts: 4,
             link_timeout: Duration::from_millis(1500),
+            discovery_warning: Duration::from_secs(10),
         }
     }
 }
@@ -134,6 +137,11 @@ pub enum LinkEvent {
     Lost,
     /// Heard again after being lost.
     Recovered,
+    /// Nothing heard from the expected system since the link started (reported once).
+    NeverHeard {
+        /// How long the link has waited.
+        after: Duration,
+    },
     /// NAV_LAND accepted: the vehicle is descending.
     Landing,
     /// On the ground (EXTENDED_SYS_STATE).
@@ -204,6 +212,7 @@ pub struct VehicleLink {
     ignored_frames: u64,
     wrong_system: Option<u8>,
     land_requested: bool,
+    never_heard_reported: bool,
 }
 
 impl VehicleLink {
@@ -224,6 +233,7 @@ impl VehicleLink {
             ignored_frames: 0,
             wrong_system: None,
             land_requested: false,
+            never_heard_reported: false,
         }
     }
 
@@ -287,6 +297,9 @@ impl VehicleLink {
         }
         if let Phase::Streaming(since) = self.phase {
             next = next.min(since + self.cfg.pre_stream);
+        }
+        if self.phase == Phase::Discovering && !self.never_heard_reported {
+            next = next.min(SimTime::ZERO + self.cfg.discovery_warning);
         }
         next
     }
@@ -551,6 +564,19 @@ impl VehicleLink {
     /// Runs the timers due at `now`: the setpoint stream, the pre-stream, command
     /// deadlines and link loss.
     pub fn handle_timeout(&mut self, now: SimTime) {
+        if self.phase == Phase::Discovering
+            && !self.never_heard_reported
+            && now >= SimTime::ZERO + self.cfg.discovery_warning
+        {
+            self.never_heard_reported = true;
+            tracing::warn!(
+                sysid = self.cfg.system_id,
+                "no heartbeat from the vehicle yet"
+            );
+            self.events.push_back(LinkEvent::NeverHeard {
+                after: self.cfg.discovery_warning,
+            });
+        }
         if let Some(last) = self.state.last_heard
             && now - last > self.cfg.link_timeout
             && !matches!(
