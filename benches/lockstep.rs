@@ -1,0 +1,105 @@
+//! Lockstep speed: the coordinator and the emulator exchanging encoded MAVLink frames in
+//! virtual time (1 kHz physics), with and without a run directory being written.
+//! `cargo bench --bench lockstep` prints one table row per case.
+
+use std::fmt::Write as _;
+use std::time::{Duration, Instant};
+
+use ringswarm::config::Config;
+use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
+use ringswarm::record::Recorder;
+use ringswarm::swarm::Swarm;
+use ringswarm_sitl::autopilot::Vehicle;
+use ringswarm_sitl::time::SimTime;
+
+fn lockstep(toml: &str) -> Lockstep {
+    let config = Config::from_toml(toml).expect("scenario parses");
+    let setup = config.validate().expect("scenario is valid");
+    let (world, vehicles) = config.emulator().expect("emulator config");
+    let vehicles = vehicles
+        .into_iter()
+        .map(|v| Vehicle::new(v, world).expect("vehicle"))
+        .collect();
+    Lockstep::new(Swarm::new(setup), vehicles, LinkConditions::default())
+}
+
+/// `n` ideal vehicles on a circle of radius 3n m at 50 m, drifting east at 2 m/s, asked
+/// for a polygon of radius 2n m; k = 1, alpha = 1 and beta 25 % above Yu's bound.
+fn ring(n: usize, rate_hz: f64) -> String {
+    let ring = ringswarm::consensus::RingDigraph::for_agents(n, 1.0).expect("even n");
+    let report = ringswarm::consensus::analyze(&ring, None).expect("analysis");
+    let beta = (1.25 * report.yu_bound.unwrap_or(1.0)).sqrt();
+    let mut s = format!(
+        "[swarm]\ncontrol_rate_hz = {rate_hz}\nduration_s = 60.0\n[gains]\nk = 1.0\nalpha = 1.0\n\
+         beta = {beta}\nk_pz = 1.0\nk_vz = 4.0\n[formation]\nkind = \"polygon\"\nradius_m = {}\n\
+         altitude_m = 50.0\n[envelope]\nmax_tilt_deg = 45.0\n[emulator]\nground_below_m = 100.0\n",
+        2.0 * n as f64
+    );
+    for i in 0..n {
+        let a = std::f64::consts::TAU * i as f64 / n as f64;
+        let r = 3.0 * n as f64;
+        let _ = write!(
+            s,
+            "[[vehicle]]\nsystem_id = {}\nprofile = \"ideal\"\nmass_kg = 1.0\nhover_throttle = 0.2\n\
+             start_enu_m = [{}, {}, 50.0]\nstart_velocity_enu_mps = [2.0, 0.0, 0.0]\nin_air = true\n",
+            i + 1,
+            r * a.cos(),
+            r * a.sin()
+        );
+    }
+    s
+}
+
+fn main() {
+    let sim1 = include_str!("../config/paper-sim1.toml");
+    let seconds = 61.2; // handshake (1.2 s) + the paper's 60 s
+    let end = SimTime::from_micros((seconds * 1e6) as u64);
+    println!(
+        "| case | vehicles | control | simulated s | wall s | x real time | µs per vehicle per simulated ms |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    let row = |name: &str, toml: &str, record: bool| {
+        let mut run = lockstep(toml);
+        let n = run.vehicles().len();
+        let rate = 1.0 / run.swarm().setup().control_interval.as_secs_f64();
+        let dir = std::env::temp_dir().join(format!("ringswarm-bench-{}", std::process::id()));
+        let start = Instant::now();
+        if record {
+            let mut recorder = Recorder::create(&dir, run.swarm(), 0).expect("temp dir");
+            struct Rec<'a>(&'a mut Recorder);
+            impl ringswarm::driver::Observer for Rec<'_> {
+                fn datagram(&mut self, now: SimTime, _: usize, _: bool, bytes: &[u8]) {
+                    self.0.datagram(now, bytes);
+                }
+                fn swarm(&mut self, swarm: &Swarm, now: SimTime) {
+                    self.0.sample(swarm, now);
+                }
+            }
+            run.run_observed(end, &mut Rec(&mut recorder));
+            let wall = start.elapsed();
+            recorder
+                .finish(run.swarm(), run.now(), wall.as_secs_f64())
+                .expect("summary");
+        } else {
+            run.run_until(end, |_| {});
+        }
+        let wall = start.elapsed();
+        let _ = std::fs::remove_dir_all(&dir);
+        print_row(name, n, rate, seconds, wall);
+    };
+    row("paper-sim1", sim1, false);
+    row("paper-sim1 + run directory", sim1, true);
+    row("ring of 6", &ring(6, 250.0), false);
+    row("ring of 16", &ring(16, 250.0), false);
+    row("ring of 64", &ring(64, 250.0), false);
+    row("ring of 64, 50 Hz", &ring(64, 50.0), false);
+}
+
+fn print_row(name: &str, n: usize, rate: f64, seconds: f64, wall: Duration) {
+    let w = wall.as_secs_f64();
+    println!(
+        "| {name} | {n} | {rate:.0} Hz | {seconds:.1} | {w:.3} | {:.0} | {:.2} |",
+        seconds / w,
+        w * 1e6 / (n as f64 * seconds * 1e3)
+    );
+}
