@@ -19,7 +19,7 @@ use ringswarm_sitl::world::World;
 use crate::consensus::{CouplingGains, RingDigraph, analyze};
 use crate::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel, enu_to_ned};
 use crate::frame::{CommonFrame, Geodetic};
-use crate::swarm::{EndAction, LossPolicy, SwarmSetup};
+use crate::swarm::{EndAction, LossPolicy, SwarmSetup, TargetVelocity};
 use crate::vehicle::LinkConfig;
 
 /// The whole file.
@@ -45,6 +45,41 @@ pub struct Config {
     /// One table per vehicle, in ring order.
     #[serde(default)]
     pub vehicle: Vec<VehicleSection>,
+    /// A final velocity to reach with the planner (optional).
+    pub target: Option<TargetSection>,
+}
+
+/// `[target]`: the planner chooses `k` (and re-targets one agent if needed) so that the
+/// swarm's consensus velocity is `velocity_enu_mps`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetSection {
+    /// The final velocity (ENU, m/s).
+    pub velocity_enu_mps: [f64; 2],
+    /// `k ≥ k_min + k_margin` (default 0.1).
+    #[serde(default = "default_k_margin")]
+    pub k_margin: f64,
+    /// `k ≤ k_max` (default 10).
+    #[serde(default = "default_k_max")]
+    pub k_max: f64,
+    /// Largest speed a re-targeted agent may be asked for (m/s).
+    pub max_speed_mps: Option<f64>,
+    /// Stage 1 ends when the re-targeted agent is this close to its velocity (default
+    /// 0.05 m/s).
+    #[serde(default = "default_tolerance")]
+    pub tolerance_mps: f64,
+}
+
+fn default_k_margin() -> f64 {
+    0.1
+}
+
+fn default_k_max() -> f64 {
+    10.0
+}
+
+fn default_tolerance() -> f64 {
+    0.05
 }
 
 /// `[swarm]`.
@@ -266,6 +301,49 @@ impl Config {
                 s.duration_s
             ));
         }
+        let target = self.target.as_ref().and_then(|t| {
+            let mut ok = true;
+            let mut check = |what: &str, good: bool, value: String| {
+                if !good {
+                    problems.push(format!("target.{what}, got {value}"));
+                    ok = false;
+                }
+            };
+            check(
+                "velocity_enu_mps must be finite",
+                t.velocity_enu_mps.iter().all(|v| v.is_finite()),
+                format!("{:?}", t.velocity_enu_mps),
+            );
+            check(
+                "k_margin must be finite and at least 0",
+                t.k_margin.is_finite() && t.k_margin >= 0.0,
+                t.k_margin.to_string(),
+            );
+            check(
+                "k_max must be finite",
+                t.k_max.is_finite(),
+                t.k_max.to_string(),
+            );
+            check(
+                "tolerance_mps must be positive",
+                t.tolerance_mps.is_finite() && t.tolerance_mps > 0.0,
+                t.tolerance_mps.to_string(),
+            );
+            if let Some(max) = t.max_speed_mps {
+                check(
+                    "max_speed_mps must be positive",
+                    max.is_finite() && max > 0.0,
+                    max.to_string(),
+                );
+            }
+            ok.then(|| TargetVelocity {
+                velocity_mps: Vector2::from(t.velocity_enu_mps),
+                k_margin: t.k_margin,
+                k_max: t.k_max,
+                max_speed_mps: t.max_speed_mps,
+                tolerance_mps: t.tolerance_mps,
+            })
+        });
         let mut models = Vec::new();
         let mut ids = Vec::new();
         for (i, v) in self.vehicle.iter().enumerate() {
@@ -343,6 +421,7 @@ impl Config {
             duration: Some(Duration::from_secs_f64(s.duration_s)),
             end_action: s.end,
             loss_policy: s.on_link_loss,
+            target,
         })
     }
 

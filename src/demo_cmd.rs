@@ -37,7 +37,7 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "paper-sim2",
-        about: "the paper's second simulation: k = -0.5, quadrotor 1 re-targeted for v_f = (20, 30)",
+        about: "the paper's second simulation: the planner re-targets one agent in flight for v_f = (20, 30)",
         toml: include_str!("../config/paper-sim2.toml"),
     },
     Scenario {

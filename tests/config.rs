@@ -26,10 +26,38 @@ fn shipped_scenarios_validate() {
                 < 1e-12
         );
     }
+    // paper-sim2 starts like paper-sim1 and asks the planner for (20, 30).
+    let sim2 = load("paper-sim2.toml").validate().unwrap();
+    assert_eq!(
+        sim2.target.map(|t| t.velocity_mps),
+        Some(nalgebra::Vector2::new(20.0, 30.0))
+    );
     assert_eq!(
         load("paper-sim2.toml").vehicle[0].start_velocity_enu_mps,
-        [59.0, 130.5, 0.0]
+        [9.0, 4.0, 0.0]
     );
+}
+
+#[test]
+fn a_bad_target_is_refused_with_every_problem() {
+    let text = with(
+        "[formation]",
+        "[target]\nvelocity_enu_mps = [20.0, nan]\nk_margin = -1.0\ntolerance_mps = 0.0\n\n[formation]",
+    );
+    let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
+    for needle in [
+        "target.velocity_enu_mps must be finite",
+        "target.k_margin must be finite and at least 0, got -1",
+        "target.tolerance_mps must be positive, got 0",
+    ] {
+        assert!(err.contains(needle), "{needle} not in:\n{err}");
+    }
+    let text = with(
+        "[formation]",
+        "[target]\nvelocity = [20.0, 30.0]\n\n[formation]",
+    );
+    let err = Config::from_toml(&text).unwrap_err();
+    assert!(err.contains("unknown field `velocity`"), "{err}");
 }
 
 fn with(replace: &str, by: &str) -> String {

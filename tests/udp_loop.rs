@@ -75,6 +75,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         duration: None,
         end_action: EndAction::Land,
         loss_policy: LossPolicy::Hold,
+        target: None,
     };
     let mut all_flying_at = None;
     let (command_tx, command_rx) = watch::channel(DriverCommand::Fly);

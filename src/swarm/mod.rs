@@ -8,6 +8,12 @@
 //!                                          └─ policy land ─► Landing
 //!  end action: hold ─► Ended (hover in place) ;  land ─► Landing
 //!  land() (Ctrl-C) from anywhere ─► Landing ──every link Done──► finished
+//!
+//!  with a target velocity, Handshake ──every vehicle Flying──► plan (current velocities)
+//!     feasible, one agent re-targeted ─► Retargeting (that agent alone accelerates to its
+//!                                        planned velocity, the others keep theirs) ─► Consensus
+//!     feasible as is ─► Consensus with the planned k;  infeasible or unstable ─► Consensus
+//!     with the configured k (warned)
 //! ```
 //!
 //! Holding and Ended run the braking law `u = −k_v·v + k_p·(p_hold − p)`, each vehicle on
@@ -29,7 +35,8 @@ use nalgebra::{Vector2, Vector3};
 use ringswarm_sitl::time::SimTime;
 
 use crate::consensus::{
-    CouplingGains, HorizontalState, RingDigraph, predicted_final_velocity, ring_accelerations,
+    CouplingGains, HorizontalState, PlanOutcome, PlanRequest, RingDigraph, analyze,
+    predicted_final_velocity, ring_accelerations,
 };
 use crate::control::{
     AltitudeGains, AttitudeThrust, Envelope, SaturationMode, VehicleModel,
@@ -74,6 +81,41 @@ pub struct SwarmSetup {
     pub end_action: EndAction,
     /// What the swarm does when a vehicle is lost during consensus.
     pub loss_policy: LossPolicy,
+    /// A final velocity to reach with the planner (stage 1), if any.
+    pub target: Option<TargetVelocity>,
+}
+
+/// The planner's job: reach `velocity_mps` by choosing `k` and, if needed, re-targeting
+/// one agent before consensus starts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TargetVelocity {
+    /// Desired final velocity (m/s, ENU).
+    pub velocity_mps: Vector2<f64>,
+    /// `k ≥ k_min + k_margin`.
+    pub k_margin: f64,
+    /// `k ≤ k_max`.
+    pub k_max: f64,
+    /// Largest speed a re-targeted agent may be asked for (m/s).
+    pub max_speed_mps: Option<f64>,
+    /// Stage 1 ends when the re-targeted agent is this close to its planned velocity (m/s).
+    pub tolerance_mps: f64,
+}
+
+/// A re-targeted agent (0-based) and its planned velocity (m/s, ENU).
+pub type Retargeted = (usize, Vector2<f64>);
+
+/// What the planner decided when consensus was about to start.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PlanDecision {
+    /// Flying the planned `k`, after re-targeting `agent` (0-based) to `velocity_mps`.
+    Planned {
+        /// The gain flown.
+        k: f64,
+        /// The re-targeted agent and its planned velocity, if any.
+        retarget: Option<Retargeted>,
+    },
+    /// Not used: the configured `k` is flown. Why, in words.
+    Rejected(String),
 }
 
 /// What the swarm does at the end of the configured duration.
@@ -104,12 +146,16 @@ const HOLD_K_V: f64 = 2.5;
 const HOLD_K_P: f64 = 1.5;
 /// Below this speed (m/s) a braking vehicle takes its hold point.
 const HOLD_CAPTURE_MPS: f64 = 1.0;
+/// Stage 1 velocity gain (1/s): the re-targeted agent's acceleration per m/s of error.
+const RETARGET_K_V: f64 = 2.0;
 
 /// Where the swarm is.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum SwarmPhase {
     /// Vehicles are being handshaken; the flying ones hold altitude.
     Handshake,
+    /// Planner stage 1: one agent accelerates to its planned velocity, since the given time.
+    Retargeting(SimTime),
     /// The consensus law runs, since the given time.
     Consensus(SimTime),
     /// A vehicle was lost: the others hover in place until it flies again.
@@ -125,6 +171,7 @@ impl SwarmPhase {
     pub fn name(self) -> &'static str {
         match self {
             Self::Handshake => "handshake",
+            Self::Retargeting(_) => "retarget",
             Self::Consensus(_) => "consensus",
             Self::Holding(_) => "holding",
             Self::Ended(_) => "ended",
@@ -163,6 +210,7 @@ pub struct Swarm {
     first_consensus: Option<SimTime>,
     hold_points: Vec<Option<Vector2<f64>>>,
     control_ticks: u64,
+    plan: Option<PlanDecision>,
 }
 
 impl Swarm {
@@ -201,6 +249,7 @@ impl Swarm {
             first_consensus: None,
             hold_points: vec![None; n],
             control_ticks: 0,
+            plan: None,
         }
     }
 
@@ -222,6 +271,11 @@ impl Swarm {
     /// Control ticks run so far (a recorder samples when this changes).
     pub fn control_ticks(&self) -> u64 {
         self.control_ticks
+    }
+
+    /// What the planner decided (with a target velocity, once every vehicle flies).
+    pub fn plan_decision(&self) -> Option<&PlanDecision> {
+        self.plan.as_ref()
     }
 
     /// When consensus first started.
@@ -359,39 +413,134 @@ impl Swarm {
                 .is_some_and(|(t0, d)| now >= t0 + d)
         };
         match self.phase {
+            SwarmPhase::Handshake
+                if all_flying && self.setup.target.is_some() && self.plan.is_none() =>
+            {
+                self.plan_target(now);
+            }
+            SwarmPhase::Retargeting(_) if !any_lost => {
+                let Some(PlanDecision::Planned {
+                    retarget: Some((agent, v)),
+                    ..
+                }) = self.plan
+                else {
+                    return;
+                };
+                let tolerance = self.setup.target.map_or(0.05, |t| t.tolerance_mps);
+                let reached =
+                    self.states[agent].is_some_and(|s| (s.vel_enu_mps.xy() - v).norm() < tolerance);
+                if reached {
+                    self.start_consensus(now);
+                }
+            }
             SwarmPhase::Handshake | SwarmPhase::Holding(_) if all_flying => {
                 if over(self.first_consensus) {
                     self.end(now);
                     return;
                 }
-                self.phase = SwarmPhase::Consensus(now);
-                self.first_consensus.get_or_insert(now);
-                let v0: Vec<Vector2<f64>> = self
-                    .states
-                    .iter()
-                    .flatten()
-                    .map(|s| s.vel_enu_mps.xy())
-                    .collect(); // once per (re)start
-                self.predicted_final_velocity =
-                    predicted_final_velocity(&self.setup.ring, &v0).ok();
-                tracing::info!(predicted = ?self.predicted_final_velocity, "consensus started");
+                self.start_consensus(now);
             }
-            SwarmPhase::Consensus(_) if any_lost => match self.setup.loss_policy {
-                LossPolicy::Hold => {
-                    tracing::warn!("a vehicle was lost: holding");
-                    self.hold_points.iter_mut().for_each(|p| *p = None);
-                    self.phase = SwarmPhase::Holding(now);
+            SwarmPhase::Consensus(_) | SwarmPhase::Retargeting(_) if any_lost => {
+                match self.setup.loss_policy {
+                    LossPolicy::Hold => {
+                        tracing::warn!("a vehicle was lost: holding");
+                        self.hold_points.iter_mut().for_each(|p| *p = None);
+                        self.phase = SwarmPhase::Holding(now);
+                    }
+                    LossPolicy::Land => {
+                        tracing::warn!("a vehicle was lost: landing");
+                        self.land(now);
+                    }
                 }
-                LossPolicy::Land => {
-                    tracing::warn!("a vehicle was lost: landing");
-                    self.land(now);
-                }
-            },
+            }
             SwarmPhase::Consensus(_) | SwarmPhase::Holding(_) if over(self.first_consensus) => {
                 self.end(now)
             }
             _ => {}
         }
+    }
+
+    fn start_consensus(&mut self, now: SimTime) {
+        self.phase = SwarmPhase::Consensus(now);
+        self.first_consensus.get_or_insert(now);
+        let v0: Vec<Vector2<f64>> = self
+            .states
+            .iter()
+            .flatten()
+            .map(|s| s.vel_enu_mps.xy())
+            .collect(); // once per (re)start
+        self.predicted_final_velocity = predicted_final_velocity(&self.setup.ring, &v0).ok();
+        tracing::info!(predicted = ?self.predicted_final_velocity, "consensus started");
+    }
+
+    /// Planner stage 0: choose `k` (and an agent to re-target) from the velocities now.
+    /// Runs once; allocates (the planner and the stability check), like the start of
+    /// consensus.
+    fn plan_target(&mut self, now: SimTime) {
+        let Some(target) = self.setup.target else {
+            return;
+        };
+        let velocities: Vec<Vector2<f64>> = self
+            .states
+            .iter()
+            .flatten()
+            .map(|s| s.vel_enu_mps.xy())
+            .collect();
+        let decision = match self.planned_ring(&target, velocities) {
+            Ok((ring, retarget)) => {
+                let k = ring.k();
+                self.w = (0..self.links.len()).map(|i| ring.w(i)).collect();
+                self.setup.ring = ring;
+                PlanDecision::Planned { k, retarget }
+            }
+            Err(reason) => {
+                tracing::warn!(%reason, "target velocity not used; flying the configured k");
+                PlanDecision::Rejected(reason)
+            }
+        };
+        tracing::info!(?decision, "plan");
+        let retargeting = matches!(
+            decision,
+            PlanDecision::Planned {
+                retarget: Some(_),
+                ..
+            }
+        );
+        self.plan = Some(decision);
+        if retargeting {
+            self.phase = SwarmPhase::Retargeting(now);
+        } else {
+            self.start_consensus(now);
+        }
+    }
+
+    fn planned_ring(
+        &self,
+        target: &TargetVelocity,
+        velocities: Vec<Vector2<f64>>,
+    ) -> Result<(RingDigraph, Option<Retargeted>), String> {
+        let plan = crate::consensus::plan(&PlanRequest {
+            velocities_mps: velocities,
+            target_mps: target.velocity_mps,
+            k_margin: target.k_margin,
+            k_max: target.k_max,
+            max_speed_mps: target.max_speed_mps,
+        })
+        .map_err(|e| e.to_string())?;
+        let (k, retarget) = match plan.outcome {
+            PlanOutcome::Feasible { k, retarget, .. } => (k, retarget),
+            PlanOutcome::Infeasible { reason } => return Err(reason),
+        };
+        let ring =
+            RingDigraph::new(self.setup.ring.macro_vertices(), k).map_err(|e| e.to_string())?;
+        let report = analyze(&ring, Some(self.setup.gains)).map_err(|e| e.to_string())?;
+        if !report.stable {
+            return Err(format!(
+                "the planned k = {k:.6} is unstable with alpha = {}, beta = {}",
+                self.setup.gains.alpha, self.setup.gains.beta
+            ));
+        }
+        Ok((ring, retarget.map(|r| (r.agent, r.new_velocity_mps))))
     }
 
     fn end(&mut self, now: SimTime) {
@@ -450,6 +599,17 @@ impl Swarm {
             SwarmPhase::Handshake => {
                 self.accel.iter_mut().for_each(|a| *a = Vector2::zeros());
                 self.setup.saturation
+            }
+            SwarmPhase::Retargeting(_) => {
+                self.accel.iter_mut().for_each(|a| *a = Vector2::zeros());
+                if let Some(PlanDecision::Planned {
+                    retarget: Some((agent, v)),
+                    ..
+                }) = self.plan
+                {
+                    self.accel[agent] = RETARGET_K_V * (v - self.horizontal[agent].vel_mps);
+                }
+                SaturationMode::Clip
             }
         };
         for (i, state) in states.iter().enumerate() {

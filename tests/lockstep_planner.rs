@@ -1,0 +1,106 @@
+//! Planner stage 1 in flight (lockstep): the paper's second simulation asks for
+//! v_f = (20, 30) from the first simulation's velocities. Expected plan (independent
+//! numpy brute force over 2·10⁶ gains, tests/python/test_cli_against_numpy.py): re-target
+//! agent 4 from (13, 1) to (34.7273, 72.6364) m/s and fly k = 10 (= k_max).
+
+use nalgebra::Vector2;
+use ringswarm::config::Config;
+use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
+use ringswarm::swarm::{PlanDecision, Swarm, SwarmPhase};
+use ringswarm_sitl::autopilot::Vehicle;
+use ringswarm_sitl::time::SimTime;
+
+fn build() -> Lockstep {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim2.toml");
+    let config = Config::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let (world, vehicles) = config.emulator().unwrap();
+    let vehicles = vehicles
+        .into_iter()
+        .map(|v| Vehicle::new(v, world).unwrap())
+        .collect();
+    Lockstep::new(
+        Swarm::new(config.validate().unwrap()),
+        vehicles,
+        LinkConditions::default(),
+    )
+}
+
+#[test]
+fn the_planned_agent_is_retargeted_then_consensus_predicts_the_target() {
+    let mut run = build();
+    let mut retarget_started = None;
+    let mut consensus_started = None;
+    run.run_until(SimTime::from_millis(30_000), |r| match r.swarm().phase() {
+        SwarmPhase::Retargeting(t) => {
+            retarget_started.get_or_insert(t);
+        }
+        SwarmPhase::Consensus(t) => {
+            consensus_started.get_or_insert(t);
+        }
+        _ => {}
+    });
+    let Some(PlanDecision::Planned {
+        k,
+        retarget: Some((agent, v)),
+    }) = run.swarm().plan_decision().cloned()
+    else {
+        panic!("{:?}", run.swarm().plan_decision());
+    };
+    assert_eq!(agent, 3, "agent 4 (0-based 3)");
+    assert!((k - 10.0).abs() < 1e-9, "k = {k}");
+    // The plan starts from measured velocities (f32 telemetry): within 0.01 m/s.
+    assert!(
+        (v - Vector2::new(34.7273, 72.6364)).norm() < 0.01,
+        "planned velocity {v:?}"
+    );
+    let retarget = retarget_started.expect("no stage 1").as_secs_f64();
+    let consensus = consensus_started.expect("no consensus").as_secs_f64();
+    assert!((1.2..1.4).contains(&retarget), "stage 1 at {retarget} s");
+    // A 74.86 m/s change at most at g·tan 45° (9.81 m/s²) takes at least 7.6 s.
+    assert!(
+        consensus - retarget > 7.6,
+        "stage 1 took {} s",
+        consensus - retarget
+    );
+    // Consensus starts with agent 4 within 0.05 m/s of its planned velocity; with
+    // w = (1, 11, 1, 11, 1, 11) that moves the prediction by at most 11/36 · 0.05.
+    let predicted = run.swarm().predicted_final_velocity().unwrap();
+    assert!(
+        (predicted - Vector2::new(20.0, 30.0)).norm() < 0.02,
+        "predicted {predicted:?}"
+    );
+}
+
+#[test]
+fn the_swarm_then_reaches_the_target_velocity_in_formation() {
+    let mut run = build();
+    // Stage 1 ends near 11.2 s; 60 s of consensus.
+    run.run_until(SimTime::from_millis(71_000), |_| {});
+    assert!(matches!(run.swarm().phase(), SwarmPhase::Consensus(_)));
+    let target = Vector2::new(20.0, 30.0);
+    let offsets: Vec<Vector2<f64>> = (0..6)
+        .map(|l| {
+            let a = std::f64::consts::PI * l as f64 / 3.0;
+            Vector2::new(a.cos(), a.sin()) * 20.0
+        })
+        .collect();
+    let shifted: Vec<Vector2<f64>> = run
+        .vehicles()
+        .iter()
+        .zip(&offsets)
+        .map(|(v, d)| {
+            let s = v.status();
+            let vel = ringswarm::control::ned_to_enu(s.vel_ned_mps).xy();
+            assert!(
+                (vel - target).norm() <= 0.01 * target.norm(),
+                "vehicle {}: {vel:?}",
+                s.system_id
+            );
+            ringswarm::control::ned_to_enu(s.pos_world_ned_m).xy() - d
+        })
+        .collect();
+    let centre = shifted.iter().sum::<Vector2<f64>>() / 6.0;
+    for p in &shifted {
+        assert!((p - centre).norm() < 0.5, "{} m off", (p - centre).norm());
+    }
+}
