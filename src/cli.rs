@@ -36,9 +36,12 @@ pub enum Command {
 /// Arguments of `ringswarm demo`.
 #[derive(Debug, Args)]
 pub struct DemoArgs {
-    /// The scenario (see --list).
+    /// The scenario (see --list), or a path to a coordinator .toml file.
     #[arg(long, default_value = "paper-sim1")]
     pub scenario: String,
+    /// Override the scenario's saturation mode: conserve or clip.
+    #[arg(long, value_parser = parse_saturation)]
+    pub saturation: Option<crate::control::SaturationMode>,
     /// List the scenarios and exit.
     #[arg(long)]
     pub list: bool,
@@ -200,6 +203,16 @@ fn parse_vector2(what: &'static str, index: usize, text: &str) -> Result<Vector2
         *slot = value;
     }
     Ok(Vector2::new(values[0], values[1]))
+}
+
+fn parse_saturation(s: &str) -> Result<crate::control::SaturationMode, String> {
+    match s {
+        "conserve" => Ok(crate::control::SaturationMode::Conserve),
+        "clip" => Ok(crate::control::SaturationMode::Clip),
+        other => Err(format!(
+            "unknown saturation mode \"{other}\" (known: conserve, clip)"
+        )),
+    }
 }
 
 #[cfg(test)]

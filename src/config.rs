@@ -124,6 +124,14 @@ pub struct GainsSection {
     pub k_pz: f64,
     /// Altitude D (1/s).
     pub k_vz: f64,
+    /// Time scale `c` of the horizontal law: flies `α·c²` and `β·c`, which slows every
+    /// mode by `c` and keeps the final velocity and stability (default 1).
+    #[serde(default = "default_time_scale")]
+    pub time_scale: f64,
+}
+
+fn default_time_scale() -> f64 {
+    1.0
 }
 
 /// `[formation]`.
@@ -257,7 +265,11 @@ impl Config {
                 None
             }
         };
-        let gains = CouplingGains::new(self.gains.alpha, self.gains.beta)
+        let c = self.gains.time_scale;
+        if !(c.is_finite() && c > 0.0 && c <= 10.0) {
+            problems.push(format!("gains.time_scale must be in (0, 10], got {c}"));
+        }
+        let gains = CouplingGains::new(self.gains.alpha * c * c, self.gains.beta * c)
             .map_err(|e| problems.push(format!("gains: {e}")))
             .ok();
         if let (Some(ring), Some(gains)) = (&ring, gains) {

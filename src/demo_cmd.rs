@@ -12,6 +12,7 @@ use ringswarm_sitl::time::SimTime;
 
 use crate::cli::DemoArgs;
 use crate::config::Config;
+use crate::control::SaturationMode;
 use crate::driver::Observer;
 use crate::driver::lockstep::{LinkConditions, Lockstep};
 use crate::record::Recorder;
@@ -61,27 +62,23 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    let Some(scenario) = SCENARIOS.iter().find(|s| s.name == args.scenario) else {
-        let known: Vec<&str> = SCENARIOS.iter().map(|s| s.name).collect();
-        bail!(
-            "unknown scenario \"{}\" (known: {})",
-            args.scenario,
-            known.join(", ")
-        );
-    };
-    let config = Config::from_toml(scenario.toml)
-        .map_err(|e| anyhow::anyhow!("scenario {}: {e}", scenario.name))?;
+    let (name, text) = scenario_text(&args.scenario)?;
+    let mut config =
+        Config::from_toml(&text).map_err(|e| anyhow::anyhow!("scenario {name}: {e}"))?;
+    if let Some(mode) = args.saturation {
+        config.envelope.saturation = mode;
+    }
     let setup = config
         .validate()
-        .map_err(|e| anyhow::anyhow!("scenario {}: {e}", scenario.name))?;
+        .map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
     let (world, vehicle_configs) = config
         .emulator()
-        .map_err(|e| anyhow::anyhow!("scenario {}: {e}", scenario.name))?;
+        .map_err(|e| anyhow::anyhow!("scenario {name}: {e}"))?;
     let vehicles = vehicle_configs
         .into_iter()
         .map(|v| Vehicle::new(v, world))
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| anyhow::anyhow!("scenario {}: {e}", scenario.name))?;
+        .map_err(|e| anyhow::anyhow!("scenario {name}: {e}"))?;
     let limit = SimTime::ZERO
         + setup.duration.unwrap_or(Duration::from_secs(60))
         + Duration::from_secs(10)
@@ -91,7 +88,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as u64);
     let out = args.out.clone().unwrap_or_else(|| {
-        PathBuf::from("runs").join(format!("demo-{}-{}", scenario.name, epoch_us / 1_000_000))
+        PathBuf::from("runs").join(format!("demo-{name}-{}", epoch_us / 1_000_000))
     });
     let recorder = Recorder::create(&out, &swarm, epoch_us)
         .with_context(|| format!("create the run directory {}", out.display()))?;
@@ -114,7 +111,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     if observer.terminal {
         eprintln!();
     }
-    println!("{}", table(scenario, &summary));
+    println!("{}", table(&name, config.envelope.saturation, &summary));
     println!("run directory: {}", out.display());
     if !run.swarm().is_finished() {
         bail!(
@@ -161,8 +158,27 @@ impl Observer for DemoObserver {
     }
 }
 
+/// A shipped scenario by name, or a TOML file by path (anything ending in `.toml`).
+fn scenario_text(scenario: &str) -> anyhow::Result<(String, String)> {
+    if scenario.ends_with(".toml") {
+        let text = std::fs::read_to_string(scenario).with_context(|| format!("read {scenario}"))?;
+        let name = std::path::Path::new(scenario)
+            .file_stem()
+            .map_or("custom".to_owned(), |s| s.to_string_lossy().into_owned());
+        return Ok((name, text));
+    }
+    let Some(found) = SCENARIOS.iter().find(|s| s.name == scenario) else {
+        let known: Vec<&str> = SCENARIOS.iter().map(|s| s.name).collect();
+        bail!(
+            "unknown scenario \"{scenario}\" (known: {}; or a path to a .toml file)",
+            known.join(", ")
+        );
+    };
+    Ok((found.name.to_owned(), found.toml.to_owned()))
+}
+
 /// The summary as a Markdown table.
-fn table(scenario: &Scenario, s: &Summary) -> String {
+fn table(name: &str, saturation: SaturationMode, s: &Summary) -> String {
     let pair = |v: Option<[f64; 2]>| {
         v.map_or("-".to_owned(), |v| {
             format!("({:.3}, {:.3}) m/s", v[0], v[1])
@@ -173,8 +189,8 @@ fn table(scenario: &Scenario, s: &Summary) -> String {
         (
             "scenario",
             format!(
-                "{} ({} vehicles, {:.0} Hz control)",
-                scenario.name, s.vehicles, s.control_rate_hz
+                "{name} ({} vehicles, {:.0} Hz control, {saturation:?} saturation)",
+                s.vehicles, s.control_rate_hz
             ),
         ),
         ("predicted final velocity", pair(s.predicted_final_velocity)),

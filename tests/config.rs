@@ -84,6 +84,23 @@ fn unstable_gains_are_refused_with_the_numbers() {
 }
 
 #[test]
+fn a_time_scale_scales_alpha_by_c_squared_and_beta_by_c_and_is_checked() {
+    let setup = Config::from_toml(&with("k_vz = 4.0", "k_vz = 4.0\ntime_scale = 0.5"))
+        .unwrap()
+        .validate()
+        .unwrap();
+    assert_eq!((setup.gains.alpha, setup.gains.beta), (0.25, 2.5));
+    let err = Config::from_toml(&with("k_vz = 4.0", "k_vz = 4.0\ntime_scale = 0.0"))
+        .unwrap()
+        .validate()
+        .unwrap_err();
+    assert!(
+        err.contains("gains.time_scale must be in (0, 10], got 0"),
+        "{err}"
+    );
+}
+
+#[test]
 fn unknown_keys_are_refused() {
     let err = Config::from_toml(&with(
         "kind = \"polygon\"",
