@@ -14,6 +14,7 @@ use serde::Deserialize;
 
 use ringswarm_sitl::autopilot::{StartState, VehicleConfig};
 use ringswarm_sitl::profile::Profile;
+use ringswarm_sitl::time::SimTime;
 use ringswarm_sitl::world::World;
 
 use crate::consensus::{CouplingGains, RingDigraph, analyze};
@@ -198,11 +199,56 @@ impl Default for FrameSection {
 }
 
 /// `[emulator]`.
-#[derive(Debug, Clone, Deserialize, Default)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct EmulatorSection {
     /// Height of the paper's z = 0 above the ground (m).
     pub ground_below_m: f64,
+    /// Lockstep links (`demo`, tests): one-way latency (ms).
+    pub latency_ms: f64,
+    /// Lockstep links: uniform extra latency `0..jitter` (ms).
+    pub jitter_ms: f64,
+    /// Lockstep links: datagrams lost, each direction (%).
+    pub loss_pct: f64,
+    /// Seed of the loss and jitter draws.
+    pub seed: u64,
+    /// Lockstep links silenced for a while: `[[emulator.silence]]`.
+    pub silence: Vec<SilenceSection>,
+}
+
+impl Default for EmulatorSection {
+    fn default() -> Self {
+        Self {
+            ground_below_m: 0.0,
+            latency_ms: 0.0,
+            jitter_ms: 0.0,
+            loss_pct: 0.0,
+            seed: 1,
+            silence: Vec::new(),
+        }
+    }
+}
+
+/// `[[emulator.silence]]`: vehicle `vehicle` (1-based, in table order) neither sends nor
+/// receives between `from_s` and `until_s` (simulated seconds).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SilenceSection {
+    /// Which vehicle (1-based position in the `[[vehicle]]` list).
+    pub vehicle: usize,
+    /// Start (s).
+    pub from_s: f64,
+    /// End (s).
+    pub until_s: f64,
+}
+
+/// Link faults of a lockstep run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LockstepFaults {
+    /// Latency, jitter, loss and seed on every link.
+    pub conditions: crate::driver::lockstep::LinkConditions,
+    /// `(vehicle index, from, until)`.
+    pub silences: Vec<(usize, SimTime, SimTime)>,
 }
 
 /// `[[vehicle]]`.
@@ -434,6 +480,62 @@ impl Config {
             end_action: s.end,
             loss_policy: s.on_link_loss,
             target,
+        })
+    }
+
+    /// The lockstep link faults of `[emulator]`.
+    ///
+    /// # Errors
+    /// Every out-of-range value, one per line.
+    pub fn lockstep_faults(&self) -> Result<LockstepFaults, String> {
+        let e = &self.emulator;
+        let mut problems = Vec::new();
+        for (name, v) in [("latency_ms", e.latency_ms), ("jitter_ms", e.jitter_ms)] {
+            if !(v.is_finite() && (0.0..=10_000.0).contains(&v)) {
+                problems.push(format!("emulator.{name} must be in [0, 10000], got {v}"));
+            }
+        }
+        if !(0.0..=100.0).contains(&e.loss_pct) {
+            problems.push(format!(
+                "emulator.loss_pct must be in [0, 100], got {}",
+                e.loss_pct
+            ));
+        }
+        let mut silences = Vec::new();
+        for (j, s) in e.silence.iter().enumerate() {
+            if s.vehicle == 0 || s.vehicle > self.vehicle.len() {
+                problems.push(format!(
+                    "emulator.silence[{j}].vehicle must be 1..={}, got {}",
+                    self.vehicle.len(),
+                    s.vehicle
+                ));
+            }
+            if !(s.from_s.is_finite()
+                && s.from_s >= 0.0
+                && s.until_s.is_finite()
+                && s.until_s > s.from_s)
+            {
+                problems.push(format!(
+                    "emulator.silence[{j}] needs 0 <= from_s < until_s, got {} .. {}",
+                    s.from_s, s.until_s
+                ));
+            } else {
+                let t = |x: f64| SimTime::from_micros((x * 1e6).round() as u64);
+                silences.push((s.vehicle.saturating_sub(1), t(s.from_s), t(s.until_s)));
+            }
+        }
+        if !problems.is_empty() {
+            return Err(problems.join("\n"));
+        }
+        let ms = |x: f64| Duration::from_secs_f64(x / 1000.0);
+        Ok(LockstepFaults {
+            conditions: crate::driver::lockstep::LinkConditions {
+                latency: ms(e.latency_ms),
+                jitter: ms(e.jitter_ms),
+                loss: e.loss_pct / 100.0,
+                seed: e.seed,
+            },
+            silences,
         })
     }
 

@@ -7,17 +7,16 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context, bail};
-use ringswarm_sitl::autopilot::Vehicle;
 use ringswarm_sitl::time::SimTime;
 
 use crate::cli::DemoArgs;
 use crate::config::Config;
 use crate::control::SaturationMode;
 use crate::driver::Observer;
-use crate::driver::lockstep::{LinkConditions, Lockstep};
+use crate::driver::lockstep::Lockstep;
 use crate::record::Recorder;
 use crate::record::metrics::Summary;
-use crate::swarm::Swarm;
+use crate::swarm::{Swarm, SwarmPhase};
 
 /// A built-in scenario: name, one line, the config file's text.
 pub struct Scenario {
@@ -43,8 +42,28 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "hexagon-x500",
-        about: "the first simulation's start and gains flown by x500 vehicles, 35° tilt",
+        about: "the first simulation's start and gains flown by x500 vehicles, 35° tilt, 5x slower",
         toml: include_str!("../config/hexagon-x500.toml"),
+    },
+    Scenario {
+        name: "ground-start",
+        about: "six x500 on the ground: arm, climb, hexagon, cruise at a planned (3, 2) m/s",
+        toml: include_str!("../config/ground-start.toml"),
+    },
+    Scenario {
+        name: "link-loss",
+        about: "paper-sim1 with quadrotor 3 silent from 20 s to 23 s: failsafe, hold, resume",
+        toml: include_str!("../config/link-loss.toml"),
+    },
+    Scenario {
+        name: "lossy",
+        about: "paper-sim1 with 20 % loss and 20 ± 10 ms latency on every link, half speed",
+        toml: include_str!("../config/lossy.toml"),
+    },
+    Scenario {
+        name: "big-ring",
+        about: "64 ideal quadrotors in a circle, velocities mismatched, k = 1",
+        toml: include_str!("../config/big-ring.toml"),
     },
 ];
 
@@ -68,38 +87,33 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     if let Some(mode) = args.saturation {
         config.envelope.saturation = mode;
     }
-    let setup = config
-        .validate()
-        .map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
-    let (world, vehicle_configs) = config
-        .emulator()
-        .map_err(|e| anyhow::anyhow!("scenario {name}: {e}"))?;
-    let vehicles = vehicle_configs
-        .into_iter()
-        .map(|v| Vehicle::new(v, world))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| anyhow::anyhow!("scenario {name}: {e}"))?;
+    let mut run =
+        Lockstep::from_config(&config).map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
     let limit = SimTime::ZERO
-        + setup.duration.unwrap_or(Duration::from_secs(60))
+        + run
+            .swarm()
+            .setup()
+            .duration
+            .unwrap_or(Duration::from_secs(60))
         + Duration::from_secs(10)
         + LANDING_ALLOWANCE;
-    let swarm = Swarm::new(setup);
     let epoch_us = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as u64);
     let out = args.out.clone().unwrap_or_else(|| {
         PathBuf::from("runs").join(format!("demo-{name}-{}", epoch_us / 1_000_000))
     });
-    let recorder = Recorder::create(&out, &swarm, epoch_us)
+    let recorder = Recorder::create(&out, run.swarm(), epoch_us)
         .with_context(|| format!("create the run directory {}", out.display()))?;
-    let mut run = Lockstep::new(swarm, vehicles, LinkConditions::default());
     let mut observer = DemoObserver {
         recorder,
         next_progress: SimTime::ZERO,
         terminal: std::io::stderr().is_terminal(),
     };
     let wall = Instant::now();
-    while run.now() < limit && !run.swarm().is_finished() {
+    let ended =
+        |swarm: &Swarm| swarm.is_finished() || matches!(swarm.phase(), SwarmPhase::Ended(_));
+    while run.now() < limit && !ended(run.swarm()) {
         let next = run.now() + Duration::from_millis(100);
         run.run_observed(next, &mut observer);
     }
@@ -113,7 +127,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     }
     println!("{}", table(&name, config.envelope.saturation, &summary));
     println!("run directory: {}", out.display());
-    if !run.swarm().is_finished() {
+    if !ended(run.swarm()) {
         bail!(
             "the vehicles had not all landed after {:.0} simulated seconds",
             run.now().as_secs_f64()

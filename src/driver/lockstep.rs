@@ -55,7 +55,7 @@ pub struct Lockstep {
     in_flight: VecDeque<InFlight>,
     conditions: LinkConditions,
     rng: ChaCha8Rng,
-    silenced: Vec<Option<(SimTime, SimTime)>>,
+    silenced: Vec<Vec<(SimTime, SimTime)>>,
 }
 
 impl Lockstep {
@@ -69,8 +69,28 @@ impl Lockstep {
             in_flight: VecDeque::new(),
             rng: ChaCha8Rng::seed_from_u64(conditions.seed),
             conditions,
-            silenced: vec![None; n],
+            silenced: vec![Vec::new(); n],
         }
+    }
+
+    /// The swarm and the emulated vehicles of a coordinator config, with its `[emulator]`
+    /// link faults and silences.
+    ///
+    /// # Errors
+    /// The config's problems (all of them), or a vehicle the emulator refuses.
+    pub fn from_config(config: &crate::config::Config) -> Result<Self, String> {
+        let setup = config.validate()?;
+        let (world, vehicle_configs) = config.emulator()?;
+        let faults = config.lockstep_faults()?;
+        let vehicles = vehicle_configs
+            .into_iter()
+            .map(|v| Vehicle::new(v, world))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut run = Self::new(Swarm::new(setup), vehicles, faults.conditions);
+        for (i, from, until) in faults.silences {
+            run.silence(i, from, until);
+        }
+        Ok(run)
     }
 
     /// Virtual time.
@@ -88,10 +108,11 @@ impl Lockstep {
         &self.vehicles
     }
 
-    /// Drops everything vehicle `i` sends and receives between `from` and `until`.
+    /// Drops everything vehicle `i` sends and receives between `from` and `until` (in
+    /// addition to any earlier silence).
     pub fn silence(&mut self, i: usize, from: SimTime, until: SimTime) {
         if let Some(slot) = self.silenced.get_mut(i) {
-            *slot = Some((from, until));
+            slot.push((from, until));
         }
     }
 
@@ -140,7 +161,9 @@ impl Lockstep {
     }
 
     fn is_silenced(&self, i: usize) -> bool {
-        self.silenced[i].is_some_and(|(from, until)| self.now >= from && self.now < until)
+        self.silenced[i]
+            .iter()
+            .any(|&(from, until)| self.now >= from && self.now < until)
     }
 
     fn send(&mut self, to_vehicle: bool, index: usize, bytes: Vec<u8>) {
