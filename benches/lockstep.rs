@@ -77,7 +77,7 @@ fn main() {
             }
             run.run_observed(end, &mut Rec(&mut recorder));
             let wall = start.elapsed();
-            recorder
+            let _ = recorder
                 .finish(run.swarm(), run.now(), wall.as_secs_f64())
                 .expect("summary");
         } else {

@@ -48,6 +48,9 @@ pub struct DemoArgs {
     /// The run directory (default runs/demo-<scenario>-<unix time>).
     #[arg(long)]
     pub out: Option<std::path::PathBuf>,
+    /// Do not draw the plots.
+    #[arg(long)]
+    pub no_plots: bool,
 }
 
 /// Arguments of `ringswarm fly`.

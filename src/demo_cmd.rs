@@ -118,10 +118,14 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         run.run_observed(next, &mut observer);
     }
     let wall_s = wall.elapsed().as_secs_f64();
-    let summary = observer
+    let (summary, trace) = observer
         .recorder
         .finish(run.swarm(), run.now(), wall_s)
         .with_context(|| format!("write the run directory {}", out.display()))?;
+    if !args.no_plots {
+        crate::plot::write_all(&out, &trace, &crate::fly_cmd::plot_info(run.swarm(), &name))
+            .map_err(|e| anyhow::anyhow!("plots: {e}"))?;
+    }
     if observer.terminal {
         eprintln!();
     }

@@ -127,10 +127,13 @@ async fn fly(
     let wall = Instant::now();
     let (swarm, observer) = run_swarm(swarm, sockets, peers, command_rx, observer).await?;
     let now = observer.last;
-    let summary = observer
+    let (summary, trace) = observer
         .recorder
         .finish(&swarm, now, wall.elapsed().as_secs_f64())
         .with_context(|| format!("write the run directory {}", out.display()))?;
+    if let Err(e) = crate::plot::write_all(out, &trace, &plot_info(&swarm, "fly")) {
+        eprintln!("plots not written: {e}");
+    }
     Ok(summary)
 }
 
@@ -189,4 +192,19 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
         line += &format!(" | predicted ({:.2}, {:.2})", p.x, p.y);
     }
     line
+}
+
+/// What the plots need from the swarm.
+pub fn plot_info(swarm: &Swarm, title: &str) -> crate::plot::PlotInfo {
+    let setup = swarm.setup();
+    crate::plot::PlotInfo {
+        title: title.to_owned(),
+        predicted_mps: swarm.predicted_final_velocity(),
+        altitude_m: setup.altitude_m,
+        envelope: setup.envelope,
+        thrust_limits: (
+            setup.envelope.min_thrust_norm(),
+            setup.envelope.max_thrust_norm(),
+        ),
+    }
 }

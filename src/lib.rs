@@ -42,6 +42,7 @@ pub mod error;
 pub mod fly_cmd;
 pub mod frame;
 pub mod link;
+pub mod plot;
 pub mod record;
 pub mod report;
 pub mod sitl_cmd;

@@ -90,6 +90,16 @@ impl Envelope {
         self.max_tilt_rad
     }
 
+    /// The lower thrust limit (normalised).
+    pub fn min_thrust_norm(&self) -> f64 {
+        self.min_thrust_norm
+    }
+
+    /// The upper thrust limit (normalised).
+    pub fn max_thrust_norm(&self) -> f64 {
+        self.max_thrust_norm
+    }
+
     /// Checks that a vehicle can hover inside the envelope.
     ///
     /// # Errors

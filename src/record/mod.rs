@@ -11,6 +11,7 @@
 //! [`Recorder::finish`] reports it.
 
 pub mod metrics;
+pub mod trace;
 
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
@@ -21,6 +22,10 @@ use ringswarm_sitl::time::SimTime;
 use crate::link::raw_frames;
 use crate::swarm::Swarm;
 use metrics::{RunTracker, Summary};
+use trace::Trace;
+
+/// How often the in-memory trace (for the plots) samples the swarm.
+pub const TRACE_PERIOD: std::time::Duration = std::time::Duration::from_millis(50);
 
 /// The CSV header (frames: position and velocity ENU in the common frame; attitude and
 /// setpoint as NED/FRD Euler angles; commands ENU after saturation).
@@ -36,6 +41,7 @@ pub struct Recorder {
     csv: Vec<BufWriter<File>>,
     epoch_us: u64,
     tracker: RunTracker,
+    trace: Trace,
     last_tick: u64,
     error: Option<io::Error>,
 }
@@ -63,6 +69,7 @@ impl Recorder {
             csv,
             epoch_us,
             tracker: RunTracker::new(swarm.links().len()),
+            trace: Trace::new(TRACE_PERIOD),
             last_tick: 0,
             error: None,
         })
@@ -107,6 +114,7 @@ impl Recorder {
         }
         self.last_tick = swarm.control_ticks();
         self.tracker.observe(swarm, now);
+        self.trace.observe(swarm, now);
         let result = self.write_rows(swarm, now);
         self.keep(result);
     }
@@ -156,11 +164,17 @@ impl Recorder {
         Ok(())
     }
 
-    /// Flushes everything and writes `summary.json`.
+    /// Flushes everything and writes `summary.json`; returns the summary and the trace
+    /// (for the plots).
     ///
     /// # Errors
     /// The first write error of the run, or one while finishing.
-    pub fn finish(mut self, swarm: &Swarm, now: SimTime, wall_seconds: f64) -> io::Result<Summary> {
+    pub fn finish(
+        mut self,
+        swarm: &Swarm,
+        now: SimTime,
+        wall_seconds: f64,
+    ) -> io::Result<(Summary, Trace)> {
         let summary = Summary::new(swarm, &self.tracker, now, wall_seconds);
         if let Some(err) = self.error.take() {
             return Err(err);
@@ -173,6 +187,6 @@ impl Recorder {
         }
         let json = serde_json::to_string_pretty(&summary).map_err(io::Error::other)?;
         std::fs::write(self.dir.join("summary.json"), json + "\n")?;
-        Ok(summary)
+        Ok((summary, self.trace))
     }
 }

@@ -75,3 +75,25 @@ def test_tlog_setpoints_are_well_formed_and_at_250_hz(run_dir):
         window = t[(t >= start) & (t < start + 50.0)]
         rate = len(window) / 50.0
         assert rate == pytest.approx(250.0, rel=0.05), f"vehicle {system}: {rate:.2f} Hz"
+
+
+FIGURES = ["trajectories-3d", "paths-xy", "altitude", "velocity", "attitude", "commands"]
+
+
+def test_every_figure_is_written_as_png_and_svg_with_axes_and_legends(run_dir):
+    import struct
+
+    for name in FIGURES:
+        png = (run_dir / f"{name}.png").read_bytes()
+        assert png[:8] == b"\x89PNG\r\n\x1a\n", name
+        width, height = struct.unpack(">II", png[16:24])  # IHDR
+        assert (width, height) == (1100, 700), name
+        svg = (run_dir / f"{name}.svg").read_text()
+        assert svg.lstrip().startswith("<svg"), name
+        assert "vehicle 1" in svg and "vehicle 6" in svg, f"{name}: legend"
+    velocity = (run_dir / "velocity.svg").read_text()
+    assert "predicted final velocity" in velocity and "time (s)" in velocity and "vx (m/s)" in velocity
+    commands = (run_dir / "commands.svg").read_text()
+    assert "thrust limits" in commands and "tilt limit at hover" in commands
+    paths = (run_dir / "paths-xy.svg").read_text()
+    assert "final formation" in paths and "x east (m)" in paths
