@@ -51,6 +51,10 @@ pub struct DemoArgs {
     /// Do not draw the plots.
     #[arg(long)]
     pub no_plots: bool,
+    /// Fly in real time over real UDP sockets, with the emulated vehicles on PX4's SITL
+    /// ports in this process (a GCS on udp 14550 sees them).
+    #[arg(long)]
+    pub realtime: bool,
 }
 
 /// Arguments of `ringswarm fly`.

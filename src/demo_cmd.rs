@@ -17,6 +17,8 @@ use crate::driver::lockstep::Lockstep;
 use crate::record::Recorder;
 use crate::record::metrics::Summary;
 use crate::swarm::{Swarm, SwarmPhase};
+use indicatif::{ProgressBar, ProgressStyle};
+use ringswarm_sitl::autopilot::Vehicle;
 
 /// A built-in scenario: name, one line, the config file's text.
 pub struct Scenario {
@@ -87,6 +89,9 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     if let Some(mode) = args.saturation {
         config.envelope.saturation = mode;
     }
+    if args.realtime {
+        return realtime(&name, &config, args);
+    }
     let mut run =
         Lockstep::from_config(&config).map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
     let limit = SimTime::ZERO
@@ -105,10 +110,13 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     });
     let recorder = Recorder::create(&out, run.swarm(), epoch_us)
         .with_context(|| format!("create the run directory {}", out.display()))?;
+    let terminal = std::io::stderr().is_terminal();
+    let flight_s = run.swarm().setup().duration.map_or(60, |d| d.as_secs() + 2);
     let mut observer = DemoObserver {
         recorder,
         next_progress: SimTime::ZERO,
-        terminal: std::io::stderr().is_terminal(),
+        terminal,
+        bar: terminal.then(|| DemoObserver::progress_bar(flight_s)),
     };
     let wall = Instant::now();
     let ended =
@@ -126,8 +134,8 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         crate::plot::write_all(&out, &trace, &crate::fly_cmd::plot_info(run.swarm(), &name))
             .map_err(|e| anyhow::anyhow!("plots: {e}"))?;
     }
-    if observer.terminal {
-        eprintln!();
+    if let Some(bar) = &observer.bar {
+        bar.finish();
     }
     println!("{}", table(&name, config.envelope.saturation, &summary));
     println!("run directory: {}", out.display());
@@ -144,6 +152,22 @@ struct DemoObserver {
     recorder: Recorder,
     next_progress: SimTime,
     terminal: bool,
+    /// On a terminal: simulated seconds of the flight (handshake + duration), then a
+    /// spinner while the vehicles land.
+    bar: Option<ProgressBar>,
+}
+
+impl DemoObserver {
+    fn progress_bar(flight_s: u64) -> ProgressBar {
+        let bar = ProgressBar::new(flight_s);
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{bar:30.cyan/blue} {pos:>4}/{len} s simulated ({per_sec}) {msg}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        bar
+    }
 }
 
 impl Observer for DemoObserver {
@@ -154,9 +178,25 @@ impl Observer for DemoObserver {
     fn swarm(&mut self, swarm: &Swarm, now: SimTime) {
         self.recorder.sample(swarm, now);
         if now >= self.next_progress {
-            // A refreshing line on a terminal, one line per 10 s in a log.
+            // A progress bar on a terminal, one line per 10 s in a log.
             let every = if self.terminal { 1 } else { 10 };
             self.next_progress = now + Duration::from_secs(every);
+            if let (Some(bar), Some(s)) = (&self.bar, self.recorder.tracker().latest()) {
+                bar.set_position((now.as_secs_f64() as u64).min(bar.length().unwrap_or(u64::MAX)));
+                let error = swarm
+                    .predicted_final_velocity()
+                    .filter(|p| p.norm() > 0.0)
+                    .map_or("-".to_owned(), |p| {
+                        let v = nalgebra::Vector2::from(s.mean_velocity_mps);
+                        format!("{:.2} %", 100.0 * (v - p).norm() / p.norm())
+                    });
+                bar.set_message(format!(
+                    "{}: formation error {:.2} m, velocity error {error}",
+                    swarm.phase().name(),
+                    s.formation_error_m
+                ));
+                return;
+            }
             if let Some(s) = self.recorder.tracker().latest() {
                 let line = format!(
                     "[{:6.1} s simulated] {:<9} formation error {:8.2} m, mean velocity ({:6.2}, {:6.2}) m/s",
@@ -166,14 +206,94 @@ impl Observer for DemoObserver {
                     s.mean_velocity_mps[0],
                     s.mean_velocity_mps[1],
                 );
-                if self.terminal {
-                    eprint!("\r{line}");
-                } else {
-                    eprintln!("{line}");
-                }
+                eprintln!("{line}");
             }
         }
     }
+}
+
+/// `--realtime`: the emulated vehicles on PX4's SITL ports in this process, the
+/// coordinator flying them over real UDP sockets (like `sitl` + `fly` in two terminals).
+fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> {
+    use ringswarm_sitl::udp::{LinkFaults, SimClock, VehicleTask, bind, px4_ports, run_vehicle};
+    use tokio::sync::{mpsc, watch};
+
+    let setup = config
+        .validate()
+        .map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
+    let (world, vehicle_configs) = config
+        .emulator()
+        .map_err(|e| anyhow::anyhow!("scenario {name}: {e}"))?;
+    let e = &config.emulator;
+    if !e.silence.is_empty() {
+        eprintln!("note: [[emulator.silence]] applies to lockstep runs only");
+    }
+    let faults = LinkFaults::from_percent_and_ms(e.loss_pct, e.latency_ms, e.jitter_ms, 0.0);
+    let endpoints: Vec<_> = (0..config.vehicle.len())
+        .map(|i| {
+            config
+                .udp_endpoints(i)
+                .with_context(|| format!("vehicle {}: no default port", i + 1))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let epoch_s = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("runs").join(format!("demo-{name}-realtime-{epoch_s}")));
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("start the tokio runtime")?;
+    let summary = runtime.block_on(async {
+        let (stop_tx, stop_rx) = watch::channel(false);
+        let clock = SimClock::new(1.0);
+        let mut tasks = Vec::new();
+        let mut controls = Vec::new();
+        for (i, cfg) in vehicle_configs.into_iter().enumerate() {
+            let vehicle = Vehicle::new(cfg, world).map_err(anyhow::Error::msg)?;
+            let plan = px4_ports(i as u16, std::net::IpAddr::from([127, 0, 0, 1]));
+            let sockets = bind(&plan)
+                .await
+                .with_context(|| format!("emulated vehicle {}: bind the PX4 ports", i + 1))?;
+            let (status_tx, _status_rx) = watch::channel(vehicle.status());
+            let (control_tx, control) = mpsc::channel(1);
+            controls.push(control_tx);
+            tasks.push(tokio::spawn(run_vehicle(
+                VehicleTask {
+                    vehicle,
+                    sockets,
+                    default_peers: [plan.offboard_peer, plan.gcs_peer],
+                    faults: [faults, faults],
+                    seed: e.seed.wrapping_add(i as u64),
+                    control,
+                },
+                clock,
+                status_tx,
+                stop_rx.clone(),
+            )));
+        }
+        let summary = crate::fly_cmd::fly(Swarm::new(setup), endpoints, &out).await;
+        stop_tx.send_replace(true);
+        drop(controls);
+        for task in tasks {
+            task.await.context("emulated vehicle task")??;
+        }
+        summary
+    })?;
+    runtime.shutdown_background();
+    println!(
+        "{}",
+        table(
+            &format!("{name} (real time, UDP)"),
+            config.envelope.saturation,
+            &summary
+        )
+    );
+    println!("run directory: {}", out.display());
+    Ok(())
 }
 
 /// A shipped scenario by name, or a TOML file by path (anything ending in `.toml`).

@@ -75,7 +75,12 @@ fn default_run_dir(config: &Path) -> PathBuf {
     PathBuf::from("runs").join(format!("{stem}-{secs}"))
 }
 
-async fn fly(
+/// Flies `swarm` over UDP until it has landed (or a second Ctrl-C), recording into `out`;
+/// returns the summary. Shared by `fly` and `demo --realtime`.
+///
+/// # Errors
+/// A port that cannot be bound, a run directory that cannot be written.
+pub(crate) async fn fly(
     swarm: Swarm,
     endpoints: Vec<(std::net::SocketAddr, std::net::SocketAddr)>,
     out: &Path,
