@@ -131,6 +131,15 @@ fn hexagon_x500_conserve_reaches_the_prediction_and_clip_misses_it() {
             altitudes(&run).iter().all(|z| (z - 50.0).abs() < 0.5),
             "{mode:?}"
         );
+        // Five times slower, the formation is still closing after 60 s (from 52 m at the
+        // start to about 7.5 m): it must at least have closed to a fifth.
+        let formation = formation_error_m(&run);
+        assert!(formation < 10.0, "{mode:?}: formation {formation} m");
+        assert!(
+            seen.min_separation_m > 0.5,
+            "{mode:?}: {}",
+            seen.min_separation_m
+        );
     }
     eprintln!(
         "hexagon-x500 error: conserve {:.4}, clip {:.4}",
