@@ -44,7 +44,7 @@ pub const SCENARIOS: &[Scenario] = &[
     },
     Scenario {
         name: "hexagon-x500",
-        about: "the first simulation's start and gains flown by x500 vehicles, 35° tilt, 5x slower",
+        about: "the first simulation's start and gains flown by x500 vehicles, 35° tilt, 0.3x speed",
         toml: include_str!("../config/hexagon-x500.toml"),
     },
     Scenario {
@@ -79,7 +79,7 @@ const LANDING_ALLOWANCE: Duration = Duration::from_secs(600);
 pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     if args.list {
         for s in SCENARIOS {
-            println!("{:<14} {}", s.name, s.about);
+            crate::report::emit(&format!("{:<14} {}", s.name, s.about))?;
         }
         return Ok(());
     }

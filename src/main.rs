@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use ringswarm::cli::{AnalyzeArgs, Cli, Command, PlanArgs};
 use ringswarm::consensus::PlanRequest;
-use ringswarm::report::{AnalyzeRequest, run_analyze, run_plan};
+use ringswarm::report::{AnalyzeRequest, emit, run_analyze, run_plan};
 use tracing_subscriber::EnvFilter;
 
 fn main() -> ExitCode {
@@ -44,9 +44,9 @@ fn analyze(args: &AnalyzeArgs) -> anyhow::Result<bool> {
         gain_margin: args.gain_margin,
     })?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&output)?);
+        emit(&serde_json::to_string_pretty(&output)?)?;
     } else {
-        println!("{output}");
+        emit(&output.to_string())?;
     }
     Ok(output.stable)
 }
@@ -61,9 +61,9 @@ fn plan(args: &PlanArgs) -> anyhow::Result<bool> {
         max_speed_mps: args.max_speed,
     })?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&output)?);
+        emit(&serde_json::to_string_pretty(&output)?)?;
     } else {
-        println!("{output}");
+        emit(&output.to_string())?;
     }
     Ok(output.feasible)
 }

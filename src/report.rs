@@ -2,6 +2,7 @@
 //! shown as text (`Display`) or as one JSON object.
 
 use std::fmt;
+use std::io::Write;
 
 use nalgebra::Vector2;
 use serde::Serialize;
@@ -84,6 +85,19 @@ pub struct AnalyzeOutput {
     pub recommended: Option<Recommendation>,
     /// The verdict.
     pub stable: bool,
+}
+
+/// Writes `text` and a newline to stdout. A closed pipe (`ringswarm analyze … | head`) is
+/// not an error: the reader has what it wanted.
+///
+/// # Errors
+/// Any other write error.
+pub fn emit(text: &str) -> std::io::Result<()> {
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{text}").and_then(|()| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => other,
+    }
 }
 
 /// Runs `analyze`.

@@ -207,3 +207,68 @@ fn sitl_reports_a_port_already_in_use() {
         stderr(&out)
     );
 }
+
+#[test]
+fn a_reader_that_closes_the_pipe_early_is_not_a_crash() {
+    // `ringswarm analyze … | head -1`: the pipe is closed before the long output is
+    // written. The command must end normally (stable: exit 0), never panic (101).
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ringswarm"))
+        .args(["analyze", "--macro-vertices", "32", "--k", "1"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the test binary runs");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("it ends");
+    let err = stderr(&out);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(out.status.code(), Some(0), "{err}");
+}
+
+#[test]
+fn demo_names_an_unknown_scenario_and_the_known_ones() {
+    let out = ringswarm(&["demo", "--scenario", "nope"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains(
+            "unknown scenario \"nope\" (known: paper-sim1, paper-sim2, hexagon-x500, \
+             ground-start, link-loss, lossy, big-ring; or a path to a .toml file)"
+        ),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn fly_reports_every_config_problem_before_touching_the_network() {
+    let dir = std::env::temp_dir().join(format!("ringswarm-cli-fly-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("bad.toml");
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml"),
+    )
+    .unwrap()
+    .replacen("beta = 5.0", "beta = 0.5", 1)
+    .replacen("control_rate_hz = 250.0", "control_rate_hz = 500.0", 1);
+    std::fs::write(&path, text).unwrap();
+    let out = ringswarm(&[
+        "fly",
+        "--config",
+        path.to_str().unwrap(),
+        "--out",
+        dir.join("run").to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr(&out);
+    assert!(err.contains("gains are unstable"), "{err}");
+    assert!(
+        err.contains("swarm.control_rate_hz must be in [1, 250], got 500"),
+        "{err}"
+    );
+    assert!(
+        !dir.join("run").exists(),
+        "no run directory for a refused config"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
