@@ -163,6 +163,9 @@ pub struct EnvelopeSection {
     pub max_thrust: f64,
     /// `conserve` (default) or `clip`.
     pub saturation: SaturationMode,
+    /// Thrust kept for horizontal control when the vertical command saturates
+    /// (normalised, like PX4's MPC_THR_XY_MARG; default 0.3).
+    pub xy_margin: f64,
 }
 
 impl Default for EnvelopeSection {
@@ -172,6 +175,7 @@ impl Default for EnvelopeSection {
             min_thrust: 0.1,
             max_thrust: 0.9,
             saturation: SaturationMode::Conserve,
+            xy_margin: 0.3,
         }
     }
 }
@@ -344,6 +348,7 @@ impl Config {
         }
         let e = &self.envelope;
         let envelope = Envelope::new(e.max_tilt_deg.to_radians(), e.min_thrust, e.max_thrust)
+            .and_then(|env| env.with_xy_margin(e.xy_margin))
             .map_err(|err| problems.push(format!("envelope: {err}")))
             .ok();
         let s = &self.swarm;

@@ -131,10 +131,10 @@ fn hexagon_x500_conserve_reaches_the_prediction_and_clip_misses_it() {
             altitudes(&run).iter().all(|z| (z - 50.0).abs() < 0.5),
             "{mode:?}"
         );
-        // Five times slower, the formation is still closing after 60 s (from 52 m at the
-        // start to about 7.5 m): it must at least have closed to a fifth.
+        // At 0.3 of the speed the formation is still closing after 60 s (from 52 m at the
+        // start to about 2 m).
         let formation = formation_error_m(&run);
-        assert!(formation < 10.0, "{mode:?}: formation {formation} m");
+        assert!(formation < 3.0, "{mode:?}: formation {formation} m");
         assert!(
             seen.min_separation_m > 0.5,
             "{mode:?}: {}",
@@ -146,6 +146,7 @@ fn hexagon_x500_conserve_reaches_the_prediction_and_clip_misses_it() {
         errors[0], errors[1]
     );
     assert!(errors[0] <= 0.02, "conserve {:.4}", errors[0]);
+    // Measured: conserve 0.67 %, clip 40 %.
     assert!(
         errors[1] > 0.10 && errors[1] > 5.0 * errors[0],
         "clip {:.4}",

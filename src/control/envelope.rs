@@ -1,8 +1,11 @@
 //! The actuator envelope and the two ways of saturating the swarm's commands.
 //!
 //! Each vehicle's vertical command comes first (altitude has priority, as in PX4): the
-//! specific thrust's vertical part `u_z + g` is clamped to the thrust limits. What is
-//! left bounds the horizontal command: its magnitude may not exceed
+//! specific thrust's vertical part `u_z + g` is clamped to the thrust limits, the upper
+//! one lowered to `√(max² − margin²)` so that a horizontal margin of thrust always remains
+//! (PX4's `MPC_THR_XY_MARG`; without it a vehicle climbing at full thrust has no authority
+//! left to hold its velocity against drag, and `w·v` drifts). What is left bounds the
+//! horizontal command: its magnitude may not exceed
 //! `a_h = min((u_z + g)·tan θ_max, √(f_max² − (u_z + g)²))`, which keeps both the tilt and
 //! the total thrust inside the envelope.
 //!
@@ -42,6 +45,7 @@ pub struct Envelope {
     max_tilt_rad: f64,
     min_thrust_norm: f64,
     max_thrust_norm: f64,
+    xy_margin_norm: f64,
 }
 
 impl Envelope {
@@ -82,7 +86,35 @@ impl Envelope {
             max_tilt_rad,
             min_thrust_norm,
             max_thrust_norm,
+            xy_margin_norm: 0.0,
         })
+    }
+
+    /// The same envelope keeping `margin` (normalised thrust, `0 ≤ margin < max`) for
+    /// horizontal control when the vertical command saturates.
+    ///
+    /// # Errors
+    /// [`ControlError::OutOfRange`] for a margin outside `[0, max_thrust)`.
+    pub fn with_xy_margin(self, margin: f64) -> Result<Self, ControlError> {
+        check_finite("xy_margin", margin)?;
+        if !(0.0..self.max_thrust_norm).contains(&margin) {
+            return Err(ControlError::OutOfRange {
+                name: "xy_margin",
+                value: margin,
+                expected: "in [0, max_thrust)",
+            });
+        }
+        Ok(Self {
+            xy_margin_norm: margin,
+            ..self
+        })
+    }
+
+    /// The highest normalised thrust the vertical command may take.
+    fn vertical_max_norm(&self) -> f64 {
+        (self.max_thrust_norm.powi(2) - self.xy_margin_norm.powi(2))
+            .sqrt()
+            .max(self.min_thrust_norm)
     }
 
     /// The largest tilt (rad).
@@ -120,7 +152,10 @@ impl Envelope {
     /// A command already inside the limits is returned bit for bit.
     pub fn limit_vertical(&self, u_z_mps2: f64, model: &VehicleModel) -> f64 {
         let f_max = model.max_specific_thrust_mps2();
-        let (lo, hi) = (self.min_thrust_norm * f_max, self.max_thrust_norm * f_max);
+        let (lo, hi) = (
+            self.min_thrust_norm * f_max,
+            self.vertical_max_norm() * f_max,
+        );
         let f_z = u_z_mps2 + GRAVITY_MPS2;
         if f_z < lo {
             lo - GRAVITY_MPS2
@@ -296,6 +331,24 @@ mod tests {
         let env = Envelope::new(35f64.to_radians(), 0.1, 1.0).unwrap();
         let a_h = env.horizontal_limit_mps2(0.0, &hover_model());
         assert!((a_h - GRAVITY_MPS2 * 35f64.to_radians().tan()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_xy_margin_caps_the_vertical_command_and_leaves_that_much_horizontally() {
+        // Max specific thrust 2g (hover 0.5); max 0.9, margin 0.3: the vertical part may
+        // reach √(0.81 − 0.09) = 0.8485 of full thrust, and a full climb still leaves
+        // √(0.9² − 0.8485²)·2g = 0.3·2g horizontally (tilt 80° does not bind).
+        let env = Envelope::new(80f64.to_radians(), 0.1, 0.9)
+            .unwrap()
+            .with_xy_margin(0.3)
+            .unwrap();
+        let model = hover_model();
+        let u_z = env.limit_vertical(100.0, &model);
+        let f_max = 2.0 * GRAVITY_MPS2;
+        assert!((u_z + GRAVITY_MPS2 - 0.72f64.sqrt() * f_max).abs() < 1e-12);
+        let a_h = env.horizontal_limit_mps2(u_z, &model);
+        assert!((a_h - 0.3 * f_max).abs() < 1e-9, "{a_h}");
+        assert!(env.with_xy_margin(0.95).is_err());
     }
 
     #[test]

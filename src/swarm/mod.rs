@@ -554,8 +554,8 @@ impl Swarm {
         }
     }
 
-    /// One control tick. Allocation-free in consensus: every buffer was sized at
-    /// construction.
+    /// One control tick. The law and the saturation allocate nothing in consensus (every
+    /// buffer was sized at construction); each link encodes its setpoint into a new frame.
     fn control(&mut self, now: SimTime) {
         self.control_ticks += 1;
         for i in 0..self.links.len() {
