@@ -126,3 +126,48 @@ fn odd_vehicle_count_nan_and_duplicates_are_all_reported_at_once() {
     assert!(err.contains("system_id 1 is used twice"), "{err}");
     assert!(lines.len() >= 3, "{err}");
 }
+
+#[test]
+fn lockstep_faults_are_checked_and_converted() {
+    let text = with(
+        "ground_below_m = 100.0",
+        "ground_below_m = 100.0\nlatency_ms = 10.0\njitter_ms = 20.0\nloss_pct = 20.0\nseed = 7\n\
+         [[emulator.silence]]\nvehicle = 3\nfrom_s = 20.0\nuntil_s = 23.0",
+    );
+    let faults = Config::from_toml(&text).unwrap().lockstep_faults().unwrap();
+    assert_eq!(
+        faults.conditions.latency,
+        std::time::Duration::from_millis(10)
+    );
+    assert_eq!(
+        faults.conditions.jitter,
+        std::time::Duration::from_millis(20)
+    );
+    assert!((faults.conditions.loss - 0.2).abs() < 1e-12);
+    assert_eq!(faults.conditions.seed, 7);
+    use ringswarm_sitl::time::SimTime;
+    assert_eq!(
+        faults.silences,
+        vec![(
+            2,
+            SimTime::from_millis(20_000),
+            SimTime::from_millis(23_000)
+        )]
+    );
+    let bad = with(
+        "ground_below_m = 100.0",
+        "ground_below_m = 100.0\nloss_pct = 150.0\n\
+         [[emulator.silence]]\nvehicle = 9\nfrom_s = 5.0\nuntil_s = 4.0",
+    );
+    let err = Config::from_toml(&bad)
+        .unwrap()
+        .lockstep_faults()
+        .unwrap_err();
+    for needle in [
+        "emulator.loss_pct must be in [0, 100], got 150",
+        "emulator.silence[0].vehicle must be 1..=6, got 9",
+        "emulator.silence[0] needs 0 <= from_s < until_s, got 5 .. 4",
+    ] {
+        assert!(err.contains(needle), "{needle} not in:\n{err}");
+    }
+}
