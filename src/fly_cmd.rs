@@ -184,6 +184,7 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
             Phase::Landing => 'L',
             Phase::Disarming => 'd',
             Phase::Done => '.',
+            Phase::Overridden => 'P',
         })
         .collect();
     let mut line = format!("[{:7.1} s] {phase:<10} links {links}", now.as_secs_f64());

@@ -362,3 +362,51 @@ fn a_vehicle_that_never_answers_is_reported_once_and_never_commanded() {
         1
     );
 }
+
+#[test]
+fn a_vehicle_taken_out_of_offboard_by_someone_else_is_never_commanded_again() {
+    use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd};
+    let mut h = Harness::new(1, 1);
+    h.run(Duration::from_secs(2), &mut deliver_all);
+    assert_eq!(h.link.phase(), Phase::Flying);
+    // A ground station on the GCS link switches the vehicle to POSCTL (main mode 3).
+    let mut gcs = ringswarm::link::Encoder::new(250, 190);
+    let switch = gcs.encode(&MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+        target_system: 1,
+        target_component: 1,
+        command: MavCmd::MAV_CMD_DO_SET_MODE,
+        confirmation: 0,
+        param1: 1.0,
+        param2: 3.0,
+        param3: 0.0,
+        param4: 0.0,
+        param5: 0.0,
+        param6: 0.0,
+        param7: 0.0,
+    }));
+    h.vehicle.handle_datagram(h.now, LinkId::Gcs, &switch);
+    let switched = h.now;
+    h.run(Duration::from_secs(3), &mut deliver_all);
+    assert_eq!(h.link.phase(), Phase::Overridden);
+    let (at, mode) = h
+        .events
+        .iter()
+        .find_map(|(t, e)| match e {
+            LinkEvent::LeftOffboard { custom_mode } => Some((*t, *custom_mode)),
+            _ => None,
+        })
+        .expect("reported");
+    assert_eq!((mode >> 16) & 0xFF, 3, "POSCTL");
+    // Heartbeats are 1 Hz: the second one outside OFFBOARD comes 1-2 s after the switch.
+    let after = (at - switched).as_secs_f64();
+    assert!((1.0..=2.1).contains(&after), "{after} s");
+    // Nothing is sent to the vehicle after that.
+    let before = h.sent_to_vehicle.len();
+    h.run(Duration::from_secs(2), &mut deliver_all);
+    assert_eq!(h.sent_to_vehicle.len(), before);
+    assert_eq!(h.vehicle.status().mode, FlightMode::Position);
+    // Told to land, the link leaves it to whoever flies it.
+    h.link.land(h.now);
+    h.run(Duration::from_secs(1), &mut deliver_all);
+    assert_eq!(h.sent_to_vehicle.len(), before);
+}

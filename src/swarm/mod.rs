@@ -301,7 +301,7 @@ impl Swarm {
             && self
                 .links
                 .iter()
-                .all(|l| matches!(l.phase(), Phase::Done | Phase::Failed))
+                .all(|l| matches!(l.phase(), Phase::Done | Phase::Failed | Phase::Overridden))
     }
 
     /// The final velocity predicted at the start of consensus (m/s, ENU).
@@ -406,7 +406,12 @@ impl Swarm {
     fn transition(&mut self, now: SimTime) {
         let all_flying = self.links.iter().all(|l| l.phase() == Phase::Flying)
             && self.states.iter().all(Option::is_some);
-        let any_lost = self.links.iter().any(|l| l.phase() == Phase::Lost);
+        // A vehicle taken out of OFFBOARD (pilot, its failsafe) counts as lost: it never
+        // comes back on its own, so the swarm holds (or lands) until told otherwise.
+        let any_lost = self
+            .links
+            .iter()
+            .any(|l| matches!(l.phase(), Phase::Lost | Phase::Overridden));
         let over = |start: Option<SimTime>| {
             start
                 .zip(self.setup.duration)

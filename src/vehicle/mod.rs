@@ -10,6 +10,9 @@
 //!                     up to max_attempts, then Failed (a clear reason in the event)
 //!  any but Discovering/Failed ──nothing heard for link_timeout──► Lost ──heartbeat──► Streaming again
 //!
+//!  Flying ──two heartbeats in a row not in OFFBOARD (a pilot, the vehicle's own failsafe,
+//!          another station)──► Overridden: never commanded again
+//!
 //!  land() ──► Landing (NAV_LAND, acked or heartbeat AUTO.LAND; setpoints until then)
 //!  Landing ──EXTENDED_SYS_STATE on ground──► Disarming (ARM_DISARM 0, acked or heartbeat
 //!  disarmed) ──► Done. A vehicle lost while landing is sent NAV_LAND again when heard.
@@ -108,6 +111,9 @@ pub enum Phase {
     Disarming,
     /// Landed and disarmed (or never armed when told to land).
     Done,
+    /// Left OFFBOARD while flying (a pilot, its own failsafe or another station took it):
+    /// nothing is sent to it any more.
+    Overridden,
 }
 
 /// What the swarm should know.
@@ -148,6 +154,11 @@ pub enum LinkEvent {
     Landed,
     /// Disarmed on the ground: the link is done.
     Disarmed,
+    /// Left OFFBOARD while flying; PX4's custom mode it reports now.
+    LeftOffboard {
+        /// The heartbeat's custom mode.
+        custom_mode: u32,
+    },
 }
 
 /// What the coordinator knows of the vehicle (its own frames: local NED, body FRD).
@@ -213,6 +224,7 @@ pub struct VehicleLink {
     wrong_system: Option<u8>,
     land_requested: bool,
     never_heard_reported: bool,
+    heartbeats_out_of_offboard: u8,
 }
 
 impl VehicleLink {
@@ -234,6 +246,7 @@ impl VehicleLink {
             wrong_system: None,
             land_requested: false,
             never_heard_reported: false,
+            heartbeats_out_of_offboard: 0,
         }
     }
 
@@ -306,9 +319,12 @@ impl VehicleLink {
 
     fn streams(&self) -> bool {
         match self.phase {
-            Phase::Discovering | Phase::Lost | Phase::Failed | Phase::Disarming | Phase::Done => {
-                false
-            }
+            Phase::Discovering
+            | Phase::Lost
+            | Phase::Failed
+            | Phase::Disarming
+            | Phase::Done
+            | Phase::Overridden => false,
             // Keep OFFBOARD fed until the vehicle has taken NAV_LAND.
             Phase::Landing => self.pending.is_some() && self.state.in_offboard(),
             _ => true,
@@ -324,6 +340,7 @@ impl VehicleLink {
         self.land_requested = true;
         match self.phase {
             Phase::Discovering => self.phase = Phase::Done,
+            Phase::Overridden => {} // someone else flies it
             Phase::Streaming(_) if !self.state.armed => {
                 self.pending = None;
                 self.phase = Phase::Done;
@@ -413,6 +430,26 @@ impl VehicleLink {
                             self.request_land(now);
                         } else {
                             self.start_streaming(now);
+                        }
+                    }
+                    Phase::Flying => {
+                        // Two in a row: a heartbeat sent just before the switch may still
+                        // arrive after the acknowledgement.
+                        if self.state.in_offboard() {
+                            self.heartbeats_out_of_offboard = 0;
+                        } else {
+                            self.heartbeats_out_of_offboard += 1;
+                            if self.heartbeats_out_of_offboard >= 2 {
+                                tracing::warn!(
+                                    sysid = self.cfg.system_id,
+                                    custom_mode,
+                                    "vehicle left OFFBOARD: no longer commanded"
+                                );
+                                self.phase = Phase::Overridden;
+                                self.pending = None;
+                                self.events
+                                    .push_back(LinkEvent::LeftOffboard { custom_mode });
+                            }
                         }
                     }
                     _ => self.advance_on_state(now),
@@ -581,7 +618,7 @@ impl VehicleLink {
             && now - last > self.cfg.link_timeout
             && !matches!(
                 self.phase,
-                Phase::Lost | Phase::Failed | Phase::Discovering | Phase::Done
+                Phase::Lost | Phase::Failed | Phase::Discovering | Phase::Done | Phase::Overridden
             )
         {
             self.phase = Phase::Lost;
