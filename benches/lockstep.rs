@@ -6,21 +6,13 @@ use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
 use ringswarm::config::Config;
-use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
+use ringswarm::driver::lockstep::Lockstep;
 use ringswarm::record::Recorder;
 use ringswarm::swarm::Swarm;
-use ringswarm_sitl::autopilot::Vehicle;
 use ringswarm_sitl::time::SimTime;
 
 fn lockstep(toml: &str) -> Lockstep {
-    let config = Config::from_toml(toml).expect("scenario parses");
-    let setup = config.validate().expect("scenario is valid");
-    let (world, vehicles) = config.emulator().expect("emulator config");
-    let vehicles = vehicles
-        .into_iter()
-        .map(|v| Vehicle::new(v, world).expect("vehicle"))
-        .collect();
-    Lockstep::new(Swarm::new(setup), vehicles, LinkConditions::default())
+    Lockstep::from_config(&Config::from_toml(toml).expect("scenario parses")).expect("scenario")
 }
 
 /// `n` ideal vehicles on a circle of radius 3n m at 50 m, drifting east at 2 m/s, asked

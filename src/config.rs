@@ -544,6 +544,19 @@ impl Config {
         })
     }
 
+    /// Every vehicle's `(address, bind address)`, in order.
+    ///
+    /// # Errors
+    /// A vehicle whose default port would pass 65535, named.
+    pub fn all_udp_endpoints(&self) -> Result<Vec<(SocketAddr, SocketAddr)>, String> {
+        (0..self.vehicle.len())
+            .map(|i| {
+                self.udp_endpoints(i)
+                    .ok_or_else(|| format!("vehicle {}: no default port", i + 1))
+            })
+            .collect()
+    }
+
     /// Vehicle `i`'s address and the coordinator's bind address for it (PX4 SITL
     /// defaults: the vehicle listens on 14580+i and sends to 14540+i).
     pub fn udp_endpoints(&self, i: usize) -> Option<(SocketAddr, SocketAddr)> {

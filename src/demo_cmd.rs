@@ -131,8 +131,12 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         .finish(run.swarm(), run.now(), wall_s)
         .with_context(|| format!("write the run directory {}", out.display()))?;
     if !args.no_plots {
-        crate::plot::write_all(&out, &trace, &crate::fly_cmd::plot_info(run.swarm(), &name))
-            .map_err(|e| anyhow::anyhow!("plots: {e}"))?;
+        crate::plot::write_all(
+            &out,
+            &trace,
+            &crate::plot::PlotInfo::new(run.swarm(), &name),
+        )
+        .map_err(|e| anyhow::anyhow!("plots: {e}"))?;
     }
     if let Some(bar) = &observer.bar {
         bar.finish();
@@ -229,13 +233,7 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
         eprintln!("note: [[emulator.silence]] applies to lockstep runs only");
     }
     let faults = LinkFaults::from_percent_and_ms(e.loss_pct, e.latency_ms, e.jitter_ms, 0.0);
-    let endpoints: Vec<_> = (0..config.vehicle.len())
-        .map(|i| {
-            config
-                .udp_endpoints(i)
-                .with_context(|| format!("vehicle {}: no default port", i + 1))
-        })
-        .collect::<anyhow::Result<_>>()?;
+    let endpoints = config.all_udp_endpoints().map_err(anyhow::Error::msg)?;
     let epoch_s = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());

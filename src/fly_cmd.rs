@@ -42,13 +42,7 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         }
         setup.duration = Some(Duration::from_secs_f64(d));
     }
-    let endpoints: Vec<_> = (0..config.vehicle.len())
-        .map(|i| {
-            config
-                .udp_endpoints(i)
-                .with_context(|| format!("vehicle {}: no default port", i + 1))
-        })
-        .collect::<anyhow::Result<_>>()?;
+    let endpoints = config.all_udp_endpoints().map_err(anyhow::Error::msg)?;
     let out = args
         .out
         .clone()
@@ -136,7 +130,8 @@ pub(crate) async fn fly(
         .recorder
         .finish(&swarm, now, wall.elapsed().as_secs_f64())
         .with_context(|| format!("write the run directory {}", out.display()))?;
-    if let Err(e) = crate::plot::write_all(out, &trace, &plot_info(&swarm, "fly")) {
+    if let Err(e) = crate::plot::write_all(out, &trace, &crate::plot::PlotInfo::new(&swarm, "fly"))
+    {
         eprintln!("plots not written: {e}");
     }
     Ok(summary)
@@ -198,19 +193,4 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
         line += &format!(" | predicted ({:.2}, {:.2})", p.x, p.y);
     }
     line
-}
-
-/// What the plots need from the swarm.
-pub fn plot_info(swarm: &Swarm, title: &str) -> crate::plot::PlotInfo {
-    let setup = swarm.setup();
-    crate::plot::PlotInfo {
-        title: title.to_owned(),
-        predicted_mps: swarm.predicted_final_velocity(),
-        altitude_m: setup.altitude_m,
-        envelope: setup.envelope,
-        thrust_limits: (
-            setup.envelope.min_thrust_norm(),
-            setup.envelope.max_thrust_norm(),
-        ),
-    }
 }

@@ -30,6 +30,23 @@ pub struct PlotInfo {
     pub thrust_limits: (f64, f64),
 }
 
+impl PlotInfo {
+    /// What the plots need from the swarm, titled `title`.
+    pub fn new(swarm: &crate::swarm::Swarm, title: &str) -> Self {
+        let setup = swarm.setup();
+        Self {
+            title: title.to_owned(),
+            predicted_mps: swarm.predicted_final_velocity(),
+            altitude_m: setup.altitude_m,
+            envelope: setup.envelope,
+            thrust_limits: (
+                setup.envelope.min_thrust_norm(),
+                setup.envelope.max_thrust_norm(),
+            ),
+        }
+    }
+}
+
 /// A plotting failure, as text.
 pub type PlotResult = Result<(), String>;
 

@@ -5,24 +5,14 @@
 
 use nalgebra::Vector2;
 use ringswarm::config::Config;
-use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
-use ringswarm::swarm::{PlanDecision, Swarm, SwarmPhase};
-use ringswarm_sitl::autopilot::Vehicle;
+use ringswarm::driver::lockstep::Lockstep;
+use ringswarm::swarm::{PlanDecision, SwarmPhase};
 use ringswarm_sitl::time::SimTime;
 
 fn build() -> Lockstep {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim2.toml");
     let config = Config::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
-    let (world, vehicles) = config.emulator().unwrap();
-    let vehicles = vehicles
-        .into_iter()
-        .map(|v| Vehicle::new(v, world).unwrap())
-        .collect();
-    Lockstep::new(
-        Swarm::new(config.validate().unwrap()),
-        vehicles,
-        LinkConditions::default(),
-    )
+    Lockstep::from_config(&config).unwrap()
 }
 
 #[test]

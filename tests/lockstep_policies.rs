@@ -2,8 +2,8 @@
 //! vehicle silenced, and with the flight ended by landing.
 
 use ringswarm::config::Config;
-use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
-use ringswarm::swarm::{Swarm, SwarmPhase};
+use ringswarm::driver::lockstep::Lockstep;
+use ringswarm::swarm::SwarmPhase;
 use ringswarm::vehicle::Phase;
 use ringswarm_sitl::autopilot::{FlightMode, Vehicle};
 use ringswarm_sitl::time::SimTime;
@@ -16,17 +16,7 @@ fn build(swarm_lines: &str, ground_below_m: f64) -> Lockstep {
         "ground_below_m = 100.0",
         &format!("ground_below_m = {ground_below_m}"),
     );
-    let config = Config::from_toml(&text).unwrap();
-    let (world, vehicles) = config.emulator().unwrap();
-    let vehicles = vehicles
-        .into_iter()
-        .map(|v| Vehicle::new(v, world).unwrap())
-        .collect();
-    Lockstep::new(
-        Swarm::new(config.validate().unwrap()),
-        vehicles,
-        LinkConditions::default(),
-    )
+    Lockstep::from_config(&Config::from_toml(&text).unwrap()).unwrap()
 }
 
 fn secs(s: f64) -> SimTime {
