@@ -83,6 +83,11 @@ fn default_tolerance() -> f64 {
     0.05
 }
 
+/// The coordinator's default system id: not QGroundControl's 255, not MAVSDK's 245.
+pub const DEFAULT_GCS_SYSTEM_ID: u8 = 253;
+/// The coordinator's default component id (MAV_COMP_ID_MISSIONPLANNER).
+pub const DEFAULT_GCS_COMPONENT_ID: u8 = 190;
+
 /// `[swarm]`.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -97,6 +102,12 @@ pub struct SwarmSection {
     pub end: EndAction,
     /// When a vehicle is lost during consensus: `hold` (default) or `land`.
     pub on_link_loss: LossPolicy,
+    /// The coordinator's own MAVLink system id, in its 1 Hz ground-station heartbeat and
+    /// every frame it sends (default 253: neither QGroundControl's 255 nor MAVSDK's 245,
+    /// so either can watch the same vehicles).
+    pub gcs_system_id: u8,
+    /// The coordinator's own MAVLink component id (default 190, MAV_COMP_ID_MISSIONPLANNER).
+    pub gcs_component_id: u8,
 }
 
 impl Default for SwarmSection {
@@ -107,6 +118,8 @@ impl Default for SwarmSection {
             link_timeout_ms: 1500,
             end: EndAction::Land,
             on_link_loss: LossPolicy::Hold,
+            gcs_system_id: DEFAULT_GCS_SYSTEM_ID,
+            gcs_component_id: DEFAULT_GCS_COMPONENT_ID,
         }
     }
 }
@@ -358,6 +371,9 @@ impl Config {
                 s.control_rate_hz
             ));
         }
+        if s.gcs_system_id == 0 {
+            problems.push("swarm.gcs_system_id must be 1..=255, got 0".to_owned());
+        }
         if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
             problems.push(format!(
                 "swarm.duration_s must be positive, got {}",
@@ -423,6 +439,12 @@ impl Config {
                 ));
             }
             ids.push(v.system_id);
+            if v.system_id == s.gcs_system_id {
+                problems.push(format!(
+                    "vehicle[{i}].system_id {} is the coordinator's own swarm.gcs_system_id",
+                    v.system_id
+                ));
+            }
             match VehicleModel::from_hover_throttle(v.mass_kg, v.hover_throttle) {
                 Ok(m) => {
                     if let Some(env) = &envelope
@@ -478,6 +500,7 @@ impl Config {
                     setpoint_interval: interval,
                     telemetry_interval: interval,
                     link_timeout: Duration::from_millis(s.link_timeout_ms),
+                    own_ids: (s.gcs_system_id, s.gcs_component_id),
                     ..LinkConfig::new(v.system_id)
                 })
                 .collect(),

@@ -75,6 +75,14 @@ impl Harness {
         }
     }
 
+    /// What was sent to the vehicle apart from our ground-station heartbeats.
+    fn commands_sent(&self) -> Vec<&MavMessage> {
+        self.sent_to_vehicle
+            .iter()
+            .filter(|m| !matches!(m, MavMessage::HEARTBEAT(_)))
+            .collect()
+    }
+
     fn flying_at(&self) -> Option<SimTime> {
         self.events
             .iter()
@@ -167,9 +175,13 @@ fn a_refused_offboard_switch_is_retried_until_accepted() {
             thrust_n: 0.0,
         },
     );
-    h.run(Duration::from_secs(3), &mut deliver_all);
-    // The stream is only 0.3 s old at the first DO_SET_MODE: TEMPORARILY_REJECTED, then
-    // resent every 0.5 s until the emulator has seen 1 s of stream.
+    // No setpoint reaches the vehicle before 1 s: the DO_SET_MODE at 0.3 s and its resend
+    // at 0.8 s find no offboard signal (TEMPORARILY_REJECTED); the one at 1.3 s does.
+    let mut filter = |to_vehicle: bool, msg: &MavMessage| {
+        !(to_vehicle && matches!(msg, MavMessage::SET_ATTITUDE_TARGET(_)))
+    };
+    h.run(Duration::from_secs(1), &mut filter);
+    h.run(Duration::from_secs(2), &mut deliver_all);
     assert_eq!(h.link.phase(), Phase::Flying);
     let retries = h
         .events
@@ -204,7 +216,7 @@ fn a_vehicle_with_another_system_id_is_never_commanded() {
     let mut h = Harness::new(1, 2);
     h.run(Duration::from_secs(3), &mut deliver_all);
     assert_eq!(h.link.phase(), Phase::Discovering);
-    assert!(h.sent_to_vehicle.is_empty(), "{:?}", h.sent_to_vehicle);
+    assert!(h.commands_sent().is_empty(), "{:?}", h.commands_sent());
     assert!(
         h.events
             .iter()
@@ -321,7 +333,7 @@ fn land_is_resent_when_lost_then_the_vehicle_is_disarmed_on_the_ground() {
     );
     // Once the vehicle took NAV_LAND no more setpoints are sent.
     assert!(!matches!(
-        h.sent_to_vehicle.last(),
+        h.commands_sent().last(),
         Some(MavMessage::SET_ATTITUDE_TARGET(_))
     ));
 }
@@ -333,9 +345,13 @@ fn a_vehicle_never_armed_is_done_at_once_when_told_to_land() {
     assert!(matches!(h.link.phase(), Phase::Streaming(_)));
     h.link.land(h.now);
     assert_eq!(h.link.phase(), Phase::Done);
-    let before = h.sent_to_vehicle.len();
+    let before = h.commands_sent().len();
     h.run(Duration::from_secs(2), &mut deliver_all);
-    assert_eq!(h.sent_to_vehicle.len(), before, "nothing sent after done");
+    assert_eq!(
+        h.commands_sent().len(),
+        before,
+        "nothing but heartbeats after done"
+    );
     assert!(!h.vehicle.status().armed);
 }
 
@@ -346,7 +362,7 @@ fn a_vehicle_that_never_answers_is_reported_once_and_never_commanded() {
     let mut h = Harness::new(1, 2);
     h.run(Duration::from_secs(25), &mut deliver_all);
     assert_eq!(h.link.phase(), Phase::Discovering);
-    assert!(h.sent_to_vehicle.is_empty());
+    assert!(h.commands_sent().is_empty());
     let not_heard: Vec<SimTime> = h
         .events
         .iter()
@@ -400,13 +416,75 @@ fn a_vehicle_taken_out_of_offboard_by_someone_else_is_never_commanded_again() {
     // Heartbeats are 1 Hz: the second one outside OFFBOARD comes 1-2 s after the switch.
     let after = (at - switched).as_secs_f64();
     assert!((1.0..=2.1).contains(&after), "{after} s");
-    // Nothing is sent to the vehicle after that.
-    let before = h.sent_to_vehicle.len();
+    // Nothing but heartbeats is sent to the vehicle after that.
+    let before = h.commands_sent().len();
     h.run(Duration::from_secs(2), &mut deliver_all);
-    assert_eq!(h.sent_to_vehicle.len(), before);
+    assert_eq!(h.commands_sent().len(), before);
     assert_eq!(h.vehicle.status().mode, FlightMode::Position);
     // Told to land, the link leaves it to whoever flies it.
     h.link.land(h.now);
     h.run(Duration::from_secs(1), &mut deliver_all);
-    assert_eq!(h.sent_to_vehicle.len(), before);
+    assert_eq!(h.commands_sent().len(), before);
+}
+
+#[test]
+fn the_link_sends_a_ground_station_heartbeat_every_second_from_its_own_ids() {
+    let mut h = Harness::new(1, 1);
+    h.run(Duration::from_millis(9500), &mut deliver_all);
+    let beats: Vec<_> = h
+        .sent_to_vehicle
+        .iter()
+        .filter_map(|m| match m {
+            MavMessage::HEARTBEAT(hb) => Some(hb.clone()),
+            _ => None,
+        })
+        .collect();
+    // At the first step (1 ms), then 1, 2, …, 9 s: ten in 9.5 s; type GCS (6), autopilot
+    // INVALID (8).
+    assert_eq!(beats.len(), 10);
+    assert!(
+        beats
+            .iter()
+            .all(|hb| hb.mavtype as u8 == 6 && hb.autopilot as u8 == 8)
+    );
+}
+
+#[test]
+fn a_vehicle_whose_autopilot_is_not_px4_is_refused_at_discovery() {
+    use mavlink::dialects::common::{HEARTBEAT_DATA, MavAutopilot, MavModeFlag, MavState, MavType};
+    let mut link = VehicleLink::new(
+        LinkConfig::new(1),
+        AttitudeThrust {
+            attitude_ned_frd: UnitQuaternion::identity(),
+            thrust_norm: 0.5,
+            thrust_n: 0.0,
+        },
+    );
+    let ardupilot =
+        ringswarm::link::Encoder::new(1, 1).encode(&MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: 4,
+            mavtype: MavType::MAV_TYPE_QUADROTOR,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            system_status: MavState::MAV_STATE_STANDBY,
+            mavlink_version: 3,
+        }));
+    link.handle_datagram(SimTime::from_millis(5), &ardupilot);
+    assert_eq!(link.phase(), Phase::Failed);
+    let reason = std::iter::from_fn(|| link.poll_event()).find_map(|e| match e {
+        LinkEvent::Failed(r) => Some(r),
+        _ => None,
+    });
+    assert_eq!(
+        reason.as_deref(),
+        Some(
+            "vehicle 1: autopilot is ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA), not PX4: refused (ringswarm speaks PX4's modes only)"
+        )
+    );
+    // Nothing but heartbeats is ever sent to it.
+    link.handle_timeout(SimTime::from_millis(3000));
+    while let Some(bytes) = link.poll_transmit() {
+        let msg = decode_datagram(&bytes).remove(0).unwrap().msg;
+        assert!(matches!(msg, MavMessage::HEARTBEAT(_)), "{msg:?}");
+    }
 }

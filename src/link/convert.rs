@@ -3,7 +3,8 @@
 //! `None`.
 
 use mavlink::dialects::common::{
-    AttitudeTargetTypemask, MavMessage, MavModeFlag, SET_ATTITUDE_TARGET_DATA,
+    AttitudeTargetTypemask, HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState,
+    MavType, SET_ATTITUDE_TARGET_DATA,
 };
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
@@ -31,6 +32,33 @@ pub fn set_attitude_target(
             | AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE,
         thrust_body: [0.0; 3],
     })
+}
+
+/// The ground station's HEARTBEAT: type GCS, autopilot INVALID, no mode, state ACTIVE
+/// (what QGroundControl and MAVSDK send at 1 Hz; PX4 watches it for data-link loss).
+pub fn gcs_heartbeat() -> MavMessage {
+    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        custom_mode: 0,
+        mavtype: MavType::MAV_TYPE_GCS,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+        base_mode: MavModeFlag::empty(),
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+    })
+}
+
+/// MAV_AUTOPILOT_PX4: the only autopilot whose mode numbers the coordinator speaks.
+pub const AUTOPILOT_PX4: u8 = 12;
+
+/// A readable name for a heartbeat's `autopilot` field.
+pub fn autopilot_name(autopilot: u8) -> String {
+    match autopilot {
+        0 => "generic (MAV_AUTOPILOT_GENERIC)".to_owned(),
+        3 => "ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA)".to_owned(),
+        8 => "none (MAV_AUTOPILOT_INVALID: a ground station or companion)".to_owned(),
+        12 => "PX4 (MAV_AUTOPILOT_PX4)".to_owned(),
+        other => format!("MAV_AUTOPILOT {other}"),
+    }
 }
 
 /// What an inbound message tells the coordinator about a vehicle.
@@ -145,6 +173,18 @@ mod tests {
         assert_eq!(&bytes[10..10 + payload.len()], payload.as_slice());
         let crc = mavlink::calculate_crc(&bytes[1..10 + payload.len()], 49);
         assert_eq!(&bytes[10 + payload.len()..], &crc.to_le_bytes());
+    }
+
+    #[test]
+    fn gcs_heartbeat_golden_bytes() {
+        let bytes = Encoder::new(253, 190).encode(&gcs_heartbeat());
+        // custom_mode u32 0, type 6 (GCS), autopilot 8 (INVALID), base_mode 0,
+        // system_status 4 (ACTIVE), mavlink_version 3; no zero trimming past the last 3.
+        let payload = [0u8, 0, 0, 0, 6, 8, 0, 4, 3];
+        assert_eq!(&bytes[..10], &[0xFD, 9, 0, 0, 0, 253, 190, 0, 0, 0]);
+        assert_eq!(&bytes[10..19], &payload);
+        let crc = mavlink::calculate_crc(&bytes[1..19], 50);
+        assert_eq!(&bytes[19..], &crc.to_le_bytes());
     }
 
     #[test]

@@ -4,5 +4,7 @@
 
 mod convert;
 
-pub use convert::{Inbound, inbound, set_attitude_target};
+pub use convert::{
+    AUTOPILOT_PX4, Inbound, autopilot_name, gcs_heartbeat, inbound, set_attitude_target,
+};
 pub use ringswarm_sitl::codec::{Encoder, Frame, FrameError, decode_datagram, raw_frames};

@@ -18,6 +18,12 @@
 //!  disarmed) ──► Done. A vehicle lost while landing is sent NAV_LAND again when heard.
 //! ```
 //!
+//! From its first timeout on, in every phase, the link sends a ground-station HEARTBEAT
+//! (type GCS, autopilot INVALID) every `heartbeat_interval` from its own ids, as
+//! QGroundControl and MAVSDK do; PX4 watches it for its data-link-loss failsafe. A first
+//! heartbeat whose `autopilot` is not PX4 fails the link at discovery, with a message
+//! naming the vehicle and its autopilot: PX4's mode numbers mean something else elsewhere.
+//!
 //! Drive it with [`VehicleLink::handle_datagram`] for every datagram from the vehicle's
 //! address, [`VehicleLink::handle_timeout`] at [`VehicleLink::poll_timeout`], and send what
 //! [`VehicleLink::poll_transmit`] returns. It never reads a clock or touches a socket.
@@ -33,7 +39,10 @@ use ringswarm_sitl::time::SimTime;
 
 use crate::control::AttitudeThrust;
 use crate::frame::Geodetic;
-use crate::link::{Encoder, Inbound, decode_datagram, inbound, set_attitude_target};
+use crate::link::{
+    AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, decode_datagram, gcs_heartbeat, inbound,
+    set_attitude_target,
+};
 
 /// PX4's OFFBOARD main mode.
 const PX4_MAIN_OFFBOARD: u32 = 6;
@@ -54,6 +63,8 @@ pub struct LinkConfig {
     pub system_id: u8,
     /// Our own system and component ids.
     pub own_ids: (u8, u8),
+    /// Period of our ground-station heartbeat.
+    pub heartbeat_interval: Duration,
     /// Period of the setpoint stream.
     pub setpoint_interval: Duration,
     /// Period asked for LOCAL_POSITION_NED and ATTITUDE_QUATERNION.
@@ -71,12 +82,14 @@ pub struct LinkConfig {
 }
 
 impl LinkConfig {
-    /// Defaults for `system_id`: 50 Hz setpoints and telemetry, 1.2 s pre-stream, 0.5 s ack
-    /// timeout and 4 attempts (MAVSDK's), 1.5 s link timeout.
+    /// Defaults for `system_id`: our ids 253/190, a 1 Hz heartbeat, 50 Hz setpoints and
+    /// telemetry, 1.2 s pre-stream, 0.5 s ack timeout and 4 attempts (MAVSDK's), 1.5 s link
+    /// timeout.
     pub fn new(system_id: u8) -> Self {
         Self {
             system_id,
-            own_ids: (255, 190),
+            own_ids: (253, 190),
+            heartbeat_interval: Duration::from_secs(1),
             setpoint_interval: Duration::from_millis(20),
             telemetry_interval: Duration::from_millis(20),
             pre_stream: Duration::from_millis(1200),
@@ -216,6 +229,7 @@ pub struct VehicleLink {
     state: VehicleState,
     setpoint: AttitudeThrust,
     next_setpoint: SimTime,
+    next_heartbeat: SimTime,
     pending: Option<Pending>,
     encoder: Encoder,
     outbox: VecDeque<Vec<u8>>,
@@ -238,6 +252,7 @@ impl VehicleLink {
             state: VehicleState::default(),
             setpoint: idle,
             next_setpoint: SimTime::ZERO,
+            next_heartbeat: SimTime::ZERO,
             pending: None,
             encoder,
             outbox: VecDeque::new(),
@@ -301,7 +316,8 @@ impl VehicleLink {
         let mut next = self
             .state
             .last_heard
-            .map_or(SimTime::from_millis(100), |t| t + self.cfg.link_timeout);
+            .map_or(SimTime::from_millis(100), |t| t + self.cfg.link_timeout)
+            .min(self.next_heartbeat);
         if self.streams() {
             next = next.min(self.next_setpoint);
         }
@@ -411,8 +427,14 @@ impl VehicleLink {
     fn apply(&mut self, now: SimTime, update: Inbound) {
         match update {
             Inbound::Heartbeat {
-                armed, custom_mode, ..
+                armed,
+                custom_mode,
+                autopilot,
             } => {
+                if self.phase == Phase::Discovering && autopilot != AUTOPILOT_PX4 {
+                    self.refuse_autopilot(autopilot);
+                    return;
+                }
                 self.state.last_heartbeat = Some(now);
                 self.state.custom_mode = custom_mode;
                 if armed && !self.state.armed {
@@ -471,6 +493,20 @@ impl VehicleLink {
             }
             Inbound::Ack { command, result } => self.on_ack(now, command, result),
         }
+    }
+
+    /// A vehicle whose autopilot is not PX4 is never commanded: PX4's mode numbers and
+    /// offboard rules would mean something else to it.
+    fn refuse_autopilot(&mut self, autopilot: u8) {
+        let reason = format!(
+            "vehicle {}: autopilot is {}, not PX4: refused (ringswarm speaks PX4's modes only)",
+            self.cfg.system_id,
+            autopilot_name(autopilot)
+        );
+        tracing::error!(sysid = self.cfg.system_id, autopilot, "autopilot not PX4");
+        self.phase = Phase::Failed;
+        self.pending = None;
+        self.events.push_back(LinkEvent::Failed(reason));
     }
 
     fn start_streaming(&mut self, now: SimTime) {
@@ -601,6 +637,15 @@ impl VehicleLink {
     /// Runs the timers due at `now`: the setpoint stream, the pre-stream, command
     /// deadlines and link loss.
     pub fn handle_timeout(&mut self, now: SimTime) {
+        if now >= self.next_heartbeat {
+            self.outbox.push_back(self.encoder.encode(&gcs_heartbeat()));
+            let next = self.next_heartbeat + self.cfg.heartbeat_interval;
+            self.next_heartbeat = if next <= now {
+                now + self.cfg.heartbeat_interval
+            } else {
+                next
+            };
+        }
         if self.phase == Phase::Discovering
             && !self.never_heard_reported
             && now >= SimTime::ZERO + self.cfg.discovery_warning
