@@ -1,8 +1,10 @@
 //! The tokio UDP driver: one task per vehicle, one socket per link, PX4's port scheme.
 //!
 //! Vehicle `i` (0-based, system id `i+1`) binds its offboard link on `14580+i` and sends to
-//! `14540+i`, and binds its GCS link on `18570+i` and sends to `14550`. Like PX4, it replies
-//! to whoever last sent to it on that link. Faults are injected per link, in both
+//! `14540+i`, and binds its GCS link on `18570+i` and sends to `14550`. Which peer a link
+//! answers follows PX4's `mavlink_receiver.cpp` ([`Partner`]): the default address until
+//! the first datagram arrives, then that datagram's sender for good (until a restart);
+//! datagrams from anyone are still read. Faults are injected per link, in both
 //! directions, from a seeded RNG: loss, latency with jitter, duplication.
 //!
 //! Time: the task keeps a simulated clock running at `speed` times real time and calls the
@@ -42,6 +44,39 @@ pub fn px4_ports(instance: u16, host: IpAddr) -> PortPlan {
         offboard_peer: SocketAddr::new(host, 14540 + instance),
         gcs_bind: SocketAddr::new(host, 18570 + instance),
         gcs_peer: SocketAddr::new(host, 14550),
+    }
+}
+
+/// Whom a PX4 UDP link sends to. PX4 starts with `127.0.0.1:<remote port>` and, on the
+/// first datagram it receives (before it is even parsed), latches that datagram's
+/// source address and port as its partner; it never changes it again. Later datagrams
+/// from other senders are handled, but answers and telemetry still go to the partner.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Partner {
+    addr: SocketAddr,
+    latched: bool,
+}
+
+impl Partner {
+    /// Not latched, sending to `default`.
+    pub fn new(default: SocketAddr) -> Self {
+        Self {
+            addr: default,
+            latched: false,
+        }
+    }
+
+    /// A datagram arrived from `from`.
+    pub fn on_datagram(&mut self, from: SocketAddr) {
+        if !self.latched {
+            self.addr = from;
+            self.latched = true;
+        }
+    }
+
+    /// Where to send.
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
     }
 }
 
@@ -154,7 +189,7 @@ pub async fn run_vehicle(
         mut control,
     } = task;
     let mut alive = true;
-    let mut peers = default_peers;
+    let mut partners = default_peers.map(Partner::new);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut delayed: VecDeque<Delayed> = VecDeque::new();
     let mut tick = tokio::time::interval(Duration::from_millis(1));
@@ -178,6 +213,7 @@ pub async fn run_vehicle(
                     }
                     VehicleControl::Restart => {
                         alive = true;
+                        partners = default_peers.map(Partner::new);
                         vehicle.reboot(clock.now());
                         tracing::info!(sysid, "vehicle restarted");
                     }
@@ -186,19 +222,20 @@ pub async fn run_vehicle(
             received = sockets[0].recv_from(buf0) => {
                 let (n, from) = received?;
                 if alive {
-                    peers[0] = from;
+                    partners[0].on_datagram(from);
                     inbound(&mut vehicle, &clock, 0, &buf0[..n], &faults[0], &mut rng, &mut delayed);
                 }
             }
             received = sockets[1].recv_from(buf1) => {
                 let (n, from) = received?;
                 if alive {
-                    peers[1] = from;
+                    partners[1].on_datagram(from);
                     inbound(&mut vehicle, &clock, 1, &buf1[..n], &faults[1], &mut rng, &mut delayed);
                 }
             }
             _ = tick.tick(), if alive => {
                 let now = clock.now();
+                let peers = partners.map(|p| p.addr());
                 vehicle.handle_timeout(now);
                 deliver_delayed(&mut vehicle, now, &mut delayed, &sockets, &peers).await;
                 if now - last_status >= Duration::from_millis(100) {
@@ -212,7 +249,7 @@ pub async fn run_vehicle(
             let link = tx.link as usize;
             for copy in fault_copies(&faults[link], &mut rng) {
                 if copy.is_zero() {
-                    send(&sockets[link], &tx.bytes, peers[link], sysid).await;
+                    send(&sockets[link], &tx.bytes, partners[link].addr(), sysid).await;
                 } else {
                     delayed.push_back(Delayed {
                         due: now + copy,
@@ -332,4 +369,22 @@ pub async fn bind(plan: &PortPlan) -> io::Result<[UdpSocket; 2]> {
         bind_one(plan.offboard_bind).await?,
         bind_one(plan.gcs_bind).await?,
     ])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_first_sender_becomes_the_partner_for_good() {
+        let default: SocketAddr = "127.0.0.1:14540".parse().expect("an address");
+        let mavsdk: SocketAddr = "127.0.0.1:14540".parse().expect("an address");
+        let other: SocketAddr = "127.0.0.1:40001".parse().expect("an address");
+        let mut p = Partner::new(default);
+        assert_eq!(p.addr(), default);
+        p.on_datagram(other);
+        assert_eq!(p.addr(), other, "latched on the first datagram");
+        p.on_datagram(mavsdk);
+        assert_eq!(p.addr(), other, "never changed again");
+    }
 }
