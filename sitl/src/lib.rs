@@ -6,8 +6,10 @@
 //!
 //! ## Layout
 //! - [`physics`]: pure, fixed-step rigid-body quadrotor (RK4), motors, drag, wind, ground.
-//! - [`control`]: PX4-like attitude P → rate PID → mixer, and the position/velocity
-//!   controller used by Hold, Land and the pilot.
+//! - [`control`]: PX4-like attitude P → rate PID → mixer.
+//! - [`position_control`]: PX4's multicopter position controller (position P → velocity
+//!   PID → thrust vector → attitude), which flies every mode but raw offboard attitude.
+//! - [`trajectory`]: the limited-speed, limited-acceleration reference of auto modes.
 //! - [`profile`]: vehicle profiles (`ideal`, `x500`) with documented numbers.
 //! - [`codec`]: MAVLink framing of datagrams with the `mavlink` crate as payload codec.
 //! - [`autopilot`]: the sans-IO vehicle machine with PX4's wire behaviour.
@@ -25,7 +27,9 @@ pub mod config_file;
 pub mod control;
 pub mod params;
 pub mod physics;
+pub mod position_control;
 pub mod profile;
 pub mod time;
+pub mod trajectory;
 pub mod udp;
 pub mod world;

@@ -1,31 +1,61 @@
 //! Commands (COMMAND_LONG, COMMAND_INT, SET_MODE): every one is answered with a
 //! COMMAND_ACK on the link it came from, UNSUPPORTED for commands the emulator does not
-//! implement. Unused parameters (NaN on the wire) arrive as `None`.
+//! implement. Unused parameters (NaN on the wire, INT32_MAX for COMMAND_INT's x and y)
+//! arrive as `None`; COMMAND_INT's x and y in a global frame arrive in degrees.
+//!
+//! Mode changes follow PX4's commander: while disarmed any mode the emulator flies is
+//! accepted (arming then needs a mode that can run); while armed, OFFBOARD needs the
+//! offboard signal and AUTO.MISSION a mission, else TEMPORARILY_REJECTED.
 
 use std::time::Duration;
 
 use mavlink::dialects::common::{COMMAND_ACK_DATA, MavCmd, MavMessage, MavResult};
+use nalgebra::Vector3;
 
+use super::flight::Nav;
 use super::mode::FlightMode;
 use super::{LinkId, Vehicle};
 use crate::time::SimTime;
+use crate::trajectory::Approach;
 
 /// PX4's magic number in param2 of ARM_DISARM that forces the action.
-const FORCE_MAGIC: f32 = 21196.0;
+const FORCE_MAGIC: f64 = 21196.0;
+/// MAV_DO_REPOSITION_FLAGS_CHANGE_MODE.
+const REPOSITION_CHANGE_MODE: u32 = 1;
 
 /// A command with its seven parameters (`None` = unused).
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Command {
     pub id: MavCmd,
-    pub params: [Option<f32>; 7],
+    pub params: [Option<f64>; 7],
 }
 
 impl Command {
-    /// A command from its wire parameters; NaN marks an unused parameter.
+    /// A COMMAND_LONG's parameters; NaN marks an unused parameter.
     pub fn from_wire(id: MavCmd, params: [f32; 7]) -> Self {
         Self {
             id,
-            params: params.map(|x| if x.is_nan() { None } else { Some(x) }),
+            params: params.map(|x| (!x.is_nan()).then_some(f64::from(x))),
+        }
+    }
+
+    /// A COMMAND_INT's parameters: x and y are degrees·10⁷ in global frames (INT32_MAX
+    /// is unused), plain numbers otherwise.
+    pub fn from_int(id: MavCmd, params: [f32; 4], x: i32, y: i32, z: f32, global: bool) -> Self {
+        let scale = if global { 1e-7 } else { 1.0 };
+        let xy = |v: i32| (v != i32::MAX).then_some(f64::from(v) * scale);
+        let p = params.map(|x| (!x.is_nan()).then_some(f64::from(x)));
+        Self {
+            id,
+            params: [
+                p[0],
+                p[1],
+                p[2],
+                p[3],
+                xy(x),
+                xy(y),
+                (!z.is_nan()).then_some(f64::from(z)),
+            ],
         }
     }
 }
@@ -47,6 +77,15 @@ impl Vehicle {
                 MavResult::MAV_RESULT_ACCEPTED
             }
             MavCmd::MAV_CMD_NAV_TAKEOFF => self.cmd_takeoff(&cmd),
+            MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH => {
+                self.failsafe = false;
+                self.enter_mode(FlightMode::Return);
+                MavResult::MAV_RESULT_ACCEPTED
+            }
+            MavCmd::MAV_CMD_DO_REPOSITION => self.cmd_reposition(&cmd),
+            MavCmd::MAV_CMD_DO_CHANGE_SPEED => self.cmd_change_speed(&cmd),
+            MavCmd::MAV_CMD_MISSION_START => self.cmd_mission_start(now, &cmd),
+            MavCmd::MAV_CMD_DO_SET_MISSION_CURRENT => self.cmd_set_mission_current(&cmd),
             MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL => self.cmd_message_interval(now, link, &cmd),
             MavCmd::MAV_CMD_REQUEST_MESSAGE => self.cmd_request_message(now, link, &cmd),
             // Superseded by REQUEST_MESSAGE, still sent by older clients.
@@ -76,6 +115,9 @@ impl Vehicle {
         let force = cmd.params[1] == Some(FORCE_MAGIC);
         match cmd.params[0] {
             Some(1.0) => {
+                if !self.armed && !force && !self.arming_allowed(now) {
+                    return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
+                }
                 self.arm(now);
                 MavResult::MAV_RESULT_ACCEPTED
             }
@@ -93,6 +135,27 @@ impl Vehicle {
         }
     }
 
+    /// PX4's arming checks that the emulator can fail: the mode must be able to run, and
+    /// with NAV_DLL_ACT set a ground station must be connected.
+    fn arming_allowed(&self, now: SimTime) -> bool {
+        if !self.can_run(now, self.mode) {
+            tracing::info!(
+                sysid = self.cfg.system_id,
+                mode = self.mode.name(),
+                "arming denied: mode cannot run"
+            );
+            return false;
+        }
+        if self.params.value("NAV_DLL_ACT") > 0.0 && !self.gcs_connected(now) {
+            tracing::info!(
+                sysid = self.cfg.system_id,
+                "arming denied: no connection to the ground station"
+            );
+            return false;
+        }
+        true
+    }
+
     fn cmd_set_mode(&mut self, now: SimTime, cmd: &Command) -> MavResult {
         let (Some(main), sub) = (cmd.params[1], cmd.params[2].unwrap_or(0.0)) else {
             return MavResult::MAV_RESULT_DENIED;
@@ -100,36 +163,127 @@ impl Vehicle {
         let Some(mode) = FlightMode::from_px4(main as u32, sub as u32) else {
             return MavResult::MAV_RESULT_UNSUPPORTED;
         };
-        if mode == FlightMode::Offboard && !self.stream_is_live(now) {
+        if self.armed && !self.can_run(now, mode) {
             return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
-        }
-        if mode == FlightMode::Takeoff && !self.armed {
-            return MavResult::MAV_RESULT_DENIED;
         }
         self.failsafe = false;
         self.enter_mode(mode);
         MavResult::MAV_RESULT_ACCEPTED
     }
 
+    /// NAV_TAKEOFF: param7 is the target altitude AMSL (NaN: the current altitude plus
+    /// MIS_TAKEOFF_ALT), never below the current altitude.
     fn cmd_takeoff(&mut self, cmd: &Command) -> MavResult {
-        if !self.armed {
-            return MavResult::MAV_RESULT_DENIED;
-        }
-        if let Some(alt) = cmd.params[6].filter(|a| *a > 0.0 && a.is_finite()) {
-            // param7 is an AMSL altitude; store it as a height above the home ground.
-            let home_amsl = self.world.reference.alt_amsl_m - self.world.ground_down_m;
-            let height = (f64::from(alt) - home_amsl).max(0.5);
-            // Out of MIS_TAKEOFF_ALT's range: keep the parameter's value, as PX4 clamps.
-            if self.params.set("MIS_TAKEOFF_ALT", height as f32).is_err() {
-                tracing::debug!(
-                    sysid = self.cfg.system_id,
-                    height,
-                    "takeoff altitude out of range"
-                );
-            }
-        }
         self.failsafe = false;
         self.enter_mode(FlightMode::Takeoff);
+        if let Some(alt_amsl) = cmd.params[6].filter(|a| a.is_finite()) {
+            let frame = self.global_frame();
+            let here = self.state.pos_ned_m;
+            let target_z = (frame.home_alt_amsl_m - alt_amsl + self.env.ground_z_ned_m).min(here.z);
+            if let Nav::Takeoff { approach, .. } = &mut self.nav {
+                approach.retarget(Vector3::new(here.x, here.y, target_z));
+            }
+        }
+        MavResult::MAV_RESULT_ACCEPTED
+    }
+
+    /// DO_REPOSITION as PX4 takes it: with the change-mode flag (param2 bit 0) it switches
+    /// to Hold, without it it is only accepted in Hold; an armed vehicle in the air then
+    /// flies to latitude/longitude (param5/6, NaN: here) at altitude param7 (AMSL, NaN:
+    /// here) at param1 m/s (≤ 0 or NaN: MPC_XY_CRUISE), facing param4 (radians, as PX4
+    /// reads it; NaN: the current heading).
+    fn cmd_reposition(&mut self, cmd: &Command) -> MavResult {
+        let flags = cmd.params[1].map_or(0, |f| f as u32);
+        if flags & REPOSITION_CHANGE_MODE == 0 && self.mode != FlightMode::Hold {
+            return MavResult::MAV_RESULT_DENIED;
+        }
+        let (lat, lon, alt) = (cmd.params[4], cmd.params[5], cmd.params[6]);
+        if lat.is_some_and(|v| v.abs() > 90.0) || lon.is_some_and(|v| v.abs() > 180.0) {
+            return MavResult::MAV_RESULT_DENIED;
+        }
+        if self.mode != FlightMode::Hold {
+            self.failsafe = false;
+            self.enter_mode(FlightMode::Hold);
+        }
+        if !self.armed || self.landed {
+            return MavResult::MAV_RESULT_ACCEPTED;
+        }
+        let frame = self.global_frame();
+        let here = self.state.pos_ned_m;
+        let here_geo = self
+            .world
+            .to_geodetic(&(self.cfg.start.pos_world_ned_m + here));
+        let target = frame.to_local(
+            lat.unwrap_or(here_geo.lat_deg),
+            lon.unwrap_or(here_geo.lon_deg),
+            alt.unwrap_or(here_geo.alt_amsl_m),
+        );
+        let speed = cmd.params[0]
+            .filter(|s| *s > 0.0)
+            .unwrap_or(self.tuning.auto.speed_xy_mps);
+        let yaw = cmd.params[3].unwrap_or_else(|| self.yaw_rad());
+        let approach = match &self.nav {
+            Nav::Hold { approach, .. } => {
+                let mut a = *approach;
+                a.retarget(target);
+                a
+            }
+            _ => Approach::new(here, self.state.vel_ned_mps, target),
+        };
+        self.nav = Nav::Hold {
+            approach,
+            limits: self.tuning.auto_at(speed),
+            yaw_rad: yaw,
+        };
+        MavResult::MAV_RESULT_ACCEPTED
+    }
+
+    /// DO_CHANGE_SPEED: param2 m/s (≤ 0: back to MPC_XY_CRUISE) for the leg being flown.
+    fn cmd_change_speed(&mut self, cmd: &Command) -> MavResult {
+        let speed = cmd.params[1]
+            .filter(|s| *s > 0.0)
+            .unwrap_or(self.tuning.auto.speed_xy_mps);
+        if let Nav::Hold { limits, .. } = &mut self.nav {
+            *limits = self.tuning.auto_at(speed);
+        }
+        MavResult::MAV_RESULT_ACCEPTED
+    }
+
+    /// MISSION_START: AUTO.MISSION from item param1 (−1: the current one), and arms.
+    fn cmd_mission_start(&mut self, now: SimTime, cmd: &Command) -> MavResult {
+        let n = self.mission.items().len() as f64;
+        let first = cmd.params[0];
+        if !self.mission.is_valid() || first.is_none_or(|f| !(-1.0..n).contains(&f)) {
+            return MavResult::MAV_RESULT_DENIED;
+        }
+        if let Some(f) = first.filter(|f| *f >= 0.0) {
+            self.mission.set_current(f as usize);
+        }
+        self.failsafe = false;
+        self.enter_mode(FlightMode::Mission);
+        if !self.armed {
+            if !self.arming_allowed(now) {
+                return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
+            }
+            self.arm(now);
+        }
+        MavResult::MAV_RESULT_ACCEPTED
+    }
+
+    /// DO_SET_MISSION_CURRENT: param1 the item (−1: keep), param2 0 or 1.
+    fn cmd_set_mission_current(&mut self, cmd: &Command) -> MavResult {
+        let (Some(seq), reset) = (cmd.params[0], cmd.params[1].unwrap_or(0.0)) else {
+            return MavResult::MAV_RESULT_DENIED;
+        };
+        if seq < -1.0 || !(reset == 0.0 || reset == 1.0) {
+            return MavResult::MAV_RESULT_DENIED;
+        }
+        if !self.mission.is_valid() || seq >= self.mission.items().len() as f64 {
+            return MavResult::MAV_RESULT_FAILED;
+        }
+        if seq >= 0.0 {
+            self.jump_to_item(seq as usize);
+        }
         MavResult::MAV_RESULT_ACCEPTED
     }
 

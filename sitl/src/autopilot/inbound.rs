@@ -7,20 +7,17 @@
 #![allow(deprecated)]
 
 use mavlink::dialects::common::{
-    AttitudeTargetTypemask, COMMAND_INT_DATA, COMMAND_LONG_DATA, MavMessage,
-    PARAM_REQUEST_READ_DATA, PARAM_SET_DATA, SET_ATTITUDE_TARGET_DATA, SET_MODE_DATA,
-    TIMESYNC_DATA,
+    COMMAND_INT_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, MISSION_ITEM_DATA, MISSION_ITEM_INT_DATA,
+    MavFrame, MavMessage, MavType, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA,
+    SET_ATTITUDE_TARGET_DATA, SET_MODE_DATA, SET_POSITION_TARGET_GLOBAL_INT_DATA,
+    SET_POSITION_TARGET_LOCAL_NED_DATA, TIMESYNC_DATA,
 };
-use nalgebra::{Quaternion, UnitQuaternion};
 
 use super::commands::Command;
+use super::offboard::{self, AttitudeTarget, OffboardTarget, PositionTarget, Refusal};
 use super::{LinkId, Vehicle};
 use crate::codec::decode_datagram;
-use crate::control::AttitudeSetpoint;
 use crate::time::SimTime;
-
-/// How far a setpoint quaternion's norm may be from 1.
-const UNIT_QUATERNION_TOLERANCE: f64 = 1e-3;
 
 impl Vehicle {
     /// Handles one datagram received on `link` at `now`. Bad frames are counted and
@@ -50,8 +47,53 @@ impl Vehicle {
 
     fn handle_message(&mut self, now: SimTime, link: LinkId, sender: (u8, u8), msg: MavMessage) {
         let heard = match msg {
-            MavMessage::HEARTBEAT(_) => true,
+            MavMessage::HEARTBEAT(m) => self.on_heartbeat(now, &m),
             MavMessage::SET_ATTITUDE_TARGET(m) => self.on_set_attitude_target(now, &m),
+            MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_position_target_local(now, &m),
+            MavMessage::SET_POSITION_TARGET_GLOBAL_INT(m) => {
+                self.on_position_target_global(now, &m)
+            }
+            MavMessage::MISSION_COUNT(m) => self.on_mission_count(now, link, sender, &m),
+            MavMessage::MISSION_ITEM_INT(m) => self.on_mission_item(now, link, sender, &m, false),
+            #[allow(deprecated)]
+            MavMessage::MISSION_ITEM(m) => {
+                let m = item_int_from_float(&m);
+                self.on_mission_item(now, link, sender, &m, true)
+            }
+            MavMessage::MISSION_REQUEST_LIST(m) => self.on_mission_request_list(
+                now,
+                link,
+                sender,
+                (m.target_system, m.target_component),
+                m.mission_type,
+            ),
+            MavMessage::MISSION_REQUEST_INT(m) => self.on_mission_request(
+                now,
+                link,
+                sender,
+                (m.target_system, m.target_component),
+                m.seq,
+            ),
+            #[allow(deprecated)]
+            MavMessage::MISSION_REQUEST(m) => self.on_mission_request(
+                now,
+                link,
+                sender,
+                (m.target_system, m.target_component),
+                m.seq,
+            ),
+            MavMessage::MISSION_ACK(m) => {
+                self.on_mission_ack(sender, (m.target_system, m.target_component))
+            }
+            MavMessage::MISSION_CLEAR_ALL(m) => self.on_mission_clear(
+                link,
+                sender,
+                (m.target_system, m.target_component),
+                m.mission_type,
+            ),
+            MavMessage::MISSION_SET_CURRENT(m) => {
+                self.on_mission_set_current((m.target_system, m.target_component), m.seq)
+            }
             MavMessage::COMMAND_LONG(m) => self.on_command_long(now, link, sender, &m),
             MavMessage::COMMAND_INT(m) => self.on_command_int(now, link, sender, &m),
             MavMessage::SET_MODE(m) => self.on_set_mode(now, link, sender, &m),
@@ -72,44 +114,89 @@ impl Vehicle {
         }
     }
 
+    /// A ground station's heartbeat (type GCS, from any system) feeds the data-link
+    /// check, as PX4's receiver does.
+    fn on_heartbeat(&mut self, now: SimTime, m: &HEARTBEAT_DATA) -> bool {
+        if m.mavtype == MavType::MAV_TYPE_GCS {
+            self.note_gcs_heartbeat(now);
+        }
+        true
+    }
+
+    /// An offboard setpoint read by [`offboard`]: flown and counted as offboard signal,
+    /// or refused and counted.
+    fn take_offboard(&mut self, now: SimTime, target: Result<OffboardTarget, Refusal>) -> bool {
+        match target {
+            Ok(target) => {
+                self.note_offboard(now, target);
+                true
+            }
+            Err(why) => {
+                self.counters.rejected_setpoints += 1;
+                tracing::debug!(sysid = self.cfg.system_id, ?why, "setpoint refused");
+                false
+            }
+        }
+    }
+
     fn on_set_attitude_target(&mut self, now: SimTime, m: &SET_ATTITUDE_TARGET_DATA) -> bool {
         if !self.for_us(m.target_system) {
             return false;
         }
-        let ignore_attitude = m
-            .type_mask
-            .contains(AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE);
-        let ignore_thrust = m
-            .type_mask
-            .contains(AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE);
-        let q = Quaternion::new(
-            f64::from(m.q[0]),
-            f64::from(m.q[1]),
-            f64::from(m.q[2]),
-            f64::from(m.q[3]),
-        );
-        let thrust = f64::from(m.thrust);
-        let attitude_ok = ignore_attitude
-            || (q.coords.iter().all(|x| x.is_finite())
-                && (q.norm() - 1.0).abs() <= UNIT_QUATERNION_TOLERANCE);
-        let thrust_ok = ignore_thrust || (thrust.is_finite() && (0.0..=1.0).contains(&thrust));
-        if !attitude_ok || !thrust_ok {
-            self.counters.rejected_setpoints += 1;
-            tracing::debug!(sysid = self.cfg.system_id, "setpoint rejected");
+        let target = offboard::attitude_target(&AttitudeTarget {
+            type_mask: m.type_mask.bits(),
+            q: m.q.map(f64::from),
+            body_rates_rps: [m.body_roll_rate, m.body_pitch_rate, m.body_yaw_rate].map(f64::from),
+            thrust: f64::from(m.thrust),
+            thrust_body: m.thrust_body.map(f64::from),
+        });
+        self.take_offboard(now, target)
+    }
+
+    fn on_position_target_local(
+        &mut self,
+        now: SimTime,
+        m: &SET_POSITION_TARGET_LOCAL_NED_DATA,
+    ) -> bool {
+        if !self.for_us(m.target_system) {
             return false;
         }
-        let mut setpoint: AttitudeSetpoint = self.offboard_setpoint;
-        if !ignore_attitude {
-            setpoint.attitude = UnitQuaternion::new_normalize(q);
+        let t = PositionTarget {
+            frame: m.coordinate_frame as u8,
+            type_mask: m.type_mask.bits(),
+            position: [m.x, m.y, m.z].map(f64::from),
+            velocity: [m.vx, m.vy, m.vz].map(f64::from),
+            acceleration: [m.afx, m.afy, m.afz].map(f64::from),
+            yaw_rad: f64::from(m.yaw),
+            yaw_rate_rps: f64::from(m.yaw_rate),
+        };
+        let target = offboard::local_ned(&t, &self.state.attitude);
+        self.take_offboard(now, target)
+    }
+
+    fn on_position_target_global(
+        &mut self,
+        now: SimTime,
+        m: &SET_POSITION_TARGET_GLOBAL_INT_DATA,
+    ) -> bool {
+        if !self.for_us(m.target_system) {
+            return false;
         }
-        if !ignore_thrust {
-            setpoint.thrust_norm = thrust;
-            // Only a setpoint that carries thrust proves the sender is alive.
-            self.note_setpoint(now);
-        }
-        self.offboard_setpoint = setpoint;
-        self.counters.setpoints += 1;
-        true
+        let t = PositionTarget {
+            frame: m.coordinate_frame as u8,
+            type_mask: m.type_mask.bits(),
+            position: [
+                f64::from(m.lat_int) * 1e-7,
+                f64::from(m.lon_int) * 1e-7,
+                f64::from(m.alt),
+            ],
+            velocity: [m.vx, m.vy, m.vz].map(f64::from),
+            acceleration: [m.afx, m.afy, m.afz].map(f64::from),
+            yaw_rad: f64::from(m.yaw),
+            yaw_rate_rps: f64::from(m.yaw_rate),
+        };
+        let target = offboard::global_int(&t, &self.global_frame());
+        self.take_offboard(now, target)
     }
 
     fn on_command_long(
@@ -139,10 +226,18 @@ impl Vehicle {
         if !self.for_us(m.target_system) {
             return false;
         }
-        let params = [
-            m.param1, m.param2, m.param3, m.param4, m.x as f32, m.y as f32, m.z,
-        ];
-        self.run_command(now, link, sender, Command::from_wire(m.command, params));
+        let global = matches!(
+            m.frame,
+            MavFrame::MAV_FRAME_GLOBAL
+                | MavFrame::MAV_FRAME_GLOBAL_INT
+                | MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT
+                | MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+                | MavFrame::MAV_FRAME_GLOBAL_TERRAIN_ALT
+                | MavFrame::MAV_FRAME_GLOBAL_TERRAIN_ALT_INT
+        );
+        let params = [m.param1, m.param2, m.param3, m.param4];
+        let command = Command::from_int(m.command, params, m.x, m.y, m.z, global);
+        self.run_command(now, link, sender, command);
         true
     }
 
@@ -206,7 +301,10 @@ impl Vehicle {
             .trim_end_matches('\0')
             .to_owned();
         match self.params.set(&name, m.param_value) {
-            Ok(index) => self.send_param(link, index),
+            Ok(index) => {
+                self.tuning = super::tuning::Tuning::from_params(&self.params);
+                self.send_param(link, index);
+            }
             Err(err) => {
                 tracing::debug!(sysid = self.cfg.system_id, ?err, "parameter not set");
                 // Answer with the current value, as PX4 does, when the name exists.
@@ -232,5 +330,40 @@ impl Vehicle {
             self.send(link, &reply);
         }
         true
+    }
+}
+
+/// A legacy MISSION_ITEM (degrees as floats) as the MISSION_ITEM_INT it stands for.
+#[allow(deprecated)]
+fn item_int_from_float(m: &MISSION_ITEM_DATA) -> MISSION_ITEM_INT_DATA {
+    let global = matches!(
+        m.frame,
+        MavFrame::MAV_FRAME_GLOBAL | MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT
+    );
+    let e7 = |v: f32| {
+        if global {
+            (f64::from(v) * 1e7)
+                .round()
+                .clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+        } else {
+            v as i32
+        }
+    };
+    MISSION_ITEM_INT_DATA {
+        param1: m.param1,
+        param2: m.param2,
+        param3: m.param3,
+        param4: m.param4,
+        x: e7(m.x),
+        y: e7(m.y),
+        z: m.z,
+        seq: m.seq,
+        command: m.command,
+        target_system: m.target_system,
+        target_component: m.target_component,
+        frame: m.frame,
+        current: m.current,
+        autocontinue: m.autocontinue,
+        mission_type: m.mission_type,
     }
 }

@@ -1,19 +1,24 @@
 //! One emulated vehicle: PX4's wire behaviour around the physics, as a sans-IO machine.
 //!
 //! ```text
-//!            arm (400)                 DO_SET_MODE 6 with a live stream
+//!            arm (400)                 DO_SET_MODE 6 with an offboard signal
 //!  DISARMED ───────────► ARMED ──────────────────────────────────────► OFFBOARD
 //!     ▲   ◄─────────────  │  ▲                                             │
-//!     │  disarm (landed,  │  └──── Position / Hold / Land / Takeoff ◄──────┤ setpoints silent
-//!     │  or forced)       │        (DO_SET_MODE, NAV_LAND, NAV_TAKEOFF)    │ > COM_OF_LOSS_T:
+//!     │  disarm (landed,  │  └── Position / Hold / Land / Takeoff / ◄──────┤ no setpoint for
+//!     │  or forced)       │      Return / Mission (DO_SET_MODE, NAV_*,     │ COM_OF_LOSS_T:
 //!     └───────────────────┴── landed for COM_DISARM_LAND, or armed         │ COM_OBL_RC_ACT
 //!                             without takeoff for COM_DISARM_PRFLT         ▼ (failsafe)
 //! ```
 //!
-//! A *live stream* is SET_ATTITUDE_TARGET messages carrying thrust, addressed to this
-//! system (or 0), finite, with a unit quaternion and thrust in `0..=1`, with no gap over
-//! 0.5 s (PX4's 2 Hz floor) for at least 1 s. OFFBOARD is refused with
-//! TEMPORARILY_REJECTED otherwise.
+//! The *offboard signal* is PX4's: any offboard setpoint PX4 would publish (position,
+//! velocity or acceleration in SET_POSITION_TARGET_*, attitude or roll+pitch rates with
+//! thrust in SET_ATTITUDE_TARGET; see [`offboard`]) received within COM_OF_LOSS_T. While
+//! disarmed any mode is accepted (arming then needs a mode that can run); while armed,
+//! OFFBOARD without the signal and AUTO.MISSION without a mission are TEMPORARILY_REJECTED.
+//!
+//! Every mode but raw offboard attitude and rates flies through one position controller
+//! ([`crate::position_control`]); the navigator (`flight`, `mission_run`) turns each
+//! mode into its trajectory setpoint.
 //!
 //! Driving it: call [`Vehicle::handle_datagram`] for every datagram received on a link,
 //! [`Vehicle::handle_timeout`] whenever time has advanced (at least every
@@ -22,9 +27,15 @@
 
 mod commands;
 mod config;
+mod datalink;
+mod flight;
 mod inbound;
+mod mission;
+mod mission_run;
 mod mode;
+pub mod offboard;
 mod telemetry;
+mod tuning;
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -35,22 +46,23 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 pub use config::{StartState, VehicleConfig, WindConfig};
+pub use mission::{MissionItem, MissionStore};
 pub use mode::FlightMode;
 
 use crate::codec::Encoder;
-use crate::control::{AttitudeController, AttitudeSetpoint, Guidance, PositionGains, guide};
+use crate::control::{AttitudeCommand, AttitudeController, AttitudeSetpoint};
 use crate::params::ParamTable;
 use crate::physics::{Airframe, BodyState, Environment};
+use crate::position_control::{Kinematics, PositionController};
 use crate::profile::GRAVITY_MPS2;
 use crate::time::SimTime;
 use crate::world::World;
+use flight::Nav;
+use offboard::{GlobalFrame, OffboardTarget};
+use tuning::Tuning;
 
 /// The fixed physics and autopilot step.
 pub const PHYSICS_STEP: Duration = Duration::from_millis(1);
-/// Largest gap between setpoints that still counts as a stream (PX4's 2 Hz floor).
-const STREAM_GAP: Duration = Duration::from_millis(500);
-/// How long a stream must have lasted before OFFBOARD is accepted.
-const STREAM_MIN_AGE: Duration = Duration::from_secs(1);
 
 /// The two MAVLink links of a PX4 SITL instance.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -95,11 +107,12 @@ pub struct Counters {
     pub bad_frames: u64,
     /// Messages addressed to another system.
     pub foreign_target: u64,
-    /// Attitude setpoints refused (non-finite, non-unit quaternion, thrust out of range).
+    /// Offboard setpoints refused (an unsupported frame, nothing set, non-finite values,
+    /// a quaternion not of unit length, thrust out of range).
     pub rejected_setpoints: u64,
     /// Commands answered UNSUPPORTED.
     pub unsupported_commands: u64,
-    /// Attitude setpoints accepted.
+    /// Offboard setpoints accepted.
     pub setpoints: u64,
 }
 
@@ -165,8 +178,10 @@ pub struct Vehicle {
     state: BodyState,
     env: Environment,
     controller: AttitudeController,
-    position_gains: PositionGains,
+    pos_ctrl: PositionController,
+    pos_ctrl_active: bool,
     params: ParamTable,
+    tuning: Tuning,
     armed: bool,
     mode: FlightMode,
     failsafe: bool,
@@ -174,11 +189,12 @@ pub struct Vehicle {
     took_off: bool,
     landed_since: Option<SimTime>,
     armed_at: SimTime,
-    stream_first: Option<SimTime>,
-    stream_last: Option<SimTime>,
-    offboard_setpoint: AttitudeSetpoint,
-    guidance: Guidance,
-    heading_rad: f64,
+    offboard: Option<OffboardTarget>,
+    offboard_signal: Option<SimTime>,
+    nav: Nav,
+    nav_yaw_rad: f64,
+    mission: MissionStore,
+    datalink: datalink::DataLink,
     battery: Battery,
     gust_ned_mps: Vector3<f64>,
     rng: ChaCha8Rng,
@@ -221,24 +237,29 @@ impl Vehicle {
             ground_z_ned_m: ground_local_z,
         };
         let params = ParamTable::new(cfg.system_id, &cfg.profile);
+        let tuning = Tuning::from_params(&params);
         let links = [LinkId::Offboard, LinkId::Gcs].map(|_| Link {
             encoder: Encoder::new(cfg.system_id, 1),
             streams: telemetry::default_streams(cfg.fast_rate_hz),
             last_heard: None,
         });
         let rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-        let guidance = if in_air {
-            Guidance::Velocity(start.vel_ned_mps)
+        let nav = if in_air {
+            Nav::Velocity {
+                vel_ned_mps: start.vel_ned_mps,
+            }
         } else {
-            Guidance::Position(state.pos_ned_m)
+            Nav::Idle
         };
         Ok(Self {
             world,
             frame,
             env,
             controller: AttitudeController::default(),
-            position_gains: PositionGains::default(),
+            pos_ctrl: PositionController::default(),
+            pos_ctrl_active: false,
             params,
+            tuning,
             armed: in_air,
             mode: FlightMode::Position,
             failsafe: false,
@@ -246,11 +267,12 @@ impl Vehicle {
             took_off: in_air,
             landed_since: None,
             armed_at: SimTime::ZERO,
-            stream_first: None,
-            stream_last: None,
-            offboard_setpoint: AttitudeSetpoint::idle(start.yaw_rad),
-            guidance,
-            heading_rad: start.yaw_rad,
+            offboard: None,
+            offboard_signal: None,
+            nav,
+            nav_yaw_rad: start.yaw_rad,
+            mission: MissionStore::default(),
+            datalink: datalink::DataLink::default(),
             battery: Battery {
                 consumed_mah: 0.0,
                 current_a: 0.0,
@@ -355,14 +377,17 @@ impl Vehicle {
     /// One fixed step of autopilot logic, control and physics ending at `t`.
     fn step(&mut self, t: SimTime) {
         self.check_offboard_loss(t);
-        let setpoint = self.current_setpoint();
+        self.check_datalink(t);
+        self.mission_timers(t);
         let dt = Self::dt_s();
-        let motors = if self.armed {
-            self.controller
-                .update(&self.frame, &self.state, &setpoint, dt)
-        } else {
-            self.controller.reset();
-            Vector4::zeros()
+        let motors = match self.attitude_command(t, dt) {
+            Some(command) => self
+                .controller
+                .update_command(&self.frame, &self.state, &command, dt),
+            None => {
+                self.controller.reset();
+                Vector4::zeros()
+            }
         };
         self.update_wind(dt);
         self.state = self.frame.step(&self.state, &motors, &self.env, dt);
@@ -370,33 +395,102 @@ impl Vehicle {
         self.update_landed(t);
     }
 
-    /// What the attitude controller tracks in the current mode.
-    fn current_setpoint(&mut self) -> AttitudeSetpoint {
-        let hover = self.params.value("MPC_THR_HOVER");
+    /// The heading (rad).
+    fn yaw_rad(&self) -> f64 {
+        self.state.attitude.euler_angles().2
+    }
+
+    /// The vehicle's geodetic frame: its origin (start point) in the world, home on the
+    /// ground below it.
+    fn global_frame(&self) -> GlobalFrame {
+        let origin = self.cfg.start.pos_world_ned_m;
+        let home = self.world.to_geodetic(&Vector3::new(
+            origin.x,
+            origin.y,
+            origin.z + self.env.ground_z_ned_m,
+        ));
+        GlobalFrame {
+            world: self.world,
+            origin_world_ned_m: origin,
+            home_alt_amsl_m: home.alt_amsl_m,
+        }
+    }
+
+    /// What the attitude controller tracks this step; `None` spins the motors down
+    /// (disarmed).
+    fn attitude_command(&mut self, t: SimTime, dt: f64) -> Option<AttitudeCommand> {
         if !self.armed {
-            return AttitudeSetpoint::idle(self.heading_rad);
+            self.pos_ctrl_active = false;
+            return None;
         }
-        match self.mode {
-            FlightMode::Offboard => self.offboard_setpoint,
-            _ if self.landed && !matches!(self.mode, FlightMode::Takeoff) => {
-                AttitudeSetpoint::idle(self.heading_rad)
-            }
-            _ => {
-                let land_speed = self.land_speed_mps();
-                if let Guidance::Descend { speed_mps, .. } = &mut self.guidance {
-                    *speed_mps = land_speed;
+        let idle = AttitudeCommand::Attitude {
+            setpoint: AttitudeSetpoint::idle(self.yaw_rad()),
+            yawspeed_ff_rps: f64::NAN,
+        };
+        let trajectory = if self.mode == FlightMode::Offboard {
+            match self.offboard {
+                Some(OffboardTarget::Attitude {
+                    attitude,
+                    thrust,
+                    yawspeed_ff_rps,
+                }) => {
+                    self.pos_ctrl_active = false;
+                    return Some(AttitudeCommand::Attitude {
+                        setpoint: AttitudeSetpoint {
+                            attitude,
+                            thrust_norm: thrust,
+                        },
+                        yawspeed_ff_rps,
+                    });
                 }
-                self.position_gains.max_tilt_rad =
-                    self.params.value("MPC_TILTMAX_AIR").to_radians();
-                guide(
-                    &self.position_gains,
-                    &self.guidance,
-                    &self.state,
-                    hover,
-                    self.heading_rad,
-                )
+                Some(OffboardTarget::Rates {
+                    rates_frd_rps,
+                    thrust,
+                }) => {
+                    self.pos_ctrl_active = false;
+                    return Some(AttitudeCommand::Rates {
+                        rates_frd_rps,
+                        thrust_norm: thrust,
+                    });
+                }
+                Some(OffboardTarget::Trajectory(sp)) => {
+                    let wants_up = sp.pos_ned_m.z < self.state.pos_ned_m.z - 0.1
+                        || sp.vel_ned_mps.z < -0.1
+                        || sp.acc_ned_mps2.z < -0.1;
+                    (!self.landed || wants_up).then_some(sp)
+                }
+                None => None,
             }
+        } else {
+            let sp = self.nav_setpoint(t, dt);
+            sp.filter(|_| !self.landed || self.nav_wants_climb())
+        };
+        let Some(sp) = trajectory else {
+            self.pos_ctrl_active = false;
+            return Some(idle);
+        };
+        if !self.pos_ctrl_active {
+            self.pos_ctrl.reset();
+            self.pos_ctrl_active = true;
         }
+        let kin = Kinematics {
+            pos_ned_m: self.state.pos_ned_m,
+            vel_ned_mps: self.state.vel_ned_mps,
+            yaw_rad: self.yaw_rad(),
+        };
+        let mut mpc = self.tuning.mpc;
+        if let Nav::Velocity { vel_ned_mps } = self.nav {
+            // The pilot of a vehicle started in the air holds its start velocity, however
+            // fast: an emulator's fiction, not bound by MPC_XY_VEL_MAX / MPC_Z_VEL_MAX_*.
+            mpc.xy_vel_max_mps = mpc.xy_vel_max_mps.max(vel_ned_mps.xy().norm());
+            mpc.z_vel_max_up_mps = mpc.z_vel_max_up_mps.max(-vel_ned_mps.z);
+            mpc.z_vel_max_dn_mps = mpc.z_vel_max_dn_mps.max(vel_ned_mps.z);
+        }
+        let out = self.pos_ctrl.update(&mpc, &sp, &kin, dt);
+        Some(AttitudeCommand::Attitude {
+            setpoint: out.attitude,
+            yawspeed_ff_rps: out.yawspeed_ff_rps,
+        })
     }
 
     fn check_offboard_loss(&mut self, t: SimTime) {
@@ -404,7 +498,7 @@ impl Vehicle {
             return;
         }
         let timeout = Duration::from_secs_f64(self.params.value("COM_OF_LOSS_T"));
-        let last = self.stream_last.unwrap_or(SimTime::ZERO);
+        let last = self.offboard_signal.unwrap_or(SimTime::ZERO);
         if t - last <= timeout {
             return;
         }
@@ -426,41 +520,14 @@ impl Vehicle {
         }
     }
 
-    /// PX4's landing descent speed: MPC_Z_V_AUTO_DN above MPC_LAND_ALT1, MPC_LAND_SPEED
-    /// below MPC_LAND_ALT2, linear in between (m/s, positive down).
-    fn land_speed_mps(&self) -> f64 {
-        let height = self.env.ground_z_ned_m - self.state.pos_ned_m.z;
-        let (fast, slow) = (
-            self.params.value("MPC_Z_V_AUTO_DN"),
-            self.params.value("MPC_LAND_SPEED"),
-        );
-        let (alt1, alt2) = (
-            self.params.value("MPC_LAND_ALT1"),
-            self.params.value("MPC_LAND_ALT2"),
-        );
-        if height >= alt1 {
-            fast
-        } else if height <= alt2 || alt1 <= alt2 {
-            slow
-        } else {
-            slow + (fast - slow) * (height - alt2) / (alt1 - alt2)
-        }
-    }
-
-    /// Switches mode and sets the guidance target it holds.
+    /// Switches mode and starts what the navigator flies in it (from where the vehicle
+    /// is now).
     fn enter_mode(&mut self, mode: FlightMode) {
-        let here = self.state.pos_ned_m;
-        self.guidance = match mode {
-            FlightMode::Land => Guidance::Descend {
-                xy_m: here.xy(),
-                speed_mps: self.params.value("MPC_LAND_SPEED"),
-            },
-            FlightMode::Takeoff => {
-                let alt = self.params.value("MIS_TAKEOFF_ALT");
-                Guidance::Position(Vector3::new(here.x, here.y, self.env.ground_z_ned_m - alt))
-            }
-            _ => Guidance::Position(here),
-        };
+        if mode == FlightMode::Mission {
+            self.mission.mark_started();
+        }
+        self.nav = self.nav_for(mode);
+        self.nav_yaw_rad = self.yaw_rad();
         if self.mode != mode {
             self.mode = mode;
             self.events.push_back(VehicleEvent::ModeChanged(mode));
@@ -469,6 +536,7 @@ impl Vehicle {
                 mode = mode.name(),
                 "mode changed"
             );
+            self.report_mission();
         }
     }
 
@@ -478,6 +546,7 @@ impl Vehicle {
             self.armed_at = t;
             self.took_off = !self.landed;
             self.controller.reset();
+            self.pos_ctrl_active = false;
             self.events.push_back(VehicleEvent::Armed);
             tracing::info!(sysid = self.cfg.system_id, "armed");
         }
@@ -502,11 +571,6 @@ impl Vehicle {
             if !on_ground {
                 self.took_off = true;
             }
-        }
-        if let (FlightMode::Takeoff, Guidance::Position(target)) = (self.mode, self.guidance)
-            && (self.state.pos_ned_m.z - target.z).abs() < 0.2
-        {
-            self.enter_mode(FlightMode::Hold);
         }
         if !self.armed {
             return;
@@ -558,23 +622,33 @@ impl Vehicle {
         (100.0 * (1.0 - self.battery.consumed_mah / capacity)).clamp(0.0, 100.0)
     }
 
-    /// Whether a live setpoint stream exists at `t`.
-    fn stream_is_live(&self, t: SimTime) -> bool {
-        match (self.stream_first, self.stream_last) {
-            (Some(first), Some(last)) => t - last <= STREAM_GAP && t - first >= STREAM_MIN_AGE,
-            _ => false,
+    /// PX4's `offboardCheck`: an offboard setpoint arrived within COM_OF_LOSS_T.
+    fn offboard_available(&self, t: SimTime) -> bool {
+        let timeout = Duration::from_secs_f64(self.params.value("COM_OF_LOSS_T"));
+        self.offboard_signal.is_some_and(|last| t - last <= timeout)
+    }
+
+    /// Whether `mode` can run now (PX4's `canRun`).
+    fn can_run(&self, t: SimTime, mode: FlightMode) -> bool {
+        match mode {
+            FlightMode::Offboard => self.offboard_available(t),
+            FlightMode::Mission => self.mission.is_valid(),
+            _ => true,
         }
     }
 
-    /// Records one valid setpoint with thrust at `t`.
-    fn note_setpoint(&mut self, t: SimTime) {
-        let continuing = self.stream_last.is_some_and(|last| t - last <= STREAM_GAP);
-        if !continuing {
-            self.stream_first = Some(t);
-        }
-        self.stream_last = Some(t);
+    /// Records an accepted offboard setpoint at `t`: it is flown in OFFBOARD and keeps
+    /// the offboard signal alive.
+    fn note_offboard(&mut self, t: SimTime, target: OffboardTarget) {
+        self.offboard = Some(target);
+        self.offboard_signal = Some(t);
+        self.counters.setpoints += 1;
     }
 }
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_mission;
+#[cfg(test)]
+mod tests_modes;

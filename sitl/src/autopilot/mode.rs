@@ -9,6 +9,8 @@ const MAIN_OFFBOARD: u32 = 6;
 /// PX4 AUTO sub modes.
 const SUB_TAKEOFF: u32 = 2;
 const SUB_LOITER: u32 = 3;
+const SUB_MISSION: u32 = 4;
+const SUB_RTL: u32 = 5;
 const SUB_LAND: u32 = 6;
 
 /// The modes the emulator flies.
@@ -22,6 +24,10 @@ pub enum FlightMode {
     Hold,
     /// AUTO.LAND: descend at MPC_LAND_SPEED holding the horizontal position.
     Land,
+    /// AUTO.MISSION: fly the stored mission.
+    Mission,
+    /// AUTO.RTL: climb to the return altitude, fly home, land.
+    Return,
     /// OFFBOARD: track the streamed attitude and thrust setpoints.
     Offboard,
 }
@@ -34,20 +40,23 @@ impl FlightMode {
             Self::Takeoff => (MAIN_AUTO, SUB_TAKEOFF),
             Self::Hold => (MAIN_AUTO, SUB_LOITER),
             Self::Land => (MAIN_AUTO, SUB_LAND),
+            Self::Mission => (MAIN_AUTO, SUB_MISSION),
+            Self::Return => (MAIN_AUTO, SUB_RTL),
             Self::Offboard => (MAIN_OFFBOARD, 0),
         };
         (main << 16) | (sub << 24)
     }
 
     /// The mode a DO_SET_MODE / SET_MODE asks for (`main`, `sub` as PX4 numbers); `None`
-    /// for modes the emulator does not fly (manual modes need a pilot, Mission and
-    /// Return need a plan).
+    /// for modes the emulator does not fly (manual modes need a pilot).
     pub fn from_px4(main: u32, sub: u32) -> Option<Self> {
         match (main, sub) {
             (MAIN_POSCTL, _) => Some(Self::Position),
             (MAIN_AUTO, SUB_TAKEOFF) => Some(Self::Takeoff),
             (MAIN_AUTO, SUB_LOITER) => Some(Self::Hold),
             (MAIN_AUTO, SUB_LAND) => Some(Self::Land),
+            (MAIN_AUTO, SUB_MISSION) => Some(Self::Mission),
+            (MAIN_AUTO, SUB_RTL) => Some(Self::Return),
             (MAIN_OFFBOARD, _) => Some(Self::Offboard),
             _ => None,
         }
@@ -60,6 +69,8 @@ impl FlightMode {
             Self::Takeoff => "TAKEOFF",
             Self::Hold => "LOITER",
             Self::Land => "LAND",
+            Self::Mission => "MISSION",
+            Self::Return => "RTL",
             Self::Offboard => "OFFBOARD",
         }
     }
@@ -83,6 +94,8 @@ mod tests {
             FlightMode::Takeoff,
             FlightMode::Hold,
             FlightMode::Land,
+            FlightMode::Mission,
+            FlightMode::Return,
             FlightMode::Offboard,
         ] {
             let c = mode.custom_mode();

@@ -14,15 +14,15 @@ use crate::profile::Profile;
 
 const GCS: (u8, u8) = (255, 190);
 
-struct Rig {
-    vehicle: Vehicle,
-    now: SimTime,
-    gcs: Encoder,
-    received: Vec<(SimTime, LinkId, MavMessage)>,
+pub(super) struct Rig {
+    pub vehicle: Vehicle,
+    pub now: SimTime,
+    pub gcs: Encoder,
+    pub received: Vec<(SimTime, LinkId, MavMessage)>,
 }
 
 impl Rig {
-    fn new(cfg: VehicleConfig) -> Self {
+    pub fn new(cfg: VehicleConfig) -> Self {
         Self {
             vehicle: Vehicle::new(cfg, World::default()).unwrap(),
             now: SimTime::ZERO,
@@ -31,18 +31,18 @@ impl Rig {
         }
     }
 
-    fn on_ground() -> Self {
+    pub fn on_ground() -> Self {
         Self::new(VehicleConfig::new(1, Profile::x500()))
     }
 
-    fn send(&mut self, msg: MavMessage) {
+    pub fn send(&mut self, msg: MavMessage) {
         let bytes = self.gcs.encode(&msg);
         self.vehicle
             .handle_datagram(self.now, LinkId::Offboard, &bytes);
         self.drain();
     }
 
-    fn drain(&mut self) {
+    pub fn drain(&mut self) {
         while let Some(tx) = self.vehicle.poll_transmit() {
             for frame in decode_datagram(&tx.bytes) {
                 self.received.push((self.now, tx.link, frame.unwrap().msg));
@@ -50,7 +50,7 @@ impl Rig {
         }
     }
 
-    fn advance(&mut self, d: Duration) {
+    pub fn advance(&mut self, d: Duration) {
         let end = self.now + d;
         while self.now < end {
             self.now = self.now + PHYSICS_STEP;
@@ -60,7 +60,7 @@ impl Rig {
     }
 
     /// Streams setpoints at `hz` for `d`.
-    fn stream(&mut self, d: Duration, hz: f64, thrust: f32) {
+    pub fn stream(&mut self, d: Duration, hz: f64, thrust: f32) {
         let period = Duration::from_secs_f64(1.0 / hz);
         let end = self.now + d;
         while self.now < end {
@@ -69,7 +69,7 @@ impl Rig {
         }
     }
 
-    fn command(&mut self, command: MavCmd, params: [f32; 7]) -> MavResult {
+    pub fn command(&mut self, command: MavCmd, params: [f32; 7]) -> MavResult {
         self.send(MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
             target_system: 1,
             target_component: 1,
@@ -93,14 +93,14 @@ impl Rig {
             .expect("every command is acknowledged")
     }
 
-    fn offboard(&mut self) -> MavResult {
+    pub fn offboard(&mut self) -> MavResult {
         self.command(
             MavCmd::MAV_CMD_DO_SET_MODE,
             [1.0, 6.0, 0.0, 0.0, 0.0, 0.0, 0.0],
         )
     }
 
-    fn arm(&mut self) -> MavResult {
+    pub fn arm(&mut self) -> MavResult {
         self.command(
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
             [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
@@ -108,7 +108,7 @@ impl Rig {
     }
 }
 
-fn setpoint(target: u8, thrust: f32) -> MavMessage {
+pub(super) fn setpoint(target: u8, thrust: f32) -> MavMessage {
     MavMessage::SET_ATTITUDE_TARGET(SET_ATTITUDE_TARGET_DATA {
         time_boot_ms: 0,
         q: [1.0, 0.0, 0.0, 0.0],
@@ -126,24 +126,40 @@ fn setpoint(target: u8, thrust: f32) -> MavMessage {
 }
 
 #[test]
-fn offboard_refused_before_setpoints_stream_and_accepted_after_one_second() {
+fn offboard_needs_one_setpoint_within_the_loss_timeout_when_armed() {
+    // PX4's offboardCheck: one setpoint younger than COM_OF_LOSS_T (1 s) is enough.
     let mut rig = Rig::on_ground();
-    rig.advance(Duration::from_millis(100));
+    assert_eq!(rig.arm(), MavResult::MAV_RESULT_ACCEPTED);
     assert_eq!(rig.offboard(), MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
-    rig.stream(Duration::from_millis(800), 20.0, 0.0);
-    assert_eq!(
-        rig.offboard(),
-        MavResult::MAV_RESULT_TEMPORARILY_REJECTED,
-        "0.8 s of stream is not enough"
-    );
-    rig.stream(Duration::from_millis(300), 20.0, 0.0);
+    rig.send(setpoint(1, 0.0));
+    rig.advance(Duration::from_millis(900));
     assert_eq!(rig.offboard(), MavResult::MAV_RESULT_ACCEPTED);
     assert_eq!(rig.vehicle.status().mode, FlightMode::Offboard);
 }
 
 #[test]
-fn setpoints_without_thrust_do_not_count_as_a_stream() {
+fn offboard_refused_when_the_last_setpoint_is_older_than_the_loss_timeout() {
     let mut rig = Rig::on_ground();
+    rig.arm();
+    rig.send(setpoint(1, 0.0));
+    rig.advance(Duration::from_millis(1100));
+    assert_eq!(rig.offboard(), MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
+}
+
+#[test]
+fn disarmed_offboard_is_accepted_but_arming_then_needs_the_signal() {
+    // PX4 takes any mode while disarmed; arming checks that the mode can run.
+    let mut rig = Rig::on_ground();
+    assert_eq!(rig.offboard(), MavResult::MAV_RESULT_ACCEPTED);
+    assert_eq!(rig.arm(), MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
+    rig.send(setpoint(1, 0.0));
+    assert_eq!(rig.arm(), MavResult::MAV_RESULT_ACCEPTED);
+}
+
+#[test]
+fn setpoints_without_thrust_are_no_offboard_signal() {
+    let mut rig = Rig::on_ground();
+    rig.arm();
     for _ in 0..40 {
         let mut sp = setpoint(1, 0.5);
         if let MavMessage::SET_ATTITUDE_TARGET(ref mut d) = sp {
@@ -223,6 +239,7 @@ fn unknown_commands_are_acknowledged_unsupported_and_nan_params_are_unused() {
 #[test]
 fn messages_for_another_system_are_ignored() {
     let mut rig = Rig::on_ground();
+    rig.arm();
     for _ in 0..30 {
         rig.send(setpoint(2, 0.5));
         rig.advance(Duration::from_millis(50));
