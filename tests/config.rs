@@ -171,3 +171,30 @@ fn lockstep_faults_are_checked_and_converted() {
         assert!(err.contains(needle), "{needle} not in:\n{err}");
     }
 }
+
+#[test]
+fn the_coordinator_ids_default_to_253_190_and_may_not_be_a_vehicle_s() {
+    let setup = load("paper-sim1.toml").validate().unwrap();
+    assert!(setup.links.iter().all(|l| l.own_ids == (253, 190)));
+    let text = with(
+        "[swarm]",
+        "[swarm]\ngcs_system_id = 2\ngcs_component_id = 191",
+    );
+    let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
+    assert!(
+        err.contains("vehicle[1].system_id 2 is the coordinator's own swarm.gcs_system_id"),
+        "{err}"
+    );
+    let text = with("[swarm]", "[swarm]\ngcs_system_id = 0");
+    let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
+    assert!(
+        err.contains("swarm.gcs_system_id must be 1..=255, got 0"),
+        "{err}"
+    );
+    let text = with(
+        "[swarm]",
+        "[swarm]\ngcs_system_id = 200\ngcs_component_id = 191",
+    );
+    let setup = Config::from_toml(&text).unwrap().validate().unwrap();
+    assert!(setup.links.iter().all(|l| l.own_ids == (200, 191)));
+}

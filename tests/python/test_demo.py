@@ -80,6 +80,26 @@ def test_tlog_setpoints_are_well_formed_and_at_250_hz(run_dir):
 FIGURES = ["trajectories-3d", "paths-xy", "altitude", "velocity", "attitude", "commands"]
 
 
+def test_the_coordinator_heartbeat_is_in_the_tlog_at_one_hertz(run_dir):
+    """Six vehicle links, each with a 1 Hz GCS heartbeat from the coordinator's own ids
+    (253/190); the tlog is stamped with the run's start plus virtual time."""
+    log = mavutil.mavlink_connection(str(run_dir / "traffic.tlog"), dialect="common")
+    stamps = []
+    while True:
+        m = log.recv_msg()
+        if m is None:
+            break
+        if m.get_type() == "HEARTBEAT" and m.type == mavutil.mavlink.MAV_TYPE_GCS:
+            assert (m.get_srcSystem(), m.get_srcComponent()) == (253, 190)
+            assert m.autopilot == mavutil.mavlink.MAV_AUTOPILOT_INVALID
+            stamps.append(m._timestamp)
+    seconds = json.loads((run_dir / "summary.json").read_text())["sim_seconds"]
+    assert abs(len(stamps) - 6 * seconds) <= 6 + 0.01 * 6 * seconds, (len(stamps), seconds)
+    instants = sorted(set(round(t, 3) for t in stamps))
+    gaps = np.diff(instants)
+    assert np.all(np.abs(gaps - 1.0) < 0.01), gaps[np.abs(gaps - 1.0) >= 0.01]
+
+
 def test_every_figure_is_written_as_png_and_svg_with_axes_and_legends(run_dir):
     import struct
 

@@ -513,7 +513,8 @@ impl Vehicle {
             "offboard setpoints lost"
         );
         match self.params.value("COM_OBL_RC_ACT") as i64 {
-            3 | 4 => self.enter_mode(FlightMode::Land),
+            3 => self.enter_mode(FlightMode::Return),
+            4 => self.enter_mode(FlightMode::Land),
             5 => self.enter_mode(FlightMode::Hold),
             6 | 7 => self.disarm("offboard loss failsafe"),
             _ => self.enter_mode(FlightMode::Position),

@@ -391,9 +391,15 @@ impl Vehicle {
     }
 
     fn autopilot_version(&self) -> MavMessage {
+        // What the emulator implements (MAVSDK refuses to upload a mission without
+        // MISSION_INT); no fence or rally plans, no FTP.
         let capabilities = MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_MAVLINK2
             | MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+            | MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+            | MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
             | MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+            | MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_MISSION_INT
+            | MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
             | MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE;
         MavMessage::AUTOPILOT_VERSION(AUTOPILOT_VERSION_DATA {
             capabilities,
