@@ -83,6 +83,11 @@ impl Rig {
             param6: params[5],
             param7: params[6],
         }));
+        self.last_ack(command)
+    }
+
+    /// The result of the last COMMAND_ACK for `command`.
+    pub fn last_ack(&self, command: MavCmd) -> MavResult {
         self.received
             .iter()
             .rev()

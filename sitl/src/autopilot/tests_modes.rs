@@ -54,14 +54,7 @@ impl Rig {
             current: 0,
             autocontinue: 0,
         }));
-        self.received
-            .iter()
-            .rev()
-            .find_map(|(_, _, m)| match m {
-                MavMessage::COMMAND_ACK(a) if a.command == command => Some(a.result),
-                _ => None,
-            })
-            .expect("every command is acknowledged")
+        self.last_ack(command)
     }
 
     /// Sends a local NED setpoint every 50 ms (MAVSDK's 20 Hz) for `d`.

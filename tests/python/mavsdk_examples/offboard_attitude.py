@@ -4,25 +4,26 @@ at 60 %; offboard stop (Hold) and land."""
 
 import asyncio
 
-from mavsdk.offboard import Attitude, OffboardError
+from mavsdk.offboard import Attitude
 
-from _common import connected_drone, wait_until_ready
+from _common import connected_drone, fly_offboard, wait_until_ready
+
+STEPS = [
+    ((0.0, 0.0, 0.0, 0.7), 2),
+    ((30.0, 0.0, 0.0, 0.6), 2),
+    ((-30.0, 0.0, 0.0, 0.6), 2),
+    ((0.0, 0.0, 0.0, 0.6), 2),
+]
 
 
 async def main():
     drone = await connected_drone()
     await wait_until_ready(drone)
-    await drone.action.arm()
-    await drone.offboard.set_attitude(Attitude(0.0, 0.0, 0.0, 0.0))
-    try:
-        await drone.offboard.start()
-    except OffboardError:
-        await drone.action.disarm()
-        raise
-    for roll_deg, thrust in [(0.0, 0.7), (30.0, 0.6), (-30.0, 0.6), (0.0, 0.6)]:
-        await drone.offboard.set_attitude(Attitude(roll_deg, 0.0, 0.0, thrust))
-        await asyncio.sleep(2)
-    await drone.offboard.stop()
+
+    async def setter(args):
+        await drone.offboard.set_attitude(Attitude(*args))
+
+    await fly_offboard(drone, setter, (0.0, 0.0, 0.0, 0.0), STEPS)
     await drone.action.land()
 
 

@@ -4,9 +4,9 @@ stop."""
 
 import asyncio
 
-from mavsdk.offboard import OffboardError, PositionNedYaw
+from mavsdk.offboard import PositionNedYaw
 
-from _common import connected_drone, wait_until_ready
+from _common import connected_drone, fly_offboard, wait_until_ready
 
 STEPS = [
     ((0.0, 0.0, -5.0, 0.0), 10),
@@ -19,17 +19,11 @@ STEPS = [
 async def main():
     drone = await connected_drone()
     await wait_until_ready(drone)
-    await drone.action.arm()
-    await drone.offboard.set_position_ned(PositionNedYaw(0.0, 0.0, 0.0, 0.0))
-    try:
-        await drone.offboard.start()
-    except OffboardError:
-        await drone.action.disarm()
-        raise
-    for setpoint, seconds in STEPS:
-        await drone.offboard.set_position_ned(PositionNedYaw(*setpoint))
-        await asyncio.sleep(seconds)
-    await drone.offboard.stop()
+
+    async def setter(args):
+        await drone.offboard.set_position_ned(PositionNedYaw(*args))
+
+    await fly_offboard(drone, setter, (0.0, 0.0, 0.0, 0.0), STEPS)
 
 
 if __name__ == "__main__":

@@ -3,9 +3,9 @@
 
 import asyncio
 
-from mavsdk.offboard import OffboardError, VelocityNedYaw
+from mavsdk.offboard import VelocityNedYaw
 
-from _common import connected_drone, wait_until_ready
+from _common import connected_drone, fly_offboard, wait_until_ready
 
 STEPS = [
     ((0.0, 0.0, -2.0, 0.0), 4),
@@ -21,17 +21,11 @@ STEPS = [
 async def main():
     drone = await connected_drone()
     await wait_until_ready(drone)
-    await drone.action.arm()
-    await drone.offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, 0.0, 0.0))
-    try:
-        await drone.offboard.start()
-    except OffboardError:
-        await drone.action.disarm()
-        raise
-    for setpoint, seconds in STEPS:
-        await drone.offboard.set_velocity_ned(VelocityNedYaw(*setpoint))
-        await asyncio.sleep(seconds)
-    await drone.offboard.stop()
+
+    async def setter(args):
+        await drone.offboard.set_velocity_ned(VelocityNedYaw(*args))
+
+    await fly_offboard(drone, setter, (0.0, 0.0, 0.0, 0.0), STEPS)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,144 @@
+//! What the attitude controller tracks each step, and the offboard signal: raw offboard
+//! attitude or body rates go straight to it; an offboard trajectory or the navigator's
+//! setpoint goes through the position controller; a vehicle on the ground idles unless
+//! its mode climbs. PX4's `offboardCheck` decides whether OFFBOARD can run; the offboard
+//! loss failsafe follows COM_OBL_RC_ACT.
+
+use std::time::Duration;
+
+use super::flight::Nav;
+use super::offboard::OffboardTarget;
+use super::{FlightMode, Vehicle, VehicleEvent};
+use crate::control::{AttitudeCommand, AttitudeSetpoint};
+use crate::position_control::Kinematics;
+use crate::time::SimTime;
+
+impl Vehicle {
+    /// What the attitude controller tracks this step; `None` spins the motors down
+    /// (disarmed).
+    pub(super) fn attitude_command(&mut self, t: SimTime, dt: f64) -> Option<AttitudeCommand> {
+        if !self.armed {
+            self.pos_ctrl_active = false;
+            return None;
+        }
+        let idle = AttitudeCommand::Attitude {
+            setpoint: AttitudeSetpoint::idle(self.yaw_rad()),
+            yawspeed_ff_rps: f64::NAN,
+        };
+        let trajectory = if self.mode == FlightMode::Offboard {
+            match self.offboard {
+                Some(OffboardTarget::Attitude {
+                    attitude,
+                    thrust,
+                    yawspeed_ff_rps,
+                }) => {
+                    self.pos_ctrl_active = false;
+                    return Some(AttitudeCommand::Attitude {
+                        setpoint: AttitudeSetpoint {
+                            attitude,
+                            thrust_norm: thrust,
+                        },
+                        yawspeed_ff_rps,
+                    });
+                }
+                Some(OffboardTarget::Rates {
+                    rates_frd_rps,
+                    thrust,
+                }) => {
+                    self.pos_ctrl_active = false;
+                    return Some(AttitudeCommand::Rates {
+                        rates_frd_rps,
+                        thrust_norm: thrust,
+                    });
+                }
+                Some(OffboardTarget::Trajectory(sp)) => {
+                    let wants_up = sp.pos_ned_m.z < self.state.pos_ned_m.z - 0.1
+                        || sp.vel_ned_mps.z < -0.1
+                        || sp.acc_ned_mps2.z < -0.1;
+                    (!self.landed || wants_up).then_some(sp)
+                }
+                None => None,
+            }
+        } else {
+            let sp = self.nav_setpoint(t, dt);
+            sp.filter(|_| !self.landed || self.nav_wants_climb())
+        };
+        let Some(sp) = trajectory else {
+            self.pos_ctrl_active = false;
+            return Some(idle);
+        };
+        if !self.pos_ctrl_active {
+            self.pos_ctrl.reset();
+            self.pos_ctrl_active = true;
+        }
+        let kin = Kinematics {
+            pos_ned_m: self.state.pos_ned_m,
+            vel_ned_mps: self.state.vel_ned_mps,
+            yaw_rad: self.yaw_rad(),
+        };
+        let mut mpc = self.tuning.mpc;
+        if let Nav::Velocity { vel_ned_mps } = self.nav {
+            // The pilot of a vehicle started in the air holds its start velocity, however
+            // fast: an emulator's fiction, not bound by MPC_XY_VEL_MAX / MPC_Z_VEL_MAX_*.
+            mpc.xy_vel_max_mps = mpc.xy_vel_max_mps.max(vel_ned_mps.xy().norm());
+            mpc.z_vel_max_up_mps = mpc.z_vel_max_up_mps.max(-vel_ned_mps.z);
+            mpc.z_vel_max_dn_mps = mpc.z_vel_max_dn_mps.max(vel_ned_mps.z);
+        }
+        let out = self.pos_ctrl.update(&mpc, &sp, &kin, dt);
+        Some(AttitudeCommand::Attitude {
+            setpoint: out.attitude,
+            yawspeed_ff_rps: out.yawspeed_ff_rps,
+        })
+    }
+
+    pub(super) fn check_offboard_loss(&mut self, t: SimTime) {
+        if self.mode != FlightMode::Offboard || self.failsafe {
+            return;
+        }
+        let timeout = Duration::from_secs_f64(self.params.value("COM_OF_LOSS_T"));
+        let last = self.offboard_signal.unwrap_or(SimTime::ZERO);
+        if t - last <= timeout {
+            return;
+        }
+        self.failsafe = true;
+        self.events.push_back(VehicleEvent::OffboardLost {
+            at: t,
+            last_setpoint: last,
+        });
+        tracing::warn!(
+            sysid = self.cfg.system_id,
+            silent_ms = (t - last).as_millis() as u64,
+            "offboard setpoints lost"
+        );
+        match self.params.value("COM_OBL_RC_ACT") as i64 {
+            3 => self.enter_mode(FlightMode::Return),
+            4 => self.enter_mode(FlightMode::Land),
+            5 => self.enter_mode(FlightMode::Hold),
+            6 | 7 => self.disarm("offboard loss failsafe"),
+            _ => self.enter_mode(FlightMode::Position),
+        }
+    }
+
+    /// PX4's `offboardCheck`: an offboard setpoint arrived within COM_OF_LOSS_T.
+    pub(super) fn offboard_available(&self, t: SimTime) -> bool {
+        let timeout = Duration::from_secs_f64(self.params.value("COM_OF_LOSS_T"));
+        self.offboard_signal.is_some_and(|last| t - last <= timeout)
+    }
+
+    /// Whether `mode` can run now (PX4's `canRun`).
+    pub(super) fn can_run(&self, t: SimTime, mode: FlightMode) -> bool {
+        match mode {
+            FlightMode::Offboard => self.offboard_available(t),
+            FlightMode::Mission => self.mission.is_valid(),
+            _ => true,
+        }
+    }
+
+    /// Records an accepted offboard setpoint at `t`: it is flown in OFFBOARD and keeps
+    /// the offboard signal alive.
+    pub(super) fn note_offboard(&mut self, t: SimTime, target: OffboardTarget) {
+        self.offboard = Some(target);
+        self.offboard_signal = Some(t);
+        self.counters.setpoints += 1;
+    }
+}
