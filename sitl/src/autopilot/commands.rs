@@ -12,7 +12,7 @@ use std::time::Duration;
 use mavlink::dialects::common::{COMMAND_ACK_DATA, MavCmd, MavMessage, MavResult};
 use nalgebra::Vector3;
 
-use super::flight::Nav;
+use super::flight::{Nav, Orbit, OrbitYaw};
 use super::mode::FlightMode;
 use super::{LinkId, Vehicle};
 use crate::time::SimTime;
@@ -83,6 +83,7 @@ impl Vehicle {
                 MavResult::MAV_RESULT_ACCEPTED
             }
             MavCmd::MAV_CMD_DO_REPOSITION => self.cmd_reposition(&cmd),
+            MavCmd::MAV_CMD_DO_ORBIT => self.cmd_orbit(&cmd),
             MavCmd::MAV_CMD_DO_CHANGE_SPEED => self.cmd_change_speed(&cmd),
             MavCmd::MAV_CMD_MISSION_START => self.cmd_mission_start(now, &cmd),
             MavCmd::MAV_CMD_DO_SET_MISSION_CURRENT => self.cmd_set_mission_current(&cmd),
@@ -235,6 +236,67 @@ impl Vehicle {
             limits: self.tuning.auto_at(speed),
             yaw_rad: yaw,
         };
+        MavResult::MAV_RESULT_ACCEPTED
+    }
+
+    /// DO_ORBIT: radius param1 (m, 1..=1000, positive clockwise; NaN: 10), speed param2
+    /// (m/s; NaN: 1; at most what MPC_ACC_HOR allows on that radius), yaw behaviour param3
+    /// (0 centre, 1 initial heading, 2 free, 3 tangent; NaN: 0), centre param5/6
+    /// (lat/lon; NaN: here), altitude param7 (AMSL; NaN: here). Needs a flying vehicle.
+    fn cmd_orbit(&mut self, cmd: &Command) -> MavResult {
+        if !self.armed || self.landed {
+            return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
+        }
+        let radius = cmd.params[0].unwrap_or(10.0);
+        let speed = cmd.params[1].unwrap_or(1.0);
+        let yaw = match cmd.params[2].map_or(0, |y| y as i64) {
+            0 => OrbitYaw::Centre,
+            1 => OrbitYaw::Initial(self.yaw_rad()),
+            2 => OrbitYaw::Free,
+            3 => OrbitYaw::Tangent,
+            _ => return MavResult::MAV_RESULT_DENIED,
+        };
+        let (lat, lon) = (cmd.params[4], cmd.params[5]);
+        if !(1.0..=1000.0).contains(&radius.abs())
+            || !(speed.is_finite() && speed >= 0.0)
+            || lat.is_some_and(|v| v.abs() > 90.0)
+            || lon.is_some_and(|v| v.abs() > 180.0)
+        {
+            return MavResult::MAV_RESULT_DENIED;
+        }
+        let here = self.state.pos_ned_m;
+        let here_geo = self
+            .world
+            .to_geodetic(&(self.cfg.start.pos_world_ned_m + here));
+        let centre = self.global_frame().to_local(
+            lat.unwrap_or(here_geo.lat_deg),
+            lon.unwrap_or(here_geo.lon_deg),
+            cmd.params[6].unwrap_or(here_geo.alt_amsl_m),
+        );
+        // The centripetal acceleration v²/r stays within MPC_ACC_HOR.
+        let speed = speed.min((self.tuning.auto.acc_xy_mps2 * radius.abs()).sqrt());
+        let out = here.xy() - centre.xy();
+        let dir = if out.norm() > 1e-6 {
+            out / out.norm()
+        } else {
+            nalgebra::Vector2::new(1.0, 0.0)
+        };
+        let entry = centre.xy() + dir * radius.abs();
+        self.failsafe = false;
+        self.enter_mode(FlightMode::Orbit);
+        self.nav = Nav::Orbit(Orbit {
+            centre_m: centre.xy(),
+            z_m: centre.z,
+            radius_m: radius,
+            speed_mps: speed,
+            yaw,
+            angle_rad: None,
+            approach: Approach::new(
+                here,
+                self.state.vel_ned_mps,
+                Vector3::new(entry.x, entry.y, centre.z),
+            ),
+        });
         MavResult::MAV_RESULT_ACCEPTED
     }
 

@@ -13,6 +13,8 @@
 //!               ──► [RTL_LAND_DELAY ≠ 0: Descend to RTL_DESCEND_ALT ──► Loiter delay]
 //!               ──► Land
 //!  Mission   ── see `mission_run`
+//!  Orbit     ── to the nearest point of the circle, then around it at the asked speed
+//!               (DO_ORBIT), nose to the centre, fixed, free or along the circle
 //! ```
 //!
 //! Auto targets travel through [`Approach`] (limited speed and acceleration), yaw slews
@@ -75,6 +77,37 @@ pub(super) enum Nav {
     },
     /// Fly the stored mission.
     Mission(MissionRun),
+    /// Circle a point (DO_ORBIT).
+    Orbit(Orbit),
+}
+
+/// What an orbit keeps its nose on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum OrbitYaw {
+    /// The centre (ORBIT_YAW_BEHAVIOUR_HOLD_FRONT_TO_CIRCLE_CENTER, 0, the default).
+    Centre,
+    /// The heading when the orbit started (1).
+    Initial(f64),
+    /// Whatever it is (2).
+    Free,
+    /// Along the circle (3).
+    Tangent,
+}
+
+/// An orbit: first to the nearest point of the circle, then around it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Orbit {
+    /// Centre (local NED x, y) and altitude (local NED z).
+    pub centre_m: Vector2<f64>,
+    pub z_m: f64,
+    /// Radius (m), positive clockwise seen from above.
+    pub radius_m: f64,
+    /// Speed along the circle (m/s).
+    pub speed_mps: f64,
+    pub yaw: OrbitYaw,
+    /// Angle on the circle from north toward east (rad); `None` while still approaching.
+    pub angle_rad: Option<f64>,
+    pub approach: Approach,
 }
 
 /// Below this horizontal speed Position mode locks its position (m/s).
@@ -146,6 +179,12 @@ impl Vehicle {
                 yaw_rad: yaw,
             },
             FlightMode::Mission => Nav::Mission(MissionRun::start(self.mission.current_seq())),
+            // Set up by DO_ORBIT; entered otherwise, it holds.
+            FlightMode::Orbit => Nav::Hold {
+                approach: Approach::new(here, vel, stop_point(here, vel, &t.auto)),
+                limits: t.auto,
+                yaw_rad: yaw,
+            },
         }
     }
 
@@ -240,6 +279,10 @@ impl Vehicle {
                 let (sp, yaw, next) = self.mission_step(t, run, dt_s);
                 (sp, yaw, next)
             }
+            Nav::Orbit(orbit) => {
+                let (sp, yaw) = self.orbit_step(orbit, dt_s);
+                (Some(sp), yaw, None)
+            }
         };
         self.nav = nav;
         self.slew_yaw(yaw_target, dt_s);
@@ -329,5 +372,60 @@ impl Vehicle {
         let max_step = self.tuning.yaw_rate_auto_rps * dt_s;
         let error = wrap_pi(target_rad - self.nav_yaw_rad);
         self.nav_yaw_rad = wrap_pi(self.nav_yaw_rad + error.clamp(-max_step, max_step));
+    }
+}
+
+impl Vehicle {
+    /// One orbit step: the approach to the circle, then the point running around it with
+    /// its velocity and centripetal acceleration as feed-forward.
+    fn orbit_step(&self, orbit: &mut Orbit, dt_s: f64) -> (TrajectorySetpoint, f64) {
+        let here = self.state.pos_ned_m;
+        let r = orbit.radius_m.abs();
+        let direction = orbit.radius_m.signum();
+        let sp = match orbit.angle_rad {
+            None => {
+                let sp = orbit.approach.step(&self.tuning.auto, dt_s);
+                if orbit.approach.arrived() {
+                    let d = orbit.approach.target().xy() - orbit.centre_m;
+                    orbit.angle_rad = Some(d.y.atan2(d.x));
+                }
+                sp
+            }
+            Some(angle) => {
+                let next = angle + direction * orbit.speed_mps / r * dt_s;
+                orbit.angle_rad = Some(wrap_pi(next));
+                let (s, c) = next.sin_cos();
+                let v = orbit.speed_mps * direction;
+                TrajectorySetpoint {
+                    pos_ned_m: Vector3::new(
+                        orbit.centre_m.x + r * c,
+                        orbit.centre_m.y + r * s,
+                        orbit.z_m,
+                    ),
+                    vel_ned_mps: Vector3::new(-v * s, v * c, 0.0),
+                    acc_ned_mps2: Vector3::new(
+                        -orbit.speed_mps.powi(2) / r * c,
+                        -orbit.speed_mps.powi(2) / r * s,
+                        0.0,
+                    ),
+                    ..TrajectorySetpoint::UNSET
+                }
+            }
+        };
+        let to_centre = orbit.centre_m - here.xy();
+        let yaw = match orbit.yaw {
+            OrbitYaw::Centre => to_centre.y.atan2(to_centre.x),
+            OrbitYaw::Initial(yaw) => yaw,
+            OrbitYaw::Free => self.yaw_rad(),
+            OrbitYaw::Tangent => {
+                let v = sp.vel_ned_mps;
+                if v.xy().norm() > 0.1 {
+                    v.y.atan2(v.x)
+                } else {
+                    self.nav_yaw_rad
+                }
+            }
+        };
+        (sp, yaw)
     }
 }

@@ -4,6 +4,8 @@
 
 /// PX4 main modes.
 const MAIN_POSCTL: u32 = 3;
+/// PX4's POSCTL sub mode of an orbit (PX4_CUSTOM_SUB_MODE_POSCTL_ORBIT).
+const SUB_ORBIT: u32 = 1;
 const MAIN_AUTO: u32 = 4;
 const MAIN_OFFBOARD: u32 = 6;
 /// PX4 AUTO sub modes.
@@ -28,6 +30,8 @@ pub enum FlightMode {
     Mission,
     /// AUTO.RTL: climb to the return altitude, fly home, land.
     Return,
+    /// Orbit (MAV_CMD_DO_ORBIT): circle a point; reported as POSCTL sub mode ORBIT.
+    Orbit,
     /// OFFBOARD: track the streamed attitude and thrust setpoints.
     Offboard,
 }
@@ -42,13 +46,15 @@ impl FlightMode {
             Self::Land => (MAIN_AUTO, SUB_LAND),
             Self::Mission => (MAIN_AUTO, SUB_MISSION),
             Self::Return => (MAIN_AUTO, SUB_RTL),
+            Self::Orbit => (MAIN_POSCTL, SUB_ORBIT),
             Self::Offboard => (MAIN_OFFBOARD, 0),
         };
         (main << 16) | (sub << 24)
     }
 
     /// The mode a DO_SET_MODE / SET_MODE asks for (`main`, `sub` as PX4 numbers); `None`
-    /// for modes the emulator does not fly (manual modes need a pilot).
+    /// for modes the emulator does not fly (manual modes need a pilot). An orbit needs its
+    /// parameters: only MAV_CMD_DO_ORBIT starts one.
     pub fn from_px4(main: u32, sub: u32) -> Option<Self> {
         match (main, sub) {
             (MAIN_POSCTL, _) => Some(Self::Position),
@@ -71,6 +77,7 @@ impl FlightMode {
             Self::Land => "LAND",
             Self::Mission => "MISSION",
             Self::Return => "RTL",
+            Self::Orbit => "ORBIT",
             Self::Offboard => "OFFBOARD",
         }
     }

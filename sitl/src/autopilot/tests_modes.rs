@@ -439,3 +439,69 @@ fn data_link_loss_lands_when_nav_dll_act_says_land() {
     );
     assert!(rig.vehicle.status().failsafe);
 }
+
+#[test]
+fn orbit_circles_the_centre_at_the_asked_radius_and_speed_facing_it() {
+    let mut rig = Rig::on_ground();
+    rig.takeoff();
+    rig.advance(Duration::from_secs(6));
+    // Centre 20 m north of home, 15 m radius clockwise, 3 m/s, 10 m above home
+    // (MAVSDK's do_orbit: COMMAND_INT, frame left at GLOBAL_RELATIVE_ALT, z AMSL).
+    let (lat, lon) = lat_lon_e7(20.0, 0.0);
+    let r = rig.command_int(
+        MavCmd::MAV_CMD_DO_ORBIT,
+        [15.0, 3.0, 0.0, NAN],
+        lat,
+        lon,
+        498.0,
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
+    assert_eq!(rig.vehicle.status().mode, FlightMode::Orbit);
+    // 3 m/s on 15 m (0.2 rad/s, centripetal 0.6 m/s²): one lap in 31.4 s.
+    rig.advance(Duration::from_secs(20));
+    let (mut worst_r, mut worst_v, mut worst_yaw) = (0.0_f64, 0.0_f64, 0.0_f64);
+    for _ in 0..300 {
+        rig.advance(Duration::from_millis(100));
+        let p = rig.pos();
+        let to_centre = Vector3::new(20.0, 0.0, -10.0) - p;
+        worst_r = worst_r.max((to_centre.xy().norm() - 15.0).abs());
+        worst_v = worst_v.max((rig.vehicle.status().vel_ned_mps.xy().norm() - 3.0).abs());
+        let facing = to_centre.y.atan2(to_centre.x);
+        worst_yaw = worst_yaw.max(crate::position_control::wrap_pi(rig.yaw() - facing).abs());
+        assert!((p.z + 10.0).abs() < 0.1, "altitude {}", -p.z);
+    }
+    assert!(worst_r < 0.3, "radius off by {worst_r} m");
+    assert!(worst_v < 0.15, "speed off by {worst_v} m/s");
+    assert!(worst_yaw < 5f64.to_radians(), "yaw off by {worst_yaw} rad");
+    // Clockwise from above: the bearing from the centre increases.
+    let before = rig.pos() - Vector3::new(20.0, 0.0, 0.0);
+    rig.advance(Duration::from_secs(2));
+    let after = rig.pos() - Vector3::new(20.0, 0.0, 0.0);
+    assert!(
+        crate::position_control::wrap_pi(after.y.atan2(after.x) - before.y.atan2(before.x)) > 0.0
+    );
+}
+
+#[test]
+fn orbit_is_refused_on_the_ground_and_with_a_bad_radius() {
+    let mut rig = Rig::on_ground();
+    let (lat, lon) = lat_lon_e7(20.0, 0.0);
+    let r = rig.command_int(
+        MavCmd::MAV_CMD_DO_ORBIT,
+        [15.0, 3.0, 0.0, NAN],
+        lat,
+        lon,
+        498.0,
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
+    rig.takeoff();
+    rig.advance(Duration::from_secs(6));
+    let r = rig.command_int(
+        MavCmd::MAV_CMD_DO_ORBIT,
+        [0.5, 3.0, 0.0, NAN],
+        lat,
+        lon,
+        498.0,
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_DENIED);
+}
