@@ -257,11 +257,8 @@ impl Vehicle {
             _ => return MavResult::MAV_RESULT_DENIED,
         };
         let (lat, lon) = (cmd.params[4], cmd.params[5]);
-        if !(1.0..=1000.0).contains(&radius.abs())
-            || !(speed.is_finite() && speed >= 0.0)
-            || lat.is_some_and(|v| v.abs() > 90.0)
-            || lon.is_some_and(|v| v.abs() > 180.0)
-        {
+        let usable = (1.0..=1000.0).contains(&radius.abs()) && speed.is_finite() && speed >= 0.0;
+        if !usable || lat.is_some_and(|v| v.abs() > 90.0) || lon.is_some_and(|v| v.abs() > 180.0) {
             return MavResult::MAV_RESULT_DENIED;
         }
         let here = self.state.pos_ned_m;
