@@ -125,3 +125,16 @@ def test_every_vehicle_was_told_to_land_and_disarm_and_acknowledged_both(run_dir
             last[m.get_srcSystem()] = m.landed_state
     for system in range(1, N + 1):
         assert last[system] == mavutil.mavlink.MAV_LANDED_STATE_ON_GROUND, system
+
+
+def test_the_coordinator_heartbeat_is_in_the_tlog_at_one_hertz_per_link(run_dir):
+    """Over UDP the four links' heartbeats leave within the same wall-clock second: the
+    tlog holds about 4 per second of flight, from 253/190, type GCS."""
+    messages = read_tlog(run_dir / "traffic.tlog")
+    beats = [m for m in messages if m.get_type() == "HEARTBEAT" and m.type == mavutil.mavlink.MAV_TYPE_GCS]
+    assert beats
+    assert all((m.get_srcSystem(), m.get_srcComponent()) == (253, 190) for m in beats)
+    assert all(m.autopilot == mavutil.mavlink.MAV_AUTOPILOT_INVALID for m in beats)
+    span = messages[-1]._timestamp - messages[0]._timestamp
+    rate = len(beats) / span
+    assert rate == pytest.approx(N * 1.0, rel=0.1), f"{rate:.2f} heartbeats/s for {N} links"
