@@ -1,13 +1,13 @@
-//! The smooth reference that auto modes (Takeoff, goto, Return, Mission) and Position's
-//! braking hand to the position controller: a point that travels toward a target along a
-//! straight line with limited speed, acceleration and jerk and stops on it, as PX4's auto
-//! flight tasks do with their jerk-limited trajectory (`PositionSmoothing`).
+//! The smooth reference that auto modes (Takeoff, Hold, goto, Return, Mission, Orbit's
+//! approach) hand to the position controller: a point that travels toward a target along
+//! a straight line with limited speed and acceleration and stops on it, as PX4's auto
+//! flight tasks do with their trajectory generator (PX4's also limits jerk,
+//! MPC_JERK_AUTO; this one does not, so its acceleration feed-forward steps).
 //!
-//! Horizontal and vertical motion are planned separately, each with its own limits. Per
-//! step the wanted velocity points at the target with the speed that can still stop in
-//! the distance left (`v² + v·a²/j = 2·a·d`, the stop with a jerk ramp), capped by the
-//! cruise speed; the acceleration moves toward `√(2·j·|v_wanted − v|)` along the velocity
-//! error plus the braking curve's own deceleration (at most `a`), by at most `j·dt`. Frames: local NED, metres and seconds. Pure and deterministic.
+//! Horizontal and vertical motion are planned separately, each with its own speed and
+//! acceleration: the reference's speed toward the target is `min(cruise, √(2·a·d))`,
+//! reached from the current reference speed at no more than `a`. Frames: local NED,
+//! metres and seconds. Pure and deterministic.
 
 use nalgebra::{Vector2, Vector3};
 

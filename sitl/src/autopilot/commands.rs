@@ -1,7 +1,8 @@
 //! Commands (COMMAND_LONG, COMMAND_INT, SET_MODE): every one is answered with a
 //! COMMAND_ACK on the link it came from, UNSUPPORTED for commands the emulator does not
 //! implement. Unused parameters (NaN on the wire, INT32_MAX for COMMAND_INT's x and y)
-//! arrive as `None`; COMMAND_INT's x and y in a global frame arrive in degrees.
+//! and non-finite ones (PX4 tests them with `PX4_ISFINITE`) arrive as `None`;
+//! COMMAND_INT's x and y in a global frame arrive in degrees.
 //!
 //! Mode changes follow PX4's commander: while disarmed any mode the emulator flies is
 //! accepted (arming then needs a mode that can run); while armed, OFFBOARD needs the
@@ -35,7 +36,7 @@ impl Command {
     pub fn from_wire(id: MavCmd, params: [f32; 7]) -> Self {
         Self {
             id,
-            params: params.map(|x| (!x.is_nan()).then_some(f64::from(x))),
+            params: params.map(|x| x.is_finite().then_some(f64::from(x))),
         }
     }
 
@@ -44,7 +45,7 @@ impl Command {
     pub fn from_int(id: MavCmd, params: [f32; 4], x: i32, y: i32, z: f32, global: bool) -> Self {
         let scale = if global { 1e-7 } else { 1.0 };
         let xy = |v: i32| (v != i32::MAX).then_some(f64::from(v) * scale);
-        let p = params.map(|x| (!x.is_nan()).then_some(f64::from(x)));
+        let p = params.map(|x| x.is_finite().then_some(f64::from(x)));
         Self {
             id,
             params: [
@@ -54,7 +55,7 @@ impl Command {
                 p[3],
                 xy(x),
                 xy(y),
-                (!z.is_nan()).then_some(f64::from(z)),
+                z.is_finite().then_some(f64::from(z)),
             ],
         }
     }
@@ -147,7 +148,7 @@ impl Vehicle {
             );
             return false;
         }
-        if self.params.value("NAV_DLL_ACT") > 0.0 && !self.gcs_connected(now) {
+        if self.tuning.datalink_loss_action > 0 && !self.gcs_connected(now) {
             tracing::info!(
                 sysid = self.cfg.system_id,
                 "arming denied: no connection to the ground station"
@@ -297,13 +298,18 @@ impl Vehicle {
         MavResult::MAV_RESULT_ACCEPTED
     }
 
-    /// DO_CHANGE_SPEED: param2 m/s (≤ 0: back to MPC_XY_CRUISE) for the leg being flown.
+    /// DO_CHANGE_SPEED: param2 m/s for the leg being flown (Hold/goto or a mission);
+    /// −1 leaves it, 0 or less otherwise goes back to MPC_XY_CRUISE.
     fn cmd_change_speed(&mut self, cmd: &Command) -> MavResult {
-        let speed = cmd.params[1]
-            .filter(|s| *s > 0.0)
-            .unwrap_or(self.tuning.auto.speed_xy_mps);
-        if let Nav::Hold { limits, .. } = &mut self.nav {
-            *limits = self.tuning.auto_at(speed);
+        let speed = match cmd.params[1] {
+            Some(-1.0) => return MavResult::MAV_RESULT_ACCEPTED,
+            Some(s) if s > 0.0 => s,
+            _ => self.tuning.auto.speed_xy_mps,
+        };
+        match &mut self.nav {
+            Nav::Hold { limits, .. } => *limits = self.tuning.auto_at(speed),
+            Nav::Mission(run) => run.set_speed(speed),
+            _ => {}
         }
         MavResult::MAV_RESULT_ACCEPTED
     }
@@ -315,11 +321,11 @@ impl Vehicle {
         if !self.mission.is_valid() || first.is_none_or(|f| !(-1.0..n).contains(&f)) {
             return MavResult::MAV_RESULT_DENIED;
         }
-        if let Some(f) = first.filter(|f| *f >= 0.0) {
-            self.mission.set_current(f as usize);
-        }
         self.failsafe = false;
         self.enter_mode(FlightMode::Mission);
+        if let Some(f) = first.filter(|f| *f >= 0.0) {
+            self.jump_to_item(f as usize);
+        }
         if !self.armed {
             if !self.arming_allowed(now) {
                 return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;

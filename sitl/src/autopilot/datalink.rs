@@ -49,8 +49,7 @@ impl Vehicle {
         if self.datalink.lost {
             return;
         }
-        let loss_t = Duration::from_secs_f64(self.params.value("COM_DL_LOSS_T"));
-        if now - last <= HEARTBEAT_STALE + loss_t {
+        if now - last <= HEARTBEAT_STALE + self.tuning.datalink_loss {
             return;
         }
         self.datalink.lost = true;
@@ -59,7 +58,7 @@ impl Vehicle {
             silent_ms = (now - last).as_millis() as u64,
             "connection to ground station lost"
         );
-        let action = self.params.value("NAV_DLL_ACT") as i64;
+        let action = self.tuning.datalink_loss_action;
         if action == 0 || !self.armed || self.mode == FlightMode::Land {
             return;
         }

@@ -166,7 +166,9 @@ impl Vehicle {
                 lock: None,
             },
             FlightMode::Takeoff => {
-                let target_z = self.env.ground_z_ned_m - t.takeoff_alt_m;
+                // MIS_TAKEOFF_ALT above the ground, never below where it is ("already
+                // higher than takeoff altitude").
+                let target_z = (self.env.ground_z_ned_m - t.takeoff_alt_m).min(here.z);
                 Nav::Takeoff {
                     approach: Approach::new(here, vel, Vector3::new(here.x, here.y, target_z)),
                     yaw_rad: yaw,
@@ -288,6 +290,10 @@ impl Vehicle {
         self.slew_yaw(yaw_target, dt_s);
         if let Some(mode) = next_mode {
             self.switch_nav(mode);
+            if sp.is_none() {
+                // The mode that just ended flew nothing this step: the next one does.
+                return self.nav_setpoint(t, dt_s);
+            }
         }
         sp.map(|sp| TrajectorySetpoint {
             yaw_rad: self.nav_yaw_rad,
@@ -354,9 +360,8 @@ impl Vehicle {
             }
             ReturnStage::Descend if approach.arrived() && close(approach.target()) => {
                 let delay = tuning.rtl_land_delay_s;
-                *stage = ReturnStage::Loiter(
-                    (delay >= 0.0).then(|| t + std::time::Duration::from_secs_f64(delay)),
-                );
+                *stage =
+                    ReturnStage::Loiter((delay >= 0.0).then(|| t + super::tuning::seconds(delay)));
             }
             ReturnStage::Loiter(Some(until)) if t >= until => *stage = ReturnStage::Land,
             _ => {}

@@ -73,6 +73,7 @@ impl Vehicle {
                 sender,
                 (m.target_system, m.target_component),
                 m.seq,
+                false,
             ),
             #[allow(deprecated)]
             MavMessage::MISSION_REQUEST(m) => self.on_mission_request(
@@ -81,6 +82,7 @@ impl Vehicle {
                 sender,
                 (m.target_system, m.target_component),
                 m.seq,
+                true,
             ),
             MavMessage::MISSION_ACK(m) => {
                 self.on_mission_ack(sender, (m.target_system, m.target_component))

@@ -296,6 +296,15 @@ impl Vehicle {
         self.report_mission();
     }
 
+    /// Stores a new plan (or none) and points a mission being flown at its current item.
+    pub(super) fn replace_mission(&mut self, items: Vec<MissionItem>, current: Option<usize>) {
+        self.mission.replace(items, current);
+        let seq = self.mission.current_seq();
+        if let super::flight::Nav::Mission(run) = &mut self.nav {
+            run.jump(seq);
+        }
+    }
+
     /// Makes `seq` the current item (and tells the clients).
     pub(super) fn jump_to_item(&mut self, seq: usize) {
         self.mission.set_current(seq);

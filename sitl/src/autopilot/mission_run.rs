@@ -19,14 +19,13 @@
 //! acceptance radius. Altitudes of relative frames are above home (the start point on
 //! the ground).
 
-use std::time::Duration;
-
 use nalgebra::Vector3;
 
 use super::Vehicle;
 use super::flight::bearing;
 use super::mission::{MissionItem, cmd};
 use super::mode::FlightMode;
+use super::tuning::seconds;
 use crate::position_control::TrajectorySetpoint;
 use crate::time::SimTime;
 use crate::trajectory::Approach;
@@ -75,6 +74,11 @@ impl MissionRun {
     pub fn jump(&mut self, seq: usize) {
         self.seq = seq;
         self.stage = Stage::Begin;
+    }
+
+    /// A new cruise speed (DO_CHANGE_SPEED as a command).
+    pub fn set_speed(&mut self, speed_mps: f64) {
+        self.speed_xy_mps = Some(speed_mps);
     }
 
     /// Whether the mission needs to leave the ground.
@@ -167,7 +171,7 @@ impl Vehicle {
                 let delay = f64::from(item.params[0]).max(0.0);
                 let point = run.approach.map_or(here, |a| a.target());
                 run.approach = Some(Approach::new(here, self.state.vel_ned_mps, point));
-                run.stage = Stage::Wait(Some(t + Duration::from_secs_f64(delay)));
+                run.stage = Stage::Wait(Some(t + seconds(delay)));
                 ItemStart::Flying
             }
             c if item.is_positional() => {
@@ -252,12 +256,12 @@ impl Vehicle {
                     run.stage = match item.command {
                         cmd::NAV_LAND => Stage::Landing,
                         cmd::NAV_LOITER_UNLIM => Stage::Wait(None),
-                        cmd::NAV_LOITER_TIME => Stage::Wait(Some(
-                            t + Duration::from_secs_f64(f64::from(item.params[0]).max(0.0)),
-                        )),
+                        cmd::NAV_LOITER_TIME => {
+                            Stage::Wait(Some(t + seconds(f64::from(item.params[0]).max(0.0))))
+                        }
                         _ => {
                             let hold = f64::from(item.params[0]);
-                            Stage::Wait(Some(t + Duration::from_secs_f64(hold.max(0.0))))
+                            Stage::Wait(Some(t + seconds(hold.max(0.0))))
                         }
                     };
                 }

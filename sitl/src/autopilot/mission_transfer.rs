@@ -168,7 +168,7 @@ impl Vehicle {
             return true;
         }
         if count == 0 {
-            self.mission.replace(Vec::new(), Some(0));
+            self.replace_mission(Vec::new(), Some(0));
             self.send_mission_ack(
                 link,
                 sender,
@@ -277,7 +277,7 @@ impl Vehicle {
         }
         let (items, current) = (std::mem::take(items), *current);
         self.mission.transfer = Transfer::Idle;
-        self.mission.replace(items, current);
+        self.replace_mission(items, current);
         self.send_mission_ack(
             link,
             sender,
@@ -304,7 +304,11 @@ impl Vehicle {
         if !self.mission_for_us(target.0, target.1) {
             return false;
         }
-        if self.mission.transfer != Transfer::Idle {
+        let restart = matches!(
+            self.mission.transfer,
+            Transfer::Sending { partner, .. } if partner == sender
+        );
+        if self.mission.transfer != Transfer::Idle && !restart {
             return true; // busy: PX4 only says so in a status text
         }
         let count = if mission_type == MavMissionType::MAV_MISSION_TYPE_MISSION {
@@ -350,6 +354,7 @@ impl Vehicle {
         sender: (u8, u8),
         target: (u8, u8),
         seq: u16,
+        legacy: bool,
     ) -> bool {
         if !self.mission_for_us(target.0, target.1) {
             return false;
@@ -378,33 +383,12 @@ impl Vehicle {
             );
             return true;
         };
-        // PX4 answers with the _INT frames (5, 6), deprecated in the XML but what flies.
-        #[allow(deprecated)]
-        let frame = match item.frame {
-            0 => MavFrame::MAV_FRAME_GLOBAL_INT,
-            3 => MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-            5 => MavFrame::MAV_FRAME_GLOBAL_INT,
-            6 => MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-            _ => MavFrame::MAV_FRAME_MISSION,
+        let current = u8::from(usize::from(seq) == self.mission.current_seq());
+        let msg = if legacy {
+            item_message_float(&item, seq, sender, current)
+        } else {
+            item_message_int(&item, seq, sender, current)
         };
-        let command = mav_cmd(item.command);
-        let msg = MavMessage::MISSION_ITEM_INT(MISSION_ITEM_INT_DATA {
-            param1: item.params[0],
-            param2: item.params[1],
-            param3: item.params[2],
-            param4: item.params[3],
-            x: item.x,
-            y: item.y,
-            z: item.z,
-            seq,
-            command,
-            target_system: sender.0,
-            target_component: sender.1,
-            frame,
-            current: u8::from(usize::from(seq) == self.mission.current_seq()),
-            autocontinue: item.autocontinue,
-            mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
-        });
         self.send(link, &msg);
         true
     }
@@ -440,7 +424,7 @@ impl Vehicle {
             mission_type,
             MavMissionType::MAV_MISSION_TYPE_MISSION | MavMissionType::MAV_MISSION_TYPE_ALL
         ) {
-            self.mission.replace(Vec::new(), Some(0));
+            self.replace_mission(Vec::new(), Some(0));
         }
         self.send_mission_ack(
             link,
@@ -512,4 +496,60 @@ impl Vehicle {
             self.report_mission();
         }
     }
+}
+
+/// A stored item as MISSION_ITEM_INT; PX4 answers with the _INT frames (5, 6),
+/// deprecated in the XML but what flies.
+#[allow(deprecated)]
+fn item_message_int(item: &MissionItem, seq: u16, to: (u8, u8), current: u8) -> MavMessage {
+    let frame = match item.frame {
+        0 | 5 => MavFrame::MAV_FRAME_GLOBAL_INT,
+        3 | 6 => MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+        _ => MavFrame::MAV_FRAME_MISSION,
+    };
+    MavMessage::MISSION_ITEM_INT(MISSION_ITEM_INT_DATA {
+        param1: item.params[0],
+        param2: item.params[1],
+        param3: item.params[2],
+        param4: item.params[3],
+        x: item.x,
+        y: item.y,
+        z: item.z,
+        seq,
+        command: mav_cmd(item.command),
+        target_system: to.0,
+        target_component: to.1,
+        frame,
+        current,
+        autocontinue: item.autocontinue,
+        mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
+    })
+}
+
+/// A stored item as the legacy MISSION_ITEM (degrees as floats), for a client that asked
+/// with MISSION_REQUEST.
+#[allow(deprecated)]
+fn item_message_float(item: &MissionItem, seq: u16, to: (u8, u8), current: u8) -> MavMessage {
+    let (frame, scale) = match item.frame {
+        0 | 5 => (MavFrame::MAV_FRAME_GLOBAL, 1e-7),
+        3 | 6 => (MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT, 1e-7),
+        _ => (MavFrame::MAV_FRAME_MISSION, 1.0),
+    };
+    MavMessage::MISSION_ITEM(mavlink::dialects::common::MISSION_ITEM_DATA {
+        param1: item.params[0],
+        param2: item.params[1],
+        param3: item.params[2],
+        param4: item.params[3],
+        x: (f64::from(item.x) * scale) as f32,
+        y: (f64::from(item.y) * scale) as f32,
+        z: item.z,
+        seq,
+        command: mav_cmd(item.command),
+        target_system: to.0,
+        target_component: to.1,
+        frame,
+        current,
+        autocontinue: item.autocontinue,
+        mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
+    })
 }

@@ -474,18 +474,18 @@ impl Vehicle {
             return;
         }
         if self.landed && self.took_off {
-            let after = self.params.value("COM_DISARM_LAND");
+            let after = self.tuning.disarm_land_s;
             if after >= 0.0
                 && self
                     .landed_since
-                    .is_some_and(|since| t - since >= Duration::from_secs_f64(after))
+                    .is_some_and(|since| t - since >= tuning::seconds(after))
             {
                 self.disarm("landed");
                 self.enter_mode(FlightMode::Position);
             }
         } else if self.landed && !self.took_off {
-            let after = self.params.value("COM_DISARM_PRFLT");
-            if after > 0.0 && t - self.armed_at >= Duration::from_secs_f64(after) {
+            let after = self.tuning.disarm_preflight_s;
+            if after > 0.0 && t - self.armed_at >= tuning::seconds(after) {
                 self.disarm("no takeoff after arming");
             }
         }
@@ -516,7 +516,7 @@ impl Vehicle {
     }
 
     fn battery_remaining_pct(&self) -> f64 {
-        let capacity = self.params.value("BAT1_CAPACITY").max(1.0);
+        let capacity = self.tuning.battery_capacity_mah;
         (100.0 * (1.0 - self.battery.consumed_mah / capacity)).clamp(0.0, 100.0)
     }
 }

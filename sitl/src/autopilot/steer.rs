@@ -4,13 +4,11 @@
 //! its mode climbs. PX4's `offboardCheck` decides whether OFFBOARD can run; the offboard
 //! loss failsafe follows COM_OBL_RC_ACT.
 
-use std::time::Duration;
-
 use super::flight::Nav;
 use super::offboard::OffboardTarget;
 use super::{FlightMode, Vehicle, VehicleEvent};
 use crate::control::{AttitudeCommand, AttitudeSetpoint};
-use crate::position_control::Kinematics;
+use crate::position_control::{Kinematics, TrajectorySetpoint};
 use crate::time::SimTime;
 
 impl Vehicle {
@@ -60,8 +58,15 @@ impl Vehicle {
                 None => None,
             }
         } else {
-            let sp = self.nav_setpoint(t, dt);
-            sp.filter(|_| !self.landed || self.nav_wants_climb())
+            match self.nav_setpoint(t, dt) {
+                Some(sp) => (!self.landed || self.nav_wants_climb()).then_some(sp),
+                // Never idle in the air: a mode with nothing to fly holds where it is.
+                None if !self.landed => Some(TrajectorySetpoint::hold(
+                    self.state.pos_ned_m,
+                    self.nav_yaw_rad,
+                )),
+                None => None,
+            }
         };
         let Some(sp) = trajectory else {
             self.pos_ctrl_active = false;
@@ -92,10 +97,11 @@ impl Vehicle {
     }
 
     pub(super) fn check_offboard_loss(&mut self, t: SimTime) {
-        if self.mode != FlightMode::Offboard || self.failsafe {
+        // PX4's failsafes act on armed vehicles only.
+        if !self.armed || self.mode != FlightMode::Offboard || self.failsafe {
             return;
         }
-        let timeout = Duration::from_secs_f64(self.params.value("COM_OF_LOSS_T"));
+        let timeout = self.tuning.offboard_loss;
         let last = self.offboard_signal.unwrap_or(SimTime::ZERO);
         if t - last <= timeout {
             return;
@@ -110,7 +116,7 @@ impl Vehicle {
             silent_ms = (t - last).as_millis() as u64,
             "offboard setpoints lost"
         );
-        match self.params.value("COM_OBL_RC_ACT") as i64 {
+        match self.tuning.offboard_loss_action {
             3 => self.enter_mode(FlightMode::Return),
             4 => self.enter_mode(FlightMode::Land),
             5 => self.enter_mode(FlightMode::Hold),
@@ -121,7 +127,7 @@ impl Vehicle {
 
     /// PX4's `offboardCheck`: an offboard setpoint arrived within COM_OF_LOSS_T.
     pub(super) fn offboard_available(&self, t: SimTime) -> bool {
-        let timeout = Duration::from_secs_f64(self.params.value("COM_OF_LOSS_T"));
+        let timeout = self.tuning.offboard_loss;
         self.offboard_signal.is_some_and(|last| t - last <= timeout)
     }
 

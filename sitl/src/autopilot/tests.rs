@@ -86,6 +86,15 @@ impl Rig {
         self.last_ack(command)
     }
 
+    /// Sets a parameter as PARAM_SET does (the tuning follows).
+    pub fn set_param(&mut self, name: &str, value: f32) {
+        self.vehicle
+            .params
+            .set(name, value)
+            .expect("a known parameter");
+        self.vehicle.tuning = tuning::Tuning::from_params(&self.vehicle.params);
+    }
+
     /// The result of the last COMMAND_ACK for `command`.
     pub fn last_ack(&self, command: MavCmd) -> MavResult {
         self.received
@@ -184,10 +193,7 @@ fn failsafe_enters_between_loss_timeout_and_200_ms_later() {
         (7, None),
     ] {
         let mut rig = Rig::on_ground();
-        rig.vehicle
-            .params
-            .set("COM_OBL_RC_ACT", f32::from_ne_bytes(action.to_ne_bytes()))
-            .unwrap();
+        rig.set_param("COM_OBL_RC_ACT", f32::from_ne_bytes(action.to_ne_bytes()));
         rig.stream(Duration::from_millis(1100), 50.0, 0.7);
         assert_eq!(rig.arm(), MavResult::MAV_RESULT_ACCEPTED);
         assert_eq!(rig.offboard(), MavResult::MAV_RESULT_ACCEPTED);

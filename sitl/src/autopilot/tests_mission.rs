@@ -266,3 +266,74 @@ fn mission_mode_without_a_mission_is_rejected_when_armed() {
     let r = rig.command(MavCmd::MAV_CMD_MISSION_START, [0.0; 7]);
     assert_eq!(r, MavResult::MAV_RESULT_DENIED);
 }
+
+#[test]
+fn a_huge_hold_time_is_held_without_breaking_anything() {
+    let mut rig = Rig::on_ground();
+    let mut items = three_waypoints();
+    items[0].param1 = 1e30;
+    items[0].param2 = 0.5;
+    assert_eq!(
+        rig.upload(&items),
+        Some(MavMissionResult::MAV_MISSION_ACCEPTED)
+    );
+    rig.arm();
+    rig.command(MavCmd::MAV_CMD_MISSION_START, [0.0; 7]);
+    rig.advance(Duration::from_secs(20));
+    // Still holding the first waypoint, 10 m up.
+    assert!((rig.vehicle.body().pos_ned_m - Vector3::new(0.0, 0.0, -10.0)).norm() < 0.2);
+    assert_eq!(rig.vehicle.mission.current_seq(), 0);
+}
+
+#[test]
+fn mission_start_after_a_finished_mission_starts_at_the_asked_item() {
+    let mut rig = Rig::on_ground();
+    let mut items = three_waypoints();
+    for i in &mut items {
+        i.param2 = 0.5;
+    }
+    rig.upload(&items);
+    rig.arm();
+    rig.command(MavCmd::MAV_CMD_MISSION_START, [0.0; 7]);
+    rig.advance(Duration::from_secs(60));
+    assert!(rig.vehicle.mission.finished());
+    rig.received.clear();
+    let r = rig.command(
+        MavCmd::MAV_CMD_MISSION_START,
+        [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
+    assert_eq!(rig.vehicle.mission.current_seq(), 2);
+}
+
+// MISSION_REQUEST and MISSION_ITEM are deprecated in the XML (which asks for an _INT
+// answer), but PX4's mavlink_mission.cpp answers a legacy request in kind.
+#[allow(deprecated)]
+#[test]
+fn a_legacy_request_gets_a_legacy_item_in_degrees() {
+    use mavlink::dialects::common::MISSION_REQUEST_DATA;
+    let mut rig = Rig::on_ground();
+    let items = three_waypoints();
+    rig.upload(&items);
+    rig.send(MavMessage::MISSION_REQUEST_LIST(
+        MISSION_REQUEST_LIST_DATA {
+            target_system: 1,
+            target_component: 1,
+            mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
+        },
+    ));
+    rig.received.clear();
+    rig.send(MavMessage::MISSION_REQUEST(MISSION_REQUEST_DATA {
+        seq: 1,
+        target_system: 1,
+        target_component: 1,
+        mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
+    }));
+    let got = rig.received.iter().find_map(|(_, _, m)| match m {
+        MavMessage::MISSION_ITEM(i) => Some(i.clone()),
+        _ => None,
+    });
+    let got = got.expect("a MISSION_ITEM");
+    assert!((f64::from(got.x) - f64::from(items[1].x) * 1e-7).abs() < 1e-5);
+    assert_eq!(got.frame, MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT);
+}

@@ -92,14 +92,6 @@ impl Rig {
             self.advance(Duration::from_millis(50));
         }
     }
-
-    fn set_param(&mut self, name: &str, value: f32) {
-        self.vehicle
-            .params
-            .set(name, value)
-            .expect("a known parameter");
-        self.vehicle.tuning = tuning::Tuning::from_params(&self.vehicle.params);
-    }
 }
 
 /// The geodetic degE7 of a local NED point of vehicle 1 (origin at the reference).
@@ -504,4 +496,63 @@ fn orbit_is_refused_on_the_ground_and_with_a_bad_radius() {
         498.0,
     );
     assert_eq!(r, MavResult::MAV_RESULT_DENIED);
+}
+
+#[test]
+fn takeoff_while_higher_than_the_takeoff_altitude_stays_up() {
+    let mut rig = Rig::on_ground();
+    assert_eq!(rig.arm(), MavResult::MAV_RESULT_ACCEPTED);
+    let mut p = [NAN; 7];
+    p[6] = 488.0 + 12.0;
+    rig.command(MavCmd::MAV_CMD_NAV_TAKEOFF, p);
+    rig.advance(Duration::from_secs(20));
+    // A second takeoff with PX4's default (NaN): MIS_TAKEOFF_ALT would be 2.5 m, but PX4
+    // never descends for a takeoff.
+    assert_eq!(
+        rig.command(MavCmd::MAV_CMD_NAV_TAKEOFF, [NAN; 7]),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    rig.advance(Duration::from_secs(10));
+    assert!(
+        (rig.height() - 12.0).abs() < 0.05,
+        "height {}",
+        rig.height()
+    );
+}
+
+#[test]
+fn a_disarmed_vehicle_in_offboard_has_no_failsafe_and_cannot_arm_without_the_signal() {
+    let mut rig = Rig::on_ground();
+    assert_eq!(rig.offboard(), MavResult::MAV_RESULT_ACCEPTED);
+    rig.advance(Duration::from_millis(1500));
+    let status = rig.vehicle.status();
+    assert!(
+        !status.failsafe && status.mode == FlightMode::Offboard,
+        "{status:?}"
+    );
+    assert_eq!(rig.arm(), MavResult::MAV_RESULT_TEMPORARILY_REJECTED);
+}
+
+#[test]
+fn numbers_that_would_break_the_controller_are_refused_or_contained() {
+    let mut rig = Rig::on_ground();
+    // MPC_THR_MIN above MPC_THR_MAX (each in range): no panic, the hover thrust is MAX.
+    rig.set_param("MPC_THR_MAX", 0.1);
+    assert!((rig.vehicle.tuning.mpc.thr_hover - 0.1).abs() < 1e-6);
+    rig.set_param("MPC_THR_MAX", 1.0);
+    rig.takeoff();
+    rig.advance(Duration::from_secs(6));
+    // An infinite orbit altitude is no altitude: PX4's PX4_ISFINITE makes it "here".
+    let (lat, lon) = lat_lon_e7(20.0, 0.0);
+    let r = rig.command_int(
+        MavCmd::MAV_CMD_DO_ORBIT,
+        [15.0, 3.0, 0.0, NAN],
+        lat,
+        lon,
+        f32::INFINITY,
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
+    rig.advance(Duration::from_secs(10));
+    assert!((rig.height() - 2.5).abs() < 0.1, "height {}", rig.height());
+    assert!(rig.pos().iter().all(|x| x.is_finite()));
 }

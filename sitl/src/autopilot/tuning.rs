@@ -1,6 +1,8 @@
 //! The parameters the control loop reads every step, looked up once from the parameter
 //! table (and again after every PARAM_SET), in SI units.
 
+use std::time::Duration;
+
 use crate::params::ParamTable;
 use crate::position_control::MpcParams;
 use crate::trajectory::Limits;
@@ -28,6 +30,16 @@ pub(super) struct Tuning {
     pub rtl_return_alt_m: f64,
     pub rtl_descend_alt_m: f64,
     pub rtl_land_delay_s: f64,
+    /// COM_OF_LOSS_T, COM_DL_LOSS_T, COM_DISARM_LAND, COM_DISARM_PRFLT (s).
+    pub offboard_loss: Duration,
+    pub datalink_loss: Duration,
+    pub disarm_land_s: f64,
+    pub disarm_preflight_s: f64,
+    /// COM_OBL_RC_ACT and NAV_DLL_ACT.
+    pub offboard_loss_action: i64,
+    pub datalink_loss_action: i64,
+    /// BAT1_CAPACITY (mAh).
+    pub battery_capacity_mah: f64,
 }
 
 impl Tuning {
@@ -53,8 +65,11 @@ impl Tuning {
             tilt_max_rad: v("MPC_TILTMAX_AIR").to_radians(),
             thr_min: v("MPC_THR_MIN"),
             thr_max: v("MPC_THR_MAX"),
-            // PX4 clamps the hover thrust into [THR_MIN, THR_MAX].
-            thr_hover: v("MPC_THR_HOVER").clamp(v("MPC_THR_MIN"), v("MPC_THR_MAX")),
+            // PX4 keeps the hover thrust within [THR_MIN, THR_MAX] (never panicking when
+            // someone sets MIN above MAX: then MAX wins).
+            thr_hover: v("MPC_THR_HOVER")
+                .max(v("MPC_THR_MIN"))
+                .min(v("MPC_THR_MAX")),
             thr_xy_margin: v("MPC_THR_XY_MARG"),
         };
         // PX4 keeps the auto speeds within the manual limits.
@@ -90,6 +105,13 @@ impl Tuning {
             rtl_return_alt_m: v("RTL_RETURN_ALT"),
             rtl_descend_alt_m: v("RTL_DESCEND_ALT"),
             rtl_land_delay_s: v("RTL_LAND_DELAY"),
+            offboard_loss: seconds(v("COM_OF_LOSS_T")),
+            datalink_loss: seconds(v("COM_DL_LOSS_T")),
+            disarm_land_s: v("COM_DISARM_LAND"),
+            disarm_preflight_s: v("COM_DISARM_PRFLT"),
+            offboard_loss_action: v("COM_OBL_RC_ACT") as i64,
+            datalink_loss_action: v("NAV_DLL_ACT") as i64,
+            battery_capacity_mah: v("BAT1_CAPACITY").max(1.0),
         }
     }
 
@@ -113,5 +135,15 @@ impl Tuning {
             speed_xy_mps: speed_xy_mps.min(self.mpc.xy_vel_max_mps),
             ..self.auto
         }
+    }
+}
+
+/// A duration from seconds that never panics: negative or NaN is zero, anything beyond
+/// what a `Duration` holds is the largest one.
+pub(super) fn seconds(s: f64) -> Duration {
+    if s.is_nan() || s <= 0.0 {
+        Duration::ZERO
+    } else {
+        Duration::try_from_secs_f64(s).unwrap_or(Duration::MAX)
     }
 }
