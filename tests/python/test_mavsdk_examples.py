@@ -103,34 +103,50 @@ def yaw_close(yaw_rad, want_deg, tol_deg):
     return abs((math.degrees(yaw_rad) - want_deg + 180.0) % 360.0 - 180.0) <= tol_deg
 
 
+def stop_group(proc, timeout=10):
+    """Stops a process started in its own session and everything it started (the
+    example's mavsdk_server holds udp 14540 until it dies): SIGINT, then SIGKILL."""
+    for sig in (signal.SIGINT, signal.SIGKILL):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            return proc.communicate(timeout=timeout)[0]
+        except subprocess.TimeoutExpired:
+            continue
+    return proc.communicate()[0]
+
+
 @pytest.fixture
 def flight():
-    sitl = subprocess.Popen([BIN, "sitl", "--vehicles", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True)
+    sitl = subprocess.Popen([BIN, "sitl", "--vehicles", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True, start_new_session=True)
     observer = Observer()
-    observer.wait(lambda o: o.of("HEARTBEAT"), 10, "the first heartbeat")
-    yield observer
-    observer.close()
-    sitl.send_signal(signal.SIGINT)
-    _, err = sitl.communicate(timeout=10)
+    try:
+        observer.wait(lambda o: o.of("HEARTBEAT"), 10, "the first heartbeat")
+        yield observer
+    finally:
+        observer.close()
+        err = stop_group(sitl)
     assert sitl.returncode == 0, err
 
 
-def run_example(name, timeout_s, ends=True):
-    """Runs an example; `ends=False` for scripts that loop forever (stopped after
-    `timeout_s`)."""
+def start_example(name):
     script = EXAMPLES / f"{name}.py"
-    proc = subprocess.Popen([sys.executable, str(script)], cwd=str(script.parent), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    return subprocess.Popen([sys.executable, str(script)], cwd=str(script.parent), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+
+
+def run_example(name, timeout_s):
+    """Runs an example to its end (at most `timeout_s`); its whole process group is
+    stopped either way."""
+    proc = start_example(name)
     try:
         out, _ = proc.communicate(timeout=timeout_s)
     except subprocess.TimeoutExpired:
-        proc.send_signal(signal.SIGINT)
-        try:
-            out, _ = proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            out, _ = proc.communicate()
-        assert not ends, f"{name} did not finish in {timeout_s} s:\n{out}"
-        return out
+        out = stop_group(proc)
+        raise AssertionError(f"{name} did not finish in {timeout_s} s:\n{out}")
+    finally:
+        stop_group(proc, timeout=5)
     assert proc.returncode == 0, f"{name} failed:\n{out}"
     return out
 
@@ -221,14 +237,9 @@ def test_goto(flight):
     watcher = threading.Thread(target=stop_when_there)
     watcher.start()
     # The example never ends: it is stopped once the vehicle is there (or after 160 s).
-    script = EXAMPLES / "goto.py"
-    proc = subprocess.Popen([sys.executable, str(script)], cwd=str(script.parent), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc = start_example("goto")
     done.wait(160)
-    proc.send_signal(signal.SIGINT)
-    try:
-        proc.communicate(timeout=10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
+    stop_group(proc)
     watcher.join()
     assert done.is_set(), "reached 47.397606, 8.543060 at 20 m above home within 1 m"
     att = flight.of("ATTITUDE")

@@ -48,6 +48,14 @@ async def until(generator, predicate, timeout=10.0):
 
 async def fly():
     drone = System()
+    try:
+        await fly_with(drone)
+    finally:
+        # The bundled mavsdk_server holds udp 14540 until it stops; later tests need it.
+        drone._stop_mavsdk_server()
+
+
+async def fly_with(drone):
     await drone.connect(system_address="udpin://0.0.0.0:14540")
     state = await first(drone.core.connection_state(), timeout=20.0)
     assert state.is_connected
@@ -59,7 +67,8 @@ async def fly():
     assert abs(euler.roll_deg) < 1.0 and abs(euler.pitch_deg) < 1.0
     assert await first(drone.telemetry.armed()) is False
     assert await first(drone.telemetry.in_air()) is False
-    assert await first(drone.telemetry.flight_mode()) == FlightMode.POSCTL
+    # PX4 boots into Hold (AUTO.LOITER).
+    assert await first(drone.telemetry.flight_mode()) == FlightMode.HOLD
     health = await first(drone.telemetry.health())
     assert health.is_local_position_ok and health.is_global_position_ok and health.is_home_position_ok
 

@@ -106,12 +106,13 @@ def test_heartbeat_arm_and_offboard_handshake(sitl):
     assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_PX4
     assert hb.base_mode & mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     assert hb.system_status == mavutil.mavlink.MAV_STATE_STANDBY
-    # OFFBOARD without a stream: TEMPORARILY_REJECTED.
-    assert command(link, 1, SET_MODE, 1, 6, 0).result == mavutil.mavlink.MAV_RESULT_TEMPORARILY_REJECTED
-    stream(link, 1, 1.2, 0.0)
     ack = command(link, 1, ARM, 1)
     assert ack.result == mavutil.mavlink.MAV_RESULT_ACCEPTED
     assert (ack.target_system, ack.target_component) == (255, 190)
+    # Armed, OFFBOARD without a setpoint within COM_OF_LOSS_T: TEMPORARILY_REJECTED; after
+    # one setpoint: accepted (PX4's offboardCheck).
+    assert command(link, 1, SET_MODE, 1, 6, 0).result == mavutil.mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+    stream(link, 1, 0.05, 0.0)
     assert command(link, 1, SET_MODE, 1, 6, 0).result == mavutil.mavlink.MAV_RESULT_ACCEPTED
     stream(link, 1, 1.2, 0.0)
     hb = latest(link, "HEARTBEAT")

@@ -151,11 +151,16 @@ impl Vehicle {
     }
 
     fn advance(&mut self, run: &mut MissionRun) {
-        self.note_item_reached(run.seq);
         run.seq += 1;
         run.stage = Stage::Begin;
-        self.mission
-            .set_current(run.seq.min(self.mission.items().len()));
+        let n = self.mission.items().len();
+        self.mission.set_current(run.seq.min(n));
+        if run.seq >= n {
+            // Past the last item (a final RTL included): the mission is complete, as PX4
+            // reports it (MAVSDK's progress reads it from MISSION_CURRENT).
+            self.mission.mark_finished();
+        }
+        self.note_item_reached(run.seq - 1);
     }
 
     fn begin_item(&mut self, t: SimTime, run: &mut MissionRun, item: &MissionItem) -> ItemStart {

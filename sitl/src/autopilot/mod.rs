@@ -263,7 +263,13 @@ impl Vehicle {
             params,
             tuning,
             armed: in_air,
-            mode: FlightMode::Position,
+            // PX4 boots into Hold (AUTO.LOITER) on the ground; a vehicle started in the
+            // air has a pilot in Position mode holding its start velocity.
+            mode: if in_air {
+                FlightMode::Position
+            } else {
+                FlightMode::Hold
+            },
             failsafe: false,
             landed: !in_air,
             took_off: in_air,
@@ -481,7 +487,8 @@ impl Vehicle {
                     .is_some_and(|since| t - since >= tuning::seconds(after))
             {
                 self.disarm("landed");
-                self.enter_mode(FlightMode::Position);
+                // PX4 goes back to Hold after a landing disarm.
+                self.enter_mode(FlightMode::Hold);
             }
         } else if self.landed && !self.took_off {
             let after = self.tuning.disarm_preflight_s;

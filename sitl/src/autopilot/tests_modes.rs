@@ -178,6 +178,13 @@ fn goto_flies_to_the_point_at_cruise_speed_and_faces_the_asked_yaw() {
 #[test]
 fn reposition_without_the_mode_flag_is_denied_outside_hold() {
     let mut rig = Rig::on_ground();
+    // PX4 boots in Hold; leave it for POSCTL.
+    assert_eq!(rig.vehicle.status().mode, FlightMode::Hold);
+    let r = rig.command(
+        MavCmd::MAV_CMD_DO_SET_MODE,
+        [1.0, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
     let (lat, lon) = lat_lon_e7(10.0, 0.0);
     let r = rig.command_int(
         MavCmd::MAV_CMD_DO_REPOSITION,
