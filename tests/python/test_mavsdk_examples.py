@@ -169,7 +169,10 @@ def test_offboard_attitude(flight):
     assert held(attitude, lambda m: abs(math.degrees(m.roll) - 30.0) < 3.0, 0.5), "rolled +30°"
     assert held(attitude, lambda m: abs(math.degrees(m.roll) + 30.0) < 3.0, 0.5), "rolled −30°"
     assert max(-m.z for _, m in local(flight)) > 3.0, "climbed at 70 % thrust"
-    flight.wait(lambda o: o.landed() and not o.armed(), 120, "landed and disarmed")
+    # offboard.stop() then land(): Hold, then AUTO.LAND descending at MPC_Z_V_AUTO_DN
+    # (1.5 m/s) from tens of metres (the touchdown itself is test_takeoff_and_land's).
+    flight.wait(lambda o: o.mode() == "LAND", 20, "AUTO.LAND")
+    flight.wait(lambda o: any(abs(m.vz - 1.5) < 0.1 for _, m in local(o)[-10:]), 30, "descending at 1.5 m/s")
 
 
 def test_offboard_velocity_ned(flight):
