@@ -5,7 +5,9 @@
 //!  Discovering ──heartbeat from the expected system──► Streaming (setpoints at the stream rate,
 //!                                                      intervals requested, origin asked for)
 //!  Streaming ──pre_stream elapsed──► Arming ──ack ACCEPTED or heartbeat armed──► Offboarding
-//!  Offboarding ──ack ACCEPTED or heartbeat OFFBOARD──► Flying
+//!  Offboarding ──heartbeat OFFBOARD, or ACCEPTED with no other answer within 100 ms──► Flying
+//!              (PX4 main answers DO_SET_MODE twice: an early ACCEPTED from its MAVLink
+//!              module, then the commander's verdict; a refusal after it is a refusal)
 //!  Arming/Offboarding ──no ack, or refused, within ack_timeout──► resend with confirmation+1,
 //!                     up to max_attempts, then Failed (a clear reason in the event)
 //!  any but Discovering/Failed ──nothing heard for link_timeout──► Lost ──heartbeat──► Streaming again
@@ -48,6 +50,9 @@ use crate::link::{
 const PX4_MAIN_OFFBOARD: u32 = 6;
 /// MAV_RESULT_ACCEPTED.
 const ACCEPTED: u8 = 0;
+/// How long an ACCEPTED for DO_SET_MODE waits for a second, real answer (PX4 main sends
+/// it a few milliseconds after its early ACCEPTED).
+const MODE_ACK_SETTLE: Duration = Duration::from_millis(100);
 /// Message ids the coordinator asks to be streamed, and GPS_GLOBAL_ORIGIN asked once.
 const LOCAL_POSITION_NED: f32 = 32.0;
 const ATTITUDE_QUATERNION: f32 = 31.0;
@@ -219,6 +224,8 @@ struct Pending {
     params: [f32; 7],
     attempt: u8,
     deadline: SimTime,
+    /// An ACCEPTED that may still be followed by the real answer.
+    accepted: bool,
 }
 
 /// One vehicle link.
@@ -573,14 +580,22 @@ impl VehicleLink {
                 result,
                 "command refused"
             );
+            if let Some(p) = &mut self.pending
+                && p.accepted
+            {
+                // The real answer after an early ACCEPTED: refused after all.
+                p.accepted = false;
+                p.deadline = now + self.cfg.ack_timeout;
+            }
             return; // resent at the deadline
         }
         match self.phase {
             Phase::Arming => self.request_offboard(now),
             Phase::Offboarding => {
-                self.pending = None;
-                self.phase = Phase::Flying;
-                self.events.push_back(LinkEvent::Flying);
+                if let Some(p) = &mut self.pending {
+                    p.accepted = true;
+                    p.deadline = now + MODE_ACK_SETTLE;
+                }
             }
             Phase::Landing => {
                 self.pending = None;
@@ -614,6 +629,7 @@ impl VehicleLink {
             params,
             attempt,
             deadline: now + self.cfg.ack_timeout,
+            accepted: false,
         });
     }
 
@@ -683,6 +699,16 @@ impl VehicleLink {
             } else {
                 self.request_arm(now)
             }
+        }
+        if let Some(p) = self.pending
+            && now >= p.deadline
+            && p.accepted
+            && self.phase == Phase::Offboarding
+        {
+            // ACCEPTED and nothing else came: OFFBOARD it is.
+            self.pending = None;
+            self.phase = Phase::Flying;
+            self.events.push_back(LinkEvent::Flying);
         }
         if let Some(p) = self.pending
             && now >= p.deadline

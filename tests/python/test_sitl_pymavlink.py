@@ -47,13 +47,18 @@ def sitl():
     assert "panicked" not in out
 
 
-def ack_for(link, command, timeout=3.0):
+def ack_for(link, command, timeout=3.0, settle=0.3):
+    """The last COMMAND_ACK for `command`: PX4 main answers DO_SET_MODE twice (an early
+    ACCEPTED, then the commander's verdict), so acks are read until `settle` s pass
+    without another one."""
     deadline = time.time() + timeout
+    last = None
     while time.time() < deadline:
-        msg = link.recv_match(type="COMMAND_ACK", blocking=True, timeout=0.1)
+        msg = link.recv_match(type="COMMAND_ACK", blocking=True, timeout=0.05)
         if msg is not None and msg.command == command:
-            return msg
-    return None
+            last = msg
+            deadline = min(deadline, time.time() + settle)
+    return last
 
 
 def command(link, target, cmd, *params):

@@ -102,15 +102,42 @@ impl Vehicle {
             }
         };
         tracing::debug!(sysid = self.cfg.system_id, command = ?cmd.id, ?result, "command");
+        self.send_ack(link, sender, cmd.id, result);
+    }
+
+    /// A COMMAND_ACK for `command` to `to` on `link`.
+    pub(super) fn send_ack(
+        &mut self,
+        link: LinkId,
+        to: (u8, u8),
+        command: MavCmd,
+        result: MavResult,
+    ) {
         let ack = MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
-            command: cmd.id,
+            command,
             result,
             progress: 0,
             result_param2: 0,
-            target_system: sender.0,
-            target_component: sender.1,
+            target_system: to.0,
+            target_component: to.1,
         });
         self.send(link, &ack);
+    }
+
+    /// A COMMAND_LONG or COMMAND_INT: PX4 main's MAVLink module answers DO_SET_MODE at
+    /// once with ACCEPTED, and its commander then sends the real answer (a few ms later on
+    /// PX4; in the same step here). Clients must read the second, as with PX4.
+    pub(super) fn run_wire_command(
+        &mut self,
+        now: SimTime,
+        link: LinkId,
+        sender: (u8, u8),
+        cmd: Command,
+    ) {
+        if cmd.id == MavCmd::MAV_CMD_DO_SET_MODE {
+            self.send_ack(link, sender, cmd.id, MavResult::MAV_RESULT_ACCEPTED);
+        }
+        self.run_command(now, link, sender, cmd);
     }
 
     fn cmd_arm_disarm(&mut self, now: SimTime, cmd: &Command) -> MavResult {

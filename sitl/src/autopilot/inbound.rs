@@ -214,7 +214,7 @@ impl Vehicle {
         let params = [
             m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7,
         ];
-        self.run_command(now, link, sender, Command::from_wire(m.command, params));
+        self.run_wire_command(now, link, sender, Command::from_wire(m.command, params));
         true
     }
 
@@ -239,7 +239,7 @@ impl Vehicle {
         );
         let params = [m.param1, m.param2, m.param3, m.param4];
         let command = Command::from_int(m.command, params, m.x, m.y, m.z, global);
-        self.run_command(now, link, sender, command);
+        self.run_wire_command(now, link, sender, command);
         true
     }
 
