@@ -226,10 +226,9 @@ impl Vehicle {
         if flags & REPOSITION_CHANGE_MODE == 0 && self.mode != FlightMode::Hold {
             return MavResult::MAV_RESULT_DENIED;
         }
-        let (lat, lon, alt) = (cmd.params[4], cmd.params[5], cmd.params[6]);
-        if lat.is_some_and(|v| v.abs() > 90.0) || lon.is_some_and(|v| v.abs() > 180.0) {
+        let Some(target) = self.target_of(cmd) else {
             return MavResult::MAV_RESULT_DENIED;
-        }
+        };
         if self.mode != FlightMode::Hold {
             self.failsafe = false;
             self.enter_mode(FlightMode::Hold);
@@ -237,16 +236,7 @@ impl Vehicle {
         if !self.armed || self.landed {
             return MavResult::MAV_RESULT_ACCEPTED;
         }
-        let frame = self.global_frame();
         let here = self.state.pos_ned_m;
-        let here_geo = self
-            .world
-            .to_geodetic(&(self.cfg.start.pos_world_ned_m + here));
-        let target = frame.to_local(
-            lat.unwrap_or(here_geo.lat_deg),
-            lon.unwrap_or(here_geo.lon_deg),
-            alt.unwrap_or(here_geo.alt_amsl_m),
-        );
         let speed = cmd.params[0]
             .filter(|s| *s > 0.0)
             .unwrap_or(self.tuning.auto.speed_xy_mps);
@@ -267,6 +257,24 @@ impl Vehicle {
         MavResult::MAV_RESULT_ACCEPTED
     }
 
+    /// The local NED point of a command's latitude/longitude (param5/6, degrees) and AMSL
+    /// altitude (param7), each unused one taken from where the vehicle is; `None` for a
+    /// latitude or longitude off the Earth.
+    fn target_of(&self, cmd: &Command) -> Option<Vector3<f64>> {
+        let (lat, lon, alt) = (cmd.params[4], cmd.params[5], cmd.params[6]);
+        if lat.is_some_and(|v| v.abs() > 90.0) || lon.is_some_and(|v| v.abs() > 180.0) {
+            return None;
+        }
+        let here = self
+            .world
+            .to_geodetic(&(self.cfg.start.pos_world_ned_m + self.state.pos_ned_m));
+        Some(self.global_frame().to_local(
+            lat.unwrap_or(here.lat_deg),
+            lon.unwrap_or(here.lon_deg),
+            alt.unwrap_or(here.alt_amsl_m),
+        ))
+    }
+
     /// DO_ORBIT: radius param1 (m, 1..=1000, positive clockwise; NaN: 10), speed param2
     /// (m/s; NaN: 1; at most what MPC_ACC_HOR allows on that radius), yaw behaviour param3
     /// (0 centre, 1 initial heading, 2 free, 3 tangent; NaN: 0), centre param5/6
@@ -284,20 +292,11 @@ impl Vehicle {
             3 => OrbitYaw::Tangent,
             _ => return MavResult::MAV_RESULT_DENIED,
         };
-        let (lat, lon) = (cmd.params[4], cmd.params[5]);
         let usable = (1.0..=1000.0).contains(&radius.abs()) && speed.is_finite() && speed >= 0.0;
-        if !usable || lat.is_some_and(|v| v.abs() > 90.0) || lon.is_some_and(|v| v.abs() > 180.0) {
+        let (true, Some(centre)) = (usable, self.target_of(cmd)) else {
             return MavResult::MAV_RESULT_DENIED;
-        }
+        };
         let here = self.state.pos_ned_m;
-        let here_geo = self
-            .world
-            .to_geodetic(&(self.cfg.start.pos_world_ned_m + here));
-        let centre = self.global_frame().to_local(
-            lat.unwrap_or(here_geo.lat_deg),
-            lon.unwrap_or(here_geo.lon_deg),
-            cmd.params[6].unwrap_or(here_geo.alt_amsl_m),
-        );
         // The centripetal acceleration v²/r stays within MPC_ACC_HOR.
         let speed = speed.min((self.tuning.auto.acc_xy_mps2 * radius.abs()).sqrt());
         let out = here.xy() - centre.xy();
