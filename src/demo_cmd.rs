@@ -143,6 +143,9 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     }
     println!("{}", table(&name, config.envelope.saturation, &summary));
     println!("run directory: {}", out.display());
+    if let Some(failure) = summary.failure {
+        return Err(crate::error::GaveUp(failure).into());
+    }
     if !ended(run.swarm()) {
         bail!(
             "the vehicles had not all landed after {:.0} simulated seconds",
@@ -291,7 +294,10 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
         )
     );
     println!("run directory: {}", out.display());
-    Ok(())
+    match summary.failure {
+        Some(failure) => Err(crate::error::GaveUp(failure).into()),
+        None => Ok(()),
+    }
 }
 
 /// A shipped scenario by name, or a TOML file by path (anything ending in `.toml`).

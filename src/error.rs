@@ -125,3 +125,15 @@ pub enum InputError {
     #[error(transparent)]
     Consensus(#[from] ConsensusError),
 }
+
+/// The swarm gave up before its flight (a handshake not complete in time, a vehicle's
+/// handshake failed); the vehicles that flew were landed. `fly` and `demo` exit with
+/// [`GaveUp::EXIT_CODE`].
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("{0}")]
+pub struct GaveUp(pub String);
+
+impl GaveUp {
+    /// The process exit code for it.
+    pub const EXIT_CODE: u8 = 3;
+}

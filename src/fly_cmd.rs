@@ -37,8 +37,12 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         .validate()
         .map_err(|e| anyhow::anyhow!("{}:\n{e}", args.config.display()))?;
     if let Some(d) = args.duration_s {
-        if !(d.is_finite() && d > 0.0) {
-            bail!("--duration-s must be positive, got {d}");
+        let max = crate::config::MAX_DURATION_S;
+        if !(d.is_finite() && d > 0.0 && d <= max) {
+            bail!(
+                "--duration-s must be a finite number in (0, {max}] s, got {}",
+                crate::config::show(d)
+            );
         }
         setup.duration = Some(Duration::from_secs_f64(d));
     }
@@ -55,7 +59,10 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
     runtime.shutdown_background();
     println!("{}", serde_json::to_string_pretty(&summary)?);
     println!("run directory: {}", out.display());
-    Ok(())
+    match summary.failure {
+        Some(failure) => Err(crate::error::GaveUp(failure).into()),
+        None => Ok(()),
+    }
 }
 
 /// `runs/<config stem>-<unix seconds>`.
@@ -180,6 +187,7 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
             Phase::Disarming => 'd',
             Phase::Done => '.',
             Phase::Overridden => 'P',
+            Phase::VehicleHold => 'H',
         })
         .collect();
     let mut line = format!("[{:7.1} s] {phase:<10} links {links}", now.as_secs_f64());

@@ -1,19 +1,31 @@
 //! The `ringswarm` binary: parse the command line, install tracing, dispatch.
 //!
-//! Exit codes: 0 for a stable / feasible answer, 1 for an unstable / infeasible one,
-//! 2 for a usage error (clap's own, or a value our validation refuses).
+//! Exit codes: 0 for a stable / feasible answer or a flight that went as configured, 1
+//! for an unstable / infeasible one, 2 for a usage error (clap's own, or a value our
+//! validation refuses), 3 when `fly` or `demo` gave up before the flight (a handshake
+//! not complete within `swarm.handshake_timeout_s`: the vehicles not flying are named,
+//! the others were landed).
+//!
+//! Logging: `RUST_LOG` as usual; unset, warnings and the swarm's warning events (lost,
+//! refused, timeouts, failsafes, origin changes) are printed.
 
 use std::process::ExitCode;
 
 use clap::Parser;
 use ringswarm::cli::{AnalyzeArgs, Cli, Command, PlanArgs};
 use ringswarm::consensus::PlanRequest;
+use ringswarm::error::GaveUp;
 use ringswarm::report::{AnalyzeRequest, emit, run_analyze, run_plan};
 use tracing_subscriber::EnvFilter;
+use tracing_subscriber::filter::LevelFilter;
 
 fn main() -> ExitCode {
     tracing_subscriber::fmt()
-        .with_env_filter(EnvFilter::from_default_env())
+        .with_env_filter(
+            EnvFilter::builder()
+                .with_default_directive(LevelFilter::WARN.into())
+                .from_env_lossy(),
+        )
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
@@ -29,7 +41,11 @@ fn main() -> ExitCode {
         Ok(false) => ExitCode::from(1),
         Err(err) => {
             eprintln!("error: {err:#}");
-            ExitCode::from(2)
+            if err.downcast_ref::<GaveUp>().is_some() {
+                ExitCode::from(GaveUp::EXIT_CODE)
+            } else {
+                ExitCode::from(2)
+            }
         }
     }
 }

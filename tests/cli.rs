@@ -263,7 +263,7 @@ fn fly_reports_every_config_problem_before_touching_the_network() {
     let err = stderr(&out);
     assert!(err.contains("gains are unstable"), "{err}");
     assert!(
-        err.contains("swarm.control_rate_hz must be in [1, 250], got 500"),
+        err.contains("swarm.control_rate_hz must be a finite number in [1, 250] Hz, got 500"),
         "{err}"
     );
     assert!(

@@ -46,9 +46,9 @@ fn a_bad_target_is_refused_with_every_problem() {
     );
     let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
     for needle in [
-        "target.velocity_enu_mps must be finite",
-        "target.k_margin must be finite and at least 0, got -1",
-        "target.tolerance_mps must be positive, got 0",
+        "target.velocity_enu_mps[1] must be a finite number in [-100, 100] m/s, got NaN",
+        "target.k_margin must be a finite number in [0, 10000], got -1",
+        "target.tolerance_mps must be a finite number in (0, 10] m/s, got 0",
     ] {
         assert!(err.contains(needle), "{needle} not in:\n{err}");
     }
@@ -95,7 +95,7 @@ fn a_time_scale_scales_alpha_by_c_squared_and_beta_by_c_and_is_checked() {
         .validate()
         .unwrap_err();
     assert!(
-        err.contains("gains.time_scale must be in (0, 10], got 0"),
+        err.contains("gains.time_scale must be a finite number in (0, 10], got 0"),
         "{err}"
     );
 }
@@ -197,4 +197,157 @@ fn the_coordinator_ids_default_to_253_190_and_may_not_be_a_vehicle_s() {
     );
     let setup = Config::from_toml(&text).unwrap().validate().unwrap();
     assert!(setup.links.iter().all(|l| l.own_ids == (200, 191)));
+}
+
+/// Every float of the file, set to a value that cannot be flown, is refused by its key and
+/// value; the config is refused as a whole (no setup, nothing sent).
+#[test]
+fn every_bad_number_is_refused_by_its_key() {
+    let cases: &[(&str, &str, &str)] = &[
+        (
+            "k = 5.0",
+            "k = nan",
+            "gains.k must be a finite number in [-2, 10000], got NaN",
+        ),
+        (
+            "alpha = 1.0",
+            "alpha = inf",
+            "gains.alpha must be a finite number in (0, 10000] 1/s², got inf",
+        ),
+        (
+            "beta = 5.0",
+            "beta = -5.0",
+            "gains.beta must be a finite number in (0, 10000] 1/s, got -5",
+        ),
+        (
+            "k_pz = 1.0",
+            "k_pz = nan",
+            "gains.k_pz must be a finite number in (0, 10000] 1/s², got NaN",
+        ),
+        (
+            "k_vz = 4.0",
+            "k_vz = 1e300",
+            "gains.k_vz must be a finite number in (0, 10000] 1/s, got 1e300",
+        ),
+        (
+            "radius_m = 20.0",
+            "radius_m = 1e9",
+            "formation.radius_m must be a finite number in (0, 10000] m, got 1e9",
+        ),
+        (
+            "altitude_m = 50.0",
+            "altitude_m = nan",
+            "formation.altitude_m must be a finite number in [-10000, 10000] m, got NaN",
+        ),
+        (
+            "duration_s = 60.0",
+            "duration_s = 1e20",
+            "swarm.duration_s must be a finite number in (0, 1000000] s, got 1e20",
+        ),
+        (
+            "control_rate_hz = 250.0",
+            "control_rate_hz = nan",
+            "swarm.control_rate_hz must be a finite number in [1, 250] Hz, got NaN",
+        ),
+        (
+            "max_tilt_deg = 45.0",
+            "max_tilt_deg = 90.0",
+            "envelope.max_tilt_deg must be a finite number in (0, 80] deg, got 90",
+        ),
+        (
+            "max_thrust = 0.95",
+            "max_thrust = nan",
+            "envelope.max_thrust must be a finite number in [0, 1], got NaN",
+        ),
+        (
+            "latitude_deg = 47.397742",
+            "latitude_deg = 95.0",
+            "frame.latitude_deg must be a finite number in [-85, 85] deg, got 95",
+        ),
+        (
+            "longitude_deg = 8.545594",
+            "longitude_deg = nan",
+            "frame.longitude_deg must be a finite number in [-180, 180] deg, got NaN",
+        ),
+        (
+            "ground_below_m = 100.0",
+            "ground_below_m = inf",
+            "emulator.ground_below_m must be a finite number in [-10000, 10000] m, got inf",
+        ),
+        (
+            "mass_kg = 1.0",
+            "mass_kg = nan",
+            "vehicle[0].mass_kg must be a finite number in (0, 1000] kg, got NaN",
+        ),
+        (
+            "hover_throttle = 0.2",
+            "hover_throttle = 1.0",
+            "vehicle[0].hover_throttle must be a finite number in [0.01, 0.99], got 1",
+        ),
+        (
+            "drag_per_s = 0.0",
+            "drag_per_s = nan",
+            "vehicle[0].drag_per_s must be a finite number in [0, 10] 1/s, got NaN",
+        ),
+        (
+            "start_enu_m = [0.0, 20.0, 0.0]",
+            "start_enu_m = [0.0, nan, 0.0]",
+            "vehicle[0].start_enu_m[1] must be a finite number in [-10000, 10000] m, got NaN",
+        ),
+        (
+            "start_velocity_enu_mps = [9.0, 4.0, 0.0]",
+            "start_velocity_enu_mps = [9.0, 4.0, 1e3]",
+            "vehicle[0].start_velocity_enu_mps[2] must be a finite number in [-100, 100] m/s, got 1000",
+        ),
+    ];
+    for (from, to, message) in cases {
+        let text = with(from, to);
+        let err = Config::from_toml(&text)
+            .unwrap()
+            .validate()
+            .expect_err(&format!("{to} accepted"));
+        assert!(
+            err.lines().any(|l| l == *message),
+            "{message}\nnot in:\n{err}"
+        );
+    }
+}
+
+#[test]
+fn a_nan_offset_is_refused_by_its_index() {
+    let text = with(
+        "kind = \"polygon\"\nradius_m = 20.0",
+        "kind = \"offsets\"\noffsets_m = [[20.0, 0.0], [10.0, 17.32], [-10.0, nan], [-20.0, 0.0], [-10.0, -17.32], [10.0, -17.32]]",
+    );
+    let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
+    assert_eq!(
+        err,
+        "formation.offsets_m[2][1] must be a finite number in [-10000, 10000] m, got NaN"
+    );
+}
+
+#[test]
+fn timeouts_are_checked_against_the_rates() {
+    let text = with(
+        "link_timeout_ms = 1500",
+        "handshake_timeout_s = 0.5\nstate_timeout_ms = 5\nlink_timeout_ms = 99",
+    );
+    let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
+    for needle in [
+        "swarm.handshake_timeout_s must be a finite number in [1, 3600] s, got 0.5",
+        // 250 Hz: three control periods are 12 ms.
+        "swarm.state_timeout_ms must be a finite number in [12, 99] ms (three control periods up to swarm.link_timeout_ms), got 5",
+        "swarm.link_timeout_ms must be a finite number in [100, 60000] ms, got 99",
+    ] {
+        assert!(err.lines().any(|l| l == needle), "{needle}\nnot in:\n{err}");
+    }
+    // The defaults: 30 s, 300 ms, no retake.
+    let setup = Config::from_toml(&with("k = 5.0", "k = 5.0"))
+        .unwrap()
+        .validate()
+        .unwrap();
+    assert_eq!(setup.handshake_timeout, std::time::Duration::from_secs(30));
+    assert!(setup.links.iter().all(|l| l.state_timeout
+        == std::time::Duration::from_millis(300)
+        && !l.retake_offboard));
 }

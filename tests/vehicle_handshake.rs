@@ -411,7 +411,7 @@ fn a_vehicle_taken_out_of_offboard_by_someone_else_is_never_commanded_again() {
         .events
         .iter()
         .find_map(|(t, e)| match e {
-            LinkEvent::LeftOffboard { custom_mode } => Some((*t, *custom_mode)),
+            LinkEvent::LeftOffboard { custom_mode, .. } => Some((*t, *custom_mode)),
             _ => None,
         })
         .expect("reported");

@@ -27,8 +27,9 @@ pub struct AttitudeThrust {
 /// The attitude and thrust that produce the acceleration `accel_enu_mps2` (paper frame,
 /// z up) at NED yaw `yaw_ned_rad` (0 = nose north).
 ///
-/// A command of free fall (no thrust needed) gives a level attitude with zero thrust;
-/// a non-finite input gives the same safe answer rather than NaN.
+/// A command of free fall (no thrust needed) gives a level attitude with zero thrust. A
+/// non-finite input is a bad number, not a wish to fall: it gives a level attitude at the
+/// model's hover thrust, never a motor cut in the air.
 pub fn attitude_thrust_from_acceleration(
     accel_enu_mps2: Vector3<f64>,
     yaw_ned_rad: f64,
@@ -39,9 +40,16 @@ pub fn attitude_thrust_from_acceleration(
     } else {
         0.0
     };
+    if !accel_enu_mps2.iter().all(|x| x.is_finite()) {
+        return AttitudeThrust {
+            attitude_ned_frd: UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+            thrust_norm: model.hover_throttle(),
+            thrust_n: model.mass_kg() * GRAVITY_MPS2,
+        };
+    }
     let specific_force_ned = enu_to_ned(accel_enu_mps2) - Vector3::new(0.0, 0.0, GRAVITY_MPS2);
     let magnitude = specific_force_ned.norm();
-    if !magnitude.is_finite() || magnitude < 1e-9 {
+    if magnitude < 1e-9 {
         return AttitudeThrust {
             attitude_ned_frd: UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
             thrust_norm: 0.0,
@@ -154,14 +162,22 @@ mod tests {
     }
 
     #[test]
-    fn free_fall_and_nan_give_a_level_zero_thrust_setpoint() {
+    fn free_fall_gives_zero_thrust_but_a_bad_number_gives_hover() {
+        let sp =
+            attitude_thrust_from_acceleration(Vector3::new(0.0, 0.0, -GRAVITY_MPS2), 0.0, &model());
+        assert_eq!(sp.thrust_norm, 0.0);
+        assert!(sp.attitude_ned_frd.angle() < 1e-12);
         for u in [
-            Vector3::new(0.0, 0.0, -GRAVITY_MPS2),
             Vector3::new(f64::NAN, 0.0, 0.0),
+            Vector3::new(0.0, f64::INFINITY, 0.0),
+            Vector3::new(0.0, 0.0, f64::NEG_INFINITY),
         ] {
-            let sp = attitude_thrust_from_acceleration(u, 0.0, &model());
-            assert_eq!(sp.thrust_norm, 0.0);
-            assert!(sp.attitude_ned_frd.angle() < 1e-12);
+            let sp = attitude_thrust_from_acceleration(u, 0.3, &model());
+            // The model's hover throttle is 0.4, its weight 1.5·g.
+            assert_eq!(sp.thrust_norm, 0.4, "u = {u:?}");
+            assert!((sp.thrust_n - 1.5 * GRAVITY_MPS2).abs() < 1e-12);
+            let (roll, pitch, yaw) = euler_ned_frd(&sp.attitude_ned_frd);
+            assert!(roll.abs() < 1e-12 && pitch.abs() < 1e-12 && (yaw - 0.3).abs() < 1e-12);
         }
     }
 }

@@ -191,7 +191,9 @@ pub struct SaturationSummary {
 /// envelope, in place. `w` is the ring's left null vector.
 ///
 /// # Errors
-/// [`ControlError::WrongLength`] when `models`, `w` and `accel_enu_mps2` differ in length.
+/// [`ControlError::WrongLength`] when `models`, `w` and `accel_enu_mps2` differ in length;
+/// [`ControlError::NonFinite`] when a command or a weight is not finite (nothing is
+/// changed then: one bad number must not spread to the whole swarm through `λ`).
 pub fn saturate(
     mode: SaturationMode,
     envelope: &Envelope,
@@ -208,6 +210,20 @@ pub fn saturate(
                 got,
             });
         }
+    }
+    for u in accel_enu_mps2.iter() {
+        if let Some(&bad) = u.iter().find(|x| !x.is_finite()) {
+            return Err(ControlError::NonFinite {
+                name: "acceleration command",
+                value: bad,
+            });
+        }
+    }
+    if let Some(&bad) = w.iter().find(|x| !x.is_finite()) {
+        return Err(ControlError::NonFinite {
+            name: "weight w",
+            value: bad,
+        });
     }
     let mut summary = SaturationSummary::default();
     // Vertical first: it sets how much authority is left horizontally.
@@ -324,6 +340,28 @@ mod tests {
 
     fn hover_model() -> VehicleModel {
         VehicleModel::from_hover_throttle(2.0, 0.5).unwrap()
+    }
+
+    #[test]
+    fn a_non_finite_command_is_refused_and_nothing_changes() {
+        let env = Envelope::new(35f64.to_radians(), 0.1, 1.0).unwrap();
+        let models = [hover_model(); 3];
+        let mut u = [
+            Vector3::new(30.0, 0.0, 0.0),
+            Vector3::new(f64::NAN, 0.0, 0.0),
+            Vector3::new(-30.0, 0.0, 0.0),
+        ];
+        let before = u;
+        let err = saturate(SaturationMode::Conserve, &env, &models, &[1.0; 3], &mut u);
+        assert!(matches!(
+            err,
+            Err(ControlError::NonFinite {
+                name: "acceleration command",
+                ..
+            })
+        ));
+        assert_eq!(u[0], before[0]);
+        assert_eq!(u[2], before[2]);
     }
 
     #[test]

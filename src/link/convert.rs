@@ -72,6 +72,8 @@ pub enum Inbound {
         custom_mode: u32,
         /// MAV_AUTOPILOT value.
         autopilot: u8,
+        /// System status CRITICAL or EMERGENCY: PX4 says CRITICAL while a failsafe acts.
+        failsafe: bool,
     },
     /// LOCAL_POSITION_NED (m, m/s, the vehicle's own origin).
     LocalPosition {
@@ -105,6 +107,10 @@ pub fn inbound(msg: &MavMessage) -> Option<Inbound> {
                 .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED),
             custom_mode: h.custom_mode,
             autopilot: h.autopilot as u8,
+            failsafe: matches!(
+                h.system_status,
+                MavState::MAV_STATE_CRITICAL | MavState::MAV_STATE_EMERGENCY
+            ),
         }),
         MavMessage::LOCAL_POSITION_NED(p) => {
             let pos = Vector3::new(p.x, p.y, p.z).map(f64::from);

@@ -162,8 +162,12 @@ pub struct Summary {
     pub sim_seconds: f64,
     /// Wall-clock seconds.
     pub wall_seconds: f64,
-    /// The swarm's final phase.
+    /// The swarm's final phase (`landing`, `ended`, …).
     pub final_phase: String,
+    /// Why the swarm gave up before its flight, if it did.
+    pub failure: Option<String>,
+    /// Warnings in `events.csv`.
+    pub warnings: usize,
 }
 
 impl Summary {
@@ -190,7 +194,9 @@ impl Summary {
             consensus_ended_s: end.map(|s| s.t_s),
             sim_seconds: now.as_secs_f64(),
             wall_seconds,
-            final_phase: format!("{:?}", swarm.phase()),
+            final_phase: swarm.phase().name().to_owned(),
+            failure: swarm.failure().map(ToString::to_string),
+            warnings: swarm.events().iter().filter(|e| e.warning).count(),
         }
     }
 }

@@ -4,6 +4,8 @@
 //! <dir>/traffic.tlog        every frame sent and received: 8-byte big-endian Unix time (µs)
 //!                           + the raw MAVLink frame (what MAVProxy and QGC write)
 //! <dir>/vehicle-<id>.csv    one row per control tick: state, attitude, command, setpoint
+//! <dir>/events.csv          every event with its time: t_s, system_id (empty for the
+//!                           swarm), level (warning or info), event (quoted text)
 //! <dir>/summary.json        the flight's figures (see [`metrics::Summary`])
 //! ```
 //!
@@ -39,6 +41,8 @@ pub struct Recorder {
     dir: PathBuf,
     tlog: Option<BufWriter<File>>,
     csv: Vec<BufWriter<File>>,
+    events: Option<BufWriter<File>>,
+    events_written: usize,
     epoch_us: u64,
     tracker: RunTracker,
     trace: Trace,
@@ -55,6 +59,8 @@ impl Recorder {
     pub fn create(dir: &Path, swarm: &Swarm, epoch_us: u64) -> io::Result<Self> {
         std::fs::create_dir_all(dir)?;
         let tlog = BufWriter::new(File::create(dir.join("traffic.tlog"))?);
+        let mut events = BufWriter::new(File::create(dir.join("events.csv"))?);
+        writeln!(events, "t_s,system_id,level,event")?;
         let mut csv = Vec::new();
         for cfg in &swarm.setup().links {
             let mut w = BufWriter::new(File::create(
@@ -67,6 +73,8 @@ impl Recorder {
             dir: dir.to_owned(),
             tlog: Some(tlog),
             csv,
+            events: Some(events),
+            events_written: 0,
             epoch_us,
             tracker: RunTracker::new(swarm.links().len()),
             trace: Trace::new(TRACE_PERIOD),
@@ -91,6 +99,7 @@ impl Recorder {
             self.error.get_or_insert(err);
             self.tlog = None;
             self.csv.clear();
+            self.events = None;
         }
     }
 
@@ -117,6 +126,26 @@ impl Recorder {
         self.trace.observe(swarm, now);
         let result = self.write_rows(swarm, now);
         self.keep(result);
+        let result = self.write_events(swarm);
+        self.keep(result);
+    }
+
+    fn write_events(&mut self, swarm: &Swarm) -> io::Result<()> {
+        let Some(w) = self.events.as_mut() else {
+            return Ok(());
+        };
+        for e in swarm.events().iter().skip(self.events_written) {
+            writeln!(
+                w,
+                "{:.4},{},{},\"{}\"",
+                e.t.as_secs_f64(),
+                e.system_id.map_or(String::new(), |id| id.to_string()),
+                if e.warning { "warning" } else { "info" },
+                e.text.replace('"', "\"\"")
+            )?;
+        }
+        self.events_written = swarm.events().len();
+        Ok(())
     }
 
     fn write_rows(&mut self, swarm: &Swarm, now: SimTime) -> io::Result<()> {
@@ -139,10 +168,10 @@ impl Recorder {
                 .map_or(f64::NAN, |t| (now - t).as_secs_f64() * 1e3);
             writeln!(
                 w,
-                "{:.4},{phase},{:?},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.5},{:.5},\
+                "{:.4},{phase},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.5},{:.5},\
                  {:.4},{:.4},{:.4},{:.5},{:.5},{:.4},{:.1}",
                 now.as_secs_f64(),
-                link.phase(),
+                link.phase().name(),
                 s.pos_enu_m.x,
                 s.pos_enu_m.y,
                 s.pos_enu_m.z,
@@ -176,6 +205,8 @@ impl Recorder {
         wall_seconds: f64,
     ) -> io::Result<(Summary, Trace)> {
         let summary = Summary::new(swarm, &self.tracker, now, wall_seconds);
+        let result = self.write_events(swarm);
+        self.keep(result);
         if let Some(err) = self.error.take() {
             return Err(err);
         }
@@ -183,6 +214,9 @@ impl Recorder {
             tlog.flush()?;
         }
         for mut w in self.csv.drain(..) {
+            w.flush()?;
+        }
+        if let Some(mut w) = self.events.take() {
             w.flush()?;
         }
         let json = serde_json::to_string_pretty(&summary).map_err(io::Error::other)?;

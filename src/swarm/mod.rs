@@ -28,118 +28,22 @@
 //! Horizontal acceleration zero before consensus keeps `w·v`, so the predicted final
 //! velocity is computed from the velocities at the start of consensus.
 
-use std::collections::VecDeque;
-use std::time::Duration;
+mod events;
+mod plan;
+mod setup;
 
 use nalgebra::{Vector2, Vector3};
 use ringswarm_sitl::time::SimTime;
 
-use crate::consensus::{
-    CouplingGains, HorizontalState, PlanOutcome, PlanRequest, RingDigraph, analyze,
-    predicted_final_velocity, ring_accelerations,
-};
-use crate::control::{
-    AltitudeGains, AttitudeThrust, Envelope, SaturationMode, VehicleModel,
-    attitude_thrust_from_acceleration, saturate,
-};
-use crate::frame::CommonFrame;
-use crate::vehicle::{LinkConfig, LinkEvent, Phase, VehicleLink};
+use std::fmt;
+use std::time::Duration;
 
-/// Link events kept for the driver before the oldest are dropped.
-pub const MAX_EVENTS: usize = 256;
-
-/// Everything the swarm machine needs, validated by the caller (see `config`).
-#[derive(Debug, Clone)]
-pub struct SwarmSetup {
-    /// The ring.
-    pub ring: RingDigraph,
-    /// `(α, β)`.
-    pub gains: CouplingGains,
-    /// `(k_pz, k_vz)`.
-    pub altitude_gains: AltitudeGains,
-    /// Commanded altitude in the common frame (m, z up).
-    pub altitude_m: f64,
-    /// Formation offsets `dᵢ` (m, ENU), one per vehicle.
-    pub offsets_m: Vec<Vector2<f64>>,
-    /// Vehicle models, one per vehicle.
-    pub models: Vec<VehicleModel>,
-    /// Linear drag of each vehicle (1/s), fed forward.
-    pub drag_per_s: Vec<f64>,
-    /// Envelope and saturation mode.
-    pub envelope: Envelope,
-    /// How commands are saturated.
-    pub saturation: SaturationMode,
-    /// Control period.
-    pub control_interval: Duration,
-    /// The common frame.
-    pub frame: CommonFrame,
-    /// One link configuration per vehicle.
-    pub links: Vec<LinkConfig>,
-    /// How long consensus runs before the end action (`None`: until told to land).
-    pub duration: Option<Duration>,
-    /// What the swarm does when the duration is over.
-    pub end_action: EndAction,
-    /// What the swarm does when a vehicle is lost during consensus.
-    pub loss_policy: LossPolicy,
-    /// A final velocity to reach with the planner (stage 1), if any.
-    pub target: Option<TargetVelocity>,
-}
-
-/// The planner's job: reach `velocity_mps` by choosing `k` and, if needed, re-targeting
-/// one agent before consensus starts.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TargetVelocity {
-    /// Desired final velocity (m/s, ENU).
-    pub velocity_mps: Vector2<f64>,
-    /// `k ≥ k_min + k_margin`.
-    pub k_margin: f64,
-    /// `k ≤ k_max`.
-    pub k_max: f64,
-    /// Largest speed a re-targeted agent may be asked for (m/s).
-    pub max_speed_mps: Option<f64>,
-    /// Stage 1 ends when the re-targeted agent is this close to its planned velocity (m/s).
-    pub tolerance_mps: f64,
-}
-
-/// A re-targeted agent (0-based) and its planned velocity (m/s, ENU).
-pub type Retargeted = (usize, Vector2<f64>);
-
-/// What the planner decided when consensus was about to start.
-#[derive(Debug, Clone, PartialEq)]
-pub enum PlanDecision {
-    /// Flying the planned `k`, after re-targeting `agent` (0-based) to `velocity_mps`.
-    Planned {
-        /// The gain flown.
-        k: f64,
-        /// The re-targeted agent and its planned velocity, if any.
-        retarget: Option<Retargeted>,
-    },
-    /// Not used: the configured `k` is flown. Why, in words.
-    Rejected(String),
-}
-
-/// What the swarm does at the end of the configured duration.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum EndAction {
-    /// Every vehicle lands and disarms.
-    #[default]
-    Land,
-    /// Every vehicle brakes and hovers in place until told to land.
-    Hold,
-}
-
-/// What the swarm does when a vehicle's link is lost during consensus.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum LossPolicy {
-    /// The others brake and hover in place; when the vehicle is handshaken again the
-    /// consensus resumes (with a new predicted final velocity).
-    #[default]
-    Hold,
-    /// Every vehicle lands.
-    Land,
-}
+use crate::consensus::{HorizontalState, predicted_final_velocity, ring_accelerations};
+use crate::control::{AttitudeThrust, SaturationMode, attitude_thrust_from_acceleration, saturate};
+use crate::vehicle::{Phase, VehicleLink};
+use events::EventLog;
+pub use events::{MAX_KEPT_EVENTS, SwarmEvent};
+pub use setup::{EndAction, LossPolicy, PlanDecision, Retargeted, SwarmSetup, TargetVelocity};
 
 /// Braking law gains: velocity (1/s) and position (1/s²), about critically damped.
 const HOLD_K_V: f64 = 2.5;
@@ -180,6 +84,42 @@ impl SwarmPhase {
     }
 }
 
+/// Why the swarm gave up before its flight (the vehicles that flew were landed).
+#[derive(Debug, Clone, PartialEq)]
+pub enum SwarmFailure {
+    /// Not every vehicle was flying in OFFBOARD within the handshake timeout, or one
+    /// vehicle's handshake gave up.
+    Handshake {
+        /// The vehicles not flying: system id and its link phase.
+        not_flying: Vec<(u8, &'static str)>,
+        /// When the swarm gave up.
+        after: Duration,
+    },
+}
+
+impl fmt::Display for SwarmFailure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Handshake { not_flying, after } => {
+                write!(
+                    f,
+                    "handshake not complete after {:.1} s: ",
+                    after.as_secs_f64()
+                )?;
+                for (j, (id, phase)) in not_flying.iter().enumerate() {
+                    let sep = if j == 0 { "" } else { ", " };
+                    let what = match *phase {
+                        "discovering" => "never heard",
+                        other => other,
+                    };
+                    write!(f, "{sep}vehicle {id} not flying ({what})")?;
+                }
+                write!(f, "; the vehicles that flew were landed")
+            }
+        }
+    }
+}
+
 /// One vehicle's state in the common frame (ENU, m and m/s).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CommonState {
@@ -206,7 +146,9 @@ pub struct Swarm {
     saturated_ticks: u64,
     consensus_ticks: u64,
     next_link: usize,
-    events: VecDeque<(usize, LinkEvent)>,
+    log: EventLog,
+    failure: Option<SwarmFailure>,
+    isolated: Vec<bool>,
     first_consensus: Option<SimTime>,
     hold_points: Vec<Option<Vector2<f64>>>,
     control_ticks: u64,
@@ -245,7 +187,9 @@ impl Swarm {
             saturated_ticks: 0,
             consensus_ticks: 0,
             next_link: 0,
-            events: VecDeque::new(),
+            log: EventLog::default(),
+            failure: None,
+            isolated: vec![false; n],
             first_consensus: None,
             hold_points: vec![None; n],
             control_ticks: 0,
@@ -283,10 +227,32 @@ impl Swarm {
         self.first_consensus
     }
 
+    /// Why the swarm gave up, if it did (`fly` exits non-zero).
+    pub fn failure(&self) -> Option<&SwarmFailure> {
+        self.failure.as_ref()
+    }
+
+    /// Every event so far, in order (at most [`MAX_KEPT_EVENTS`]).
+    pub fn events(&self) -> &[SwarmEvent] {
+        self.log.events()
+    }
+
+    /// Events not kept because the log was full.
+    pub fn dropped_events(&self) -> u64 {
+        self.log.dropped()
+    }
+
+    /// Whether vehicle `i` was handed to its own Hold because its command could not be
+    /// computed.
+    pub fn is_isolated(&self, i: usize) -> bool {
+        self.isolated.get(i).copied().unwrap_or(false)
+    }
+
     /// Tells every vehicle to land and disarm (Ctrl-C, the end action or the land policy).
     pub fn land(&mut self, now: SimTime) {
         if !matches!(self.phase, SwarmPhase::Landing(_)) {
-            tracing::info!(at = ?now, "swarm landing");
+            self.log
+                .push(now, None, false, "landing every vehicle".to_owned());
             self.phase = SwarmPhase::Landing(now);
         }
         for link in &mut self.links {
@@ -328,7 +294,8 @@ impl Swarm {
         &self.setpoints
     }
 
-    /// Vehicle `i` in the common frame, once its origin is known.
+    /// Vehicle `i` in the common frame, once its origin is known (whatever the age of its
+    /// position; the control tick uses only fresh ones).
     pub fn common_state(&self, i: usize) -> Option<CommonState> {
         let state = self.links[i].state();
         let origin = state.origin?;
@@ -346,6 +313,7 @@ impl Swarm {
         if let Some(link) = self.links.get_mut(i) {
             link.handle_datagram(now, bytes);
         }
+        self.drain_link_events(now);
     }
 
     /// When [`Swarm::handle_timeout`] must next be called.
@@ -382,24 +350,22 @@ impl Swarm {
                 next
             };
         }
-        for (i, link) in self.links.iter_mut().enumerate() {
+        for link in &mut self.links {
             if now >= link.poll_timeout() {
                 link.handle_timeout(now);
             }
-            while let Some(event) = link.poll_event() {
-                tracing::info!(vehicle = i, ?event, "link event");
-                if self.events.len() == MAX_EVENTS {
-                    self.events.pop_front();
-                }
-                self.events.push_back((i, event));
-            }
         }
+        self.drain_link_events(now);
     }
 
-    /// The next link event and the vehicle it concerns. Drivers should drain these; the
-    /// queue keeps at most [`MAX_EVENTS`] and drops the oldest beyond that.
-    pub fn poll_event(&mut self) -> Option<(usize, LinkEvent)> {
-        self.events.pop_front()
+    fn drain_link_events(&mut self, now: SimTime) {
+        for (i, link) in self.links.iter_mut().enumerate() {
+            while let Some(event) = link.poll_event() {
+                let id = self.setup.links[i].system_id;
+                self.log
+                    .push(now, Some(id), event.is_warning(), event.to_string());
+            }
+        }
     }
 
     /// Moves between phases; runs at the start of every control tick.
@@ -407,11 +373,18 @@ impl Swarm {
         let all_flying = self.links.iter().all(|l| l.phase() == Phase::Flying)
             && self.states.iter().all(Option::is_some);
         // A vehicle taken out of OFFBOARD (pilot, its failsafe) counts as lost: it never
-        // comes back on its own, so the swarm holds (or lands) until told otherwise.
-        let any_lost = self
-            .links
-            .iter()
-            .any(|l| matches!(l.phase(), Phase::Lost | Phase::Overridden));
+        // comes back on its own, so the swarm holds (or lands) until told otherwise. So
+        // does one that flies on a position too old to use, or that was handed to its own
+        // Hold.
+        let any_lost = self.links.iter().zip(&self.states).any(|(l, s)| {
+            matches!(
+                l.phase(),
+                Phase::Lost | Phase::Overridden | Phase::VehicleHold
+            ) || (l.phase() == Phase::Flying && s.is_none())
+        });
+        if self.phase == SwarmPhase::Handshake && !all_flying && self.handshake_over(now) {
+            return;
+        }
         let over = |start: Option<SimTime>| {
             start
                 .zip(self.setup.duration)
@@ -448,12 +421,22 @@ impl Swarm {
             SwarmPhase::Consensus(_) | SwarmPhase::Retargeting(_) if any_lost => {
                 match self.setup.loss_policy {
                     LossPolicy::Hold => {
-                        tracing::warn!("a vehicle was lost: holding");
+                        self.log.push(
+                            now,
+                            None,
+                            true,
+                            "a vehicle is lost: the others brake and hold".to_owned(),
+                        );
                         self.hold_points.iter_mut().for_each(|p| *p = None);
                         self.phase = SwarmPhase::Holding(now);
                     }
                     LossPolicy::Land => {
-                        tracing::warn!("a vehicle was lost: landing");
+                        self.log.push(
+                            now,
+                            None,
+                            true,
+                            "a vehicle is lost: landing (on_link_loss = land)".to_owned(),
+                        );
                         self.land(now);
                     }
                 }
@@ -463,6 +446,39 @@ impl Swarm {
             }
             _ => {}
         }
+    }
+
+    /// Gives up on the handshake when the timeout is over or a vehicle's handshake failed:
+    /// names the vehicles not flying and lands the others. Whether it gave up.
+    fn handshake_over(&mut self, now: SimTime) -> bool {
+        let failed = self.links.iter().any(|l| l.phase() == Phase::Failed);
+        let timed_out = now >= SimTime::ZERO + self.setup.handshake_timeout;
+        if !(failed || timed_out) {
+            return false;
+        }
+        let not_flying: Vec<(u8, &'static str)> = self
+            .links
+            .iter()
+            .zip(&self.states)
+            .zip(&self.setup.links)
+            .filter(|((l, s), _)| l.phase() != Phase::Flying || s.is_none())
+            .map(|((l, s), cfg)| {
+                let phase = if l.phase() == Phase::Flying && s.is_none() {
+                    "no usable position"
+                } else {
+                    l.phase().name()
+                };
+                (cfg.system_id, phase)
+            })
+            .collect();
+        let failure = SwarmFailure::Handshake {
+            not_flying,
+            after: now - SimTime::ZERO,
+        };
+        self.log.push(now, None, true, failure.to_string());
+        self.failure = Some(failure);
+        self.land(now);
+        true
     }
 
     fn start_consensus(&mut self, now: SimTime) {
@@ -475,84 +491,22 @@ impl Swarm {
             .map(|s| s.vel_enu_mps.xy())
             .collect(); // once per (re)start
         self.predicted_final_velocity = predicted_final_velocity(&self.setup.ring, &v0).ok();
-        tracing::info!(predicted = ?self.predicted_final_velocity, "consensus started");
-    }
-
-    /// Planner stage 0: choose `k` (and an agent to re-target) from the velocities now.
-    /// Runs once; allocates (the planner and the stability check), like the start of
-    /// consensus.
-    fn plan_target(&mut self, now: SimTime) {
-        let Some(target) = self.setup.target else {
-            return;
+        let text = match self.predicted_final_velocity {
+            Some(v) => format!(
+                "consensus started: predicted final velocity ({:.3}, {:.3}) m/s",
+                v.x, v.y
+            ),
+            None => "consensus started".to_owned(),
         };
-        let velocities: Vec<Vector2<f64>> = self
-            .states
-            .iter()
-            .flatten()
-            .map(|s| s.vel_enu_mps.xy())
-            .collect();
-        let decision = match self.planned_ring(&target, velocities) {
-            Ok((ring, retarget)) => {
-                let k = ring.k();
-                self.w = (0..self.links.len()).map(|i| ring.w(i)).collect();
-                self.setup.ring = ring;
-                PlanDecision::Planned { k, retarget }
-            }
-            Err(reason) => {
-                tracing::warn!(%reason, "target velocity not used; flying the configured k");
-                PlanDecision::Rejected(reason)
-            }
-        };
-        tracing::info!(?decision, "plan");
-        let retargeting = matches!(
-            decision,
-            PlanDecision::Planned {
-                retarget: Some(_),
-                ..
-            }
-        );
-        self.plan = Some(decision);
-        if retargeting {
-            self.phase = SwarmPhase::Retargeting(now);
-        } else {
-            self.start_consensus(now);
-        }
-    }
-
-    fn planned_ring(
-        &self,
-        target: &TargetVelocity,
-        velocities: Vec<Vector2<f64>>,
-    ) -> Result<(RingDigraph, Option<Retargeted>), String> {
-        let plan = crate::consensus::plan(&PlanRequest {
-            velocities_mps: velocities,
-            target_mps: target.velocity_mps,
-            k_margin: target.k_margin,
-            k_max: target.k_max,
-            max_speed_mps: target.max_speed_mps,
-        })
-        .map_err(|e| e.to_string())?;
-        let (k, retarget) = match plan.outcome {
-            PlanOutcome::Feasible { k, retarget, .. } => (k, retarget),
-            PlanOutcome::Infeasible { reason } => return Err(reason),
-        };
-        let ring =
-            RingDigraph::new(self.setup.ring.macro_vertices(), k).map_err(|e| e.to_string())?;
-        let report = analyze(&ring, Some(self.setup.gains)).map_err(|e| e.to_string())?;
-        if !report.stable {
-            return Err(format!(
-                "the planned k = {k:.6} is unstable with alpha = {}, beta = {}",
-                self.setup.gains.alpha, self.setup.gains.beta
-            ));
-        }
-        Ok((ring, retarget.map(|r| (r.agent, r.new_velocity_mps))))
+        self.log.push(now, None, false, text);
     }
 
     fn end(&mut self, now: SimTime) {
         match self.setup.end_action {
             EndAction::Land => self.land(now),
             EndAction::Hold => {
-                tracing::info!("duration over: holding");
+                self.log
+                    .push(now, None, false, "duration over: holding".to_owned());
                 self.hold_points.iter_mut().for_each(|p| *p = None);
                 self.phase = SwarmPhase::Ended(now);
             }
@@ -561,14 +515,22 @@ impl Swarm {
 
     /// One control tick. The law and the saturation allocate nothing in consensus (every
     /// buffer was sized at construction); each link encodes its setpoint into a new frame.
+    ///
+    /// Only fresh states are flown on. A vehicle whose command comes out non-finite is
+    /// isolated before the swarm-wide saturation sees it: its command becomes level at
+    /// its hover thrust and it is handed to its own Hold; the swarm applies its loss
+    /// policy on the next tick.
     fn control(&mut self, now: SimTime) {
         self.control_ticks += 1;
         for i in 0..self.links.len() {
-            self.states[i] = self.common_state(i);
+            self.states[i] = if self.links[i].state_fresh(now) {
+                self.common_state(i)
+            } else {
+                None
+            };
         }
         self.transition(now);
-        let states = &self.states;
-        for (i, state) in states.iter().enumerate() {
+        for (i, state) in self.states.iter().enumerate() {
             let s = state.unwrap_or_default();
             self.horizontal[i] = HorizontalState {
                 pos_m: s.pos_enu_m.xy(),
@@ -576,7 +538,50 @@ impl Swarm {
                 offset_m: self.setup.offsets_m[i],
             };
         }
-        let saturation = match self.phase {
+        let saturation = self.horizontal_law();
+        for (i, state) in self.states.iter().enumerate() {
+            let s = state.unwrap_or_default();
+            let u_z = self.setup.altitude_gains.acceleration(
+                s.pos_enu_m.z,
+                s.vel_enu_mps.z,
+                self.setup.altitude_m,
+            );
+            let drag = s.vel_enu_mps * self.setup.drag_per_s[i];
+            self.commands[i] = Vector3::new(self.accel[i].x, self.accel[i].y, u_z) + drag;
+        }
+        self.isolate_non_finite(now, "the law's command");
+        if let Ok(summary) = saturate(
+            saturation,
+            &self.setup.envelope,
+            &self.setup.models,
+            &self.w,
+            &mut self.commands,
+        ) && matches!(self.phase, SwarmPhase::Consensus(_))
+        {
+            self.consensus_ticks += 1;
+            self.saturated_ticks +=
+                u64::from(summary.horizontal_limited + summary.vertical_limited > 0);
+        }
+        self.isolate_non_finite(now, "the saturated command");
+        for (i, link) in self.links.iter_mut().enumerate() {
+            // No usable state (or isolated): level at hover thrust, never a motor cut.
+            let command = if self.states[i].is_some() && !self.isolated[i] {
+                self.commands[i]
+            } else {
+                Vector3::zeros()
+            };
+            self.setpoints[i] =
+                attitude_thrust_from_acceleration(command, 0.0, &self.setup.models[i]);
+            if self.states[i].is_some() || link.phase() == Phase::Flying {
+                link.set_setpoint(now, self.setpoints[i]);
+            }
+        }
+        self.drain_link_events(now);
+    }
+
+    /// The horizontal accelerations of this phase into `accel`; the saturation to use.
+    fn horizontal_law(&mut self) -> SaturationMode {
+        match self.phase {
             SwarmPhase::Consensus(_) => {
                 ring_accelerations(
                     &self.setup.ring,
@@ -616,34 +621,27 @@ impl Swarm {
                 }
                 SaturationMode::Clip
             }
-        };
-        for (i, state) in states.iter().enumerate() {
-            let s = state.unwrap_or_default();
-            let u_z = self.setup.altitude_gains.acceleration(
-                s.pos_enu_m.z,
-                s.vel_enu_mps.z,
-                self.setup.altitude_m,
-            );
-            let drag = s.vel_enu_mps * self.setup.drag_per_s[i];
-            self.commands[i] = Vector3::new(self.accel[i].x, self.accel[i].y, u_z) + drag;
         }
-        if let Ok(summary) = saturate(
-            saturation,
-            &self.setup.envelope,
-            &self.setup.models,
-            &self.w,
-            &mut self.commands,
-        ) && matches!(self.phase, SwarmPhase::Consensus(_))
-        {
-            self.consensus_ticks += 1;
-            self.saturated_ticks +=
-                u64::from(summary.horizontal_limited + summary.vertical_limited > 0);
-        }
-        for (i, link) in self.links.iter_mut().enumerate() {
-            if states[i].is_some() {
-                self.setpoints[i] =
-                    attitude_thrust_from_acceleration(self.commands[i], 0.0, &self.setup.models[i]);
-                link.set_setpoint(now, self.setpoints[i]);
+    }
+
+    /// Isolates every vehicle whose command is not finite: zero acceleration (level at
+    /// hover thrust) and its own Hold, for good.
+    fn isolate_non_finite(&mut self, now: SimTime, what: &str) {
+        for i in 0..self.commands.len() {
+            if self.commands[i].iter().all(|x| x.is_finite()) {
+                continue;
+            }
+            self.commands[i] = Vector3::zeros();
+            if !self.isolated[i] {
+                self.isolated[i] = true;
+                let reason = format!("{what} is not a finite number: isolated");
+                self.log.push(
+                    now,
+                    Some(self.setup.links[i].system_id),
+                    true,
+                    reason.clone(),
+                );
+                self.links[i].hold_on_own(now, &reason);
             }
         }
     }

@@ -12,8 +12,16 @@
 //!                     up to max_attempts, then Failed (a clear reason in the event)
 //!  any but Discovering/Failed ──nothing heard for link_timeout──► Lost ──heartbeat──► Streaming again
 //!
-//!  Flying ──two heartbeats in a row not in OFFBOARD (a pilot, the vehicle's own failsafe,
-//!          another station)──► Overridden: never commanded again
+//!  Flying ──two heartbeats in a row not in OFFBOARD, or disarmed (a pilot, the vehicle's
+//!          own failsafe, another station)──► Overridden: never commanded again
+//!          (with retake_offboard: Streaming, re-armed and taken back)
+//!  Lost ──heard again, after it had flown──► Flying if still armed in OFFBOARD, else
+//!          Overridden (with retake_offboard: Streaming); back to VehicleHold if it was there
+//!
+//!  Flying ──position older than state_timeout (silent, refused or implausible reports),
+//!          or hold_on_own()──► VehicleHold (DO_SET_MODE AUTO.LOITER: the vehicle brakes
+//!          and holds on its own estimate; no setpoints)
+//!  VehicleHold ──fresh positions again (stale hold only)──► Streaming ──► … ──► Flying
 //!
 //!  land() ──► Landing (NAV_LAND, acked or heartbeat AUTO.LAND; setpoints until then)
 //!  Landing ──EXTENDED_SYS_STATE on ground──► Disarming (ARM_DISARM 0, acked or heartbeat
@@ -30,35 +38,28 @@
 //! address, [`VehicleLink::handle_timeout`] at [`VehicleLink::poll_timeout`], and send what
 //! [`VehicleLink::poll_transmit`] returns. It never reads a clock or touches a socket.
 //! Frames from another system id are never acted on, and nothing is ever addressed to a
-//! system other than the configured one.
+//! system other than the configured one. Position reports and origins pass the
+//! [`telemetry::TelemetryGate`] first: what is non-finite, implausible or jumps is refused,
+//! named in an event, and never reaches the swarm.
 
-use std::collections::VecDeque;
+mod link;
+pub mod telemetry;
+
+pub use link::VehicleLink;
+
+use std::fmt;
 use std::time::Duration;
 
-use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd, MavMessage};
 use nalgebra::{UnitQuaternion, Vector3};
 use ringswarm_sitl::time::SimTime;
 
-use crate::control::AttitudeThrust;
 use crate::frame::Geodetic;
-use crate::link::{
-    AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, decode_datagram, gcs_heartbeat, inbound,
-    set_attitude_target,
-};
 
 /// PX4's OFFBOARD main mode.
 const PX4_MAIN_OFFBOARD: u32 = 6;
-/// MAV_RESULT_ACCEPTED.
-const ACCEPTED: u8 = 0;
-/// How long an ACCEPTED for DO_SET_MODE waits for a second, real answer (PX4 main sends
-/// it a few milliseconds after its early ACCEPTED).
-const MODE_ACK_SETTLE: Duration = Duration::from_millis(100);
-/// Message ids the coordinator asks to be streamed, and GPS_GLOBAL_ORIGIN asked once.
-const LOCAL_POSITION_NED: f32 = 32.0;
-const ATTITUDE_QUATERNION: f32 = 31.0;
-const GPS_GLOBAL_ORIGIN: f32 = 49.0;
-/// PX4's AUTO main mode and its LAND sub mode.
+/// PX4's AUTO main mode and its LOITER (Hold) and LAND sub modes.
 const PX4_MAIN_AUTO: u32 = 4;
+const PX4_SUB_AUTO_LOITER: u32 = 3;
 const PX4_SUB_AUTO_LAND: u32 = 6;
 
 /// Timing and identity of one vehicle link.
@@ -84,12 +85,17 @@ pub struct LinkConfig {
     pub link_timeout: Duration,
     /// How long to wait for a first heartbeat before reporting the vehicle as never heard.
     pub discovery_warning: Duration,
+    /// Age of the last accepted position after which a flying vehicle is handed to its
+    /// own Hold (and a position jump followed this long is taken).
+    pub state_timeout: Duration,
+    /// Re-arm and take back a vehicle that left OFFBOARD by itself (default false).
+    pub retake_offboard: bool,
 }
 
 impl LinkConfig {
     /// Defaults for `system_id`: our ids 253/190, a 1 Hz heartbeat, 50 Hz setpoints and
     /// telemetry, 1.2 s pre-stream, 0.5 s ack timeout and 4 attempts (MAVSDK's), 1.5 s link
-    /// timeout.
+    /// timeout, 0.3 s state timeout, no retake.
     pub fn new(system_id: u8) -> Self {
         Self {
             system_id,
@@ -102,6 +108,8 @@ impl LinkConfig {
             max_attempts: 4,
             link_timeout: Duration::from_millis(1500),
             discovery_warning: Duration::from_secs(10),
+            state_timeout: Duration::from_millis(300),
+            retake_offboard: false,
         }
     }
 }
@@ -132,6 +140,29 @@ pub enum Phase {
     /// Left OFFBOARD while flying (a pilot, its own failsafe or another station took it):
     /// nothing is sent to it any more.
     Overridden,
+    /// Handed to its own Hold mode (AUTO.LOITER) because it could not be flown on (stale or
+    /// refused position, or a command that could not be computed): no setpoints.
+    VehicleHold,
+}
+
+impl Phase {
+    /// A short lower-case name, as written in the run directory.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Discovering => "discovering",
+            Self::Streaming(_) => "streaming",
+            Self::Arming => "arming",
+            Self::Offboarding => "offboarding",
+            Self::Flying => "flying",
+            Self::Lost => "lost",
+            Self::Failed => "failed",
+            Self::Landing => "landing",
+            Self::Disarming => "disarming",
+            Self::Done => "done",
+            Self::Overridden => "overridden",
+            Self::VehicleHold => "vehicle_hold",
+        }
+    }
 }
 
 /// What the swarm should know.
@@ -176,7 +207,155 @@ pub enum LinkEvent {
     LeftOffboard {
         /// The heartbeat's custom mode.
         custom_mode: u32,
+        /// Armed, as that heartbeat says.
+        armed: bool,
     },
+    /// A command was refused (it is resent until its attempts run out).
+    Refused {
+        /// MAV_CMD id.
+        command: u16,
+        /// MAV_RESULT value.
+        result: u8,
+    },
+    /// A telemetry report was refused (first of a run of refusals; the field named).
+    TelemetryRefused(String),
+    /// The vehicle reported a new GPS_GLOBAL_ORIGIN: re-anchored.
+    OriginChanged {
+        /// Distance between the old and the new origin (m).
+        shift_m: f64,
+    },
+    /// A position jump followed consistently for the state timeout was taken.
+    PositionReset {
+        /// The jump (m).
+        jump_m: f64,
+    },
+    /// Handed to its own Hold mode, and why.
+    HandedToHold(String),
+}
+
+impl LinkEvent {
+    /// Whether an operator must see it (lost, refused, timeouts, failsafes, origin
+    /// changes); the others are the handshake's progress.
+    pub fn is_warning(&self) -> bool {
+        !matches!(
+            self,
+            Self::Discovered
+                | Self::Armed
+                | Self::Flying
+                | Self::Recovered
+                | Self::Landing
+                | Self::Landed
+                | Self::Disarmed
+        )
+    }
+}
+
+impl fmt::Display for LinkEvent {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Discovered => write!(f, "discovered"),
+            Self::Armed => write!(f, "armed"),
+            Self::Flying => write!(f, "flying in OFFBOARD"),
+            Self::Retrying { command, attempt } => write!(
+                f,
+                "{} not acknowledged: attempt {attempt}",
+                command_name(*command)
+            ),
+            Self::Failed(reason) => write!(f, "failed: {reason}"),
+            Self::WrongSystem { system_id } => {
+                write!(f, "frames from system {system_id} on this link ignored")
+            }
+            Self::Lost => write!(f, "lost (link timeout)"),
+            Self::Recovered => write!(f, "heard again"),
+            Self::NeverHeard { after } => {
+                write!(f, "never heard after {:.1} s", after.as_secs_f64())
+            }
+            Self::Landing => write!(f, "landing"),
+            Self::Landed => write!(f, "landed"),
+            Self::Disarmed => write!(f, "disarmed"),
+            Self::LeftOffboard { custom_mode, armed } => write!(
+                f,
+                "left OFFBOARD by itself: now in {} ({})",
+                px4_mode_name(*custom_mode),
+                if *armed { "armed" } else { "disarmed" }
+            ),
+            Self::Refused { command, result } => write!(
+                f,
+                "{} refused: {}",
+                command_name(*command),
+                result_name(*result)
+            ),
+            Self::TelemetryRefused(why) => write!(f, "telemetry refused: {why}"),
+            Self::OriginChanged { shift_m } => {
+                write!(f, "GPS_GLOBAL_ORIGIN moved {shift_m:.2} m: re-anchored")
+            }
+            Self::PositionReset { jump_m } => write!(
+                f,
+                "position jump of {jump_m:.2} m taken after it was followed consistently"
+            ),
+            Self::HandedToHold(why) => write!(f, "handed to its own Hold: {why}"),
+        }
+    }
+}
+
+/// The MAVLink name of the commands the coordinator sends.
+pub fn command_name(command: u16) -> String {
+    match command {
+        16 => "MAV_CMD_NAV_WAYPOINT".to_owned(),
+        21 => "MAV_CMD_NAV_LAND".to_owned(),
+        176 => "MAV_CMD_DO_SET_MODE".to_owned(),
+        400 => "MAV_CMD_COMPONENT_ARM_DISARM".to_owned(),
+        511 => "MAV_CMD_SET_MESSAGE_INTERVAL".to_owned(),
+        512 => "MAV_CMD_REQUEST_MESSAGE".to_owned(),
+        other => format!("MAV_CMD {other}"),
+    }
+}
+
+/// MAV_RESULT's name.
+pub fn result_name(result: u8) -> String {
+    match result {
+        0 => "ACCEPTED".to_owned(),
+        1 => "TEMPORARILY_REJECTED".to_owned(),
+        2 => "DENIED".to_owned(),
+        3 => "UNSUPPORTED".to_owned(),
+        4 => "FAILED".to_owned(),
+        5 => "IN_PROGRESS".to_owned(),
+        6 => "CANCELLED".to_owned(),
+        other => format!("MAV_RESULT {other}"),
+    }
+}
+
+/// PX4's name for a custom mode (main mode in bits 16–23, sub mode in 24–31).
+pub fn px4_mode_name(custom_mode: u32) -> String {
+    let main = (custom_mode >> 16) & 0xFF;
+    let sub = (custom_mode >> 24) & 0xFF;
+    let auto = [
+        "AUTO",
+        "AUTO.READY",
+        "AUTO.TAKEOFF",
+        "AUTO.LOITER",
+        "AUTO.MISSION",
+        "AUTO.RTL",
+        "AUTO.LAND",
+        "AUTO.RTGS",
+        "AUTO.FOLLOW_TARGET",
+        "AUTO.PRECLAND",
+        "AUTO.VTOL_TAKEOFF",
+    ];
+    match main {
+        1 => "MANUAL".to_owned(),
+        2 => "ALTCTL".to_owned(),
+        3 if sub == 1 => "POSCTL.ORBIT".to_owned(),
+        3 => "POSCTL".to_owned(),
+        4 => auto
+            .get(sub as usize)
+            .map_or_else(|| format!("AUTO.{sub}"), |s| (*s).to_owned()),
+        5 => "ACRO".to_owned(),
+        6 => "OFFBOARD".to_owned(),
+        7 => "STABILIZED".to_owned(),
+        8 => "RATTITUDE".to_owned(),
+        other => format!("PX4 main mode {other}"),
+    }
 }
 
 /// What the coordinator knows of the vehicle (its own frames: local NED, body FRD).
@@ -194,13 +373,16 @@ pub struct VehicleState {
     pub armed: bool,
     /// PX4 custom mode of the last heartbeat.
     pub custom_mode: u32,
+    /// A failsafe acts, as the last heartbeat said (system status CRITICAL).
+    pub failsafe: bool,
     /// On the ground, as EXTENDED_SYS_STATE said.
     pub landed: bool,
     /// When the last heartbeat arrived.
     pub last_heartbeat: Option<SimTime>,
     /// When any valid frame from the vehicle last arrived (link health).
     pub last_heard: Option<SimTime>,
-    /// When the last local position arrived.
+    /// When the last accepted local position arrived (cleared when the origin moves, so
+    /// no position is read against the wrong origin).
     pub last_position: Option<SimTime>,
 }
 
@@ -215,529 +397,10 @@ impl VehicleState {
         (self.custom_mode >> 16) & 0xFF == PX4_MAIN_AUTO
             && (self.custom_mode >> 24) & 0xFF == PX4_SUB_AUTO_LAND
     }
-}
 
-/// A command waiting for its acknowledgement.
-#[derive(Debug, Clone, Copy)]
-struct Pending {
-    command: MavCmd,
-    params: [f32; 7],
-    attempt: u8,
-    deadline: SimTime,
-    /// An ACCEPTED that may still be followed by the real answer.
-    accepted: bool,
-}
-
-/// One vehicle link.
-#[derive(Debug, Clone)]
-pub struct VehicleLink {
-    cfg: LinkConfig,
-    phase: Phase,
-    state: VehicleState,
-    setpoint: AttitudeThrust,
-    next_setpoint: SimTime,
-    next_heartbeat: SimTime,
-    pending: Option<Pending>,
-    encoder: Encoder,
-    outbox: VecDeque<Vec<u8>>,
-    events: VecDeque<LinkEvent>,
-    ignored_frames: u64,
-    wrong_system: Option<u8>,
-    land_requested: bool,
-    never_heard_reported: bool,
-    heartbeats_out_of_offboard: u8,
-}
-
-impl VehicleLink {
-    /// A link that starts discovering, with `idle` as the setpoint to stream until the law
-    /// takes over (normally level at hover throttle).
-    pub fn new(cfg: LinkConfig, idle: AttitudeThrust) -> Self {
-        let encoder = Encoder::new(cfg.own_ids.0, cfg.own_ids.1);
-        Self {
-            cfg,
-            phase: Phase::Discovering,
-            state: VehicleState::default(),
-            setpoint: idle,
-            next_setpoint: SimTime::ZERO,
-            next_heartbeat: SimTime::ZERO,
-            pending: None,
-            encoder,
-            outbox: VecDeque::new(),
-            events: VecDeque::new(),
-            ignored_frames: 0,
-            wrong_system: None,
-            land_requested: false,
-            never_heard_reported: false,
-            heartbeats_out_of_offboard: 0,
-        }
-    }
-
-    /// The phase.
-    pub fn phase(&self) -> Phase {
-        self.phase
-    }
-
-    /// What is known of the vehicle.
-    pub fn state(&self) -> &VehicleState {
-        &self.state
-    }
-
-    /// The setpoint being streamed.
-    pub fn setpoint(&self) -> AttitudeThrust {
-        self.setpoint
-    }
-
-    /// Frames ignored (undecodable, another system, another component).
-    pub fn ignored_frames(&self) -> u64 {
-        self.ignored_frames
-    }
-
-    /// Replaces the setpoint. While streaming it is sent at once, so the stream follows
-    /// the control ticks; the link's own timer only resends it if no new setpoint comes
-    /// within one and a half periods (it never doubles the rate when the two timers drift).
-    pub fn set_setpoint(&mut self, now: SimTime, setpoint: AttitudeThrust) {
-        self.setpoint = setpoint;
-        if self.streams() {
-            self.send_setpoint(now);
-            self.next_setpoint = now + self.cfg.setpoint_interval.mul_f64(1.5);
-        }
-    }
-
-    fn send_setpoint(&mut self, now: SimTime) {
-        let msg = set_attitude_target(&self.setpoint, self.cfg.system_id, now.boot_ms());
-        self.outbox.push_back(self.encoder.encode(&msg));
-    }
-
-    /// The next datagram to send to the vehicle.
-    pub fn poll_transmit(&mut self) -> Option<Vec<u8>> {
-        self.outbox.pop_front()
-    }
-
-    /// The next event.
-    pub fn poll_event(&mut self) -> Option<LinkEvent> {
-        self.events.pop_front()
-    }
-
-    /// When [`VehicleLink::handle_timeout`] must next be called.
-    pub fn poll_timeout(&self) -> SimTime {
-        let mut next = self
-            .state
-            .last_heard
-            .map_or(SimTime::from_millis(100), |t| t + self.cfg.link_timeout)
-            .min(self.next_heartbeat);
-        if self.streams() {
-            next = next.min(self.next_setpoint);
-        }
-        if let Some(p) = self.pending {
-            next = next.min(p.deadline);
-        }
-        if let Phase::Streaming(since) = self.phase {
-            next = next.min(since + self.cfg.pre_stream);
-        }
-        if self.phase == Phase::Discovering && !self.never_heard_reported {
-            next = next.min(SimTime::ZERO + self.cfg.discovery_warning);
-        }
-        next
-    }
-
-    fn streams(&self) -> bool {
-        match self.phase {
-            Phase::Discovering
-            | Phase::Lost
-            | Phase::Failed
-            | Phase::Disarming
-            | Phase::Done
-            | Phase::Overridden => false,
-            // Keep OFFBOARD fed until the vehicle has taken NAV_LAND.
-            Phase::Landing => self.pending.is_some() && self.state.in_offboard(),
-            _ => true,
-        }
-    }
-
-    /// Tells the vehicle to land where it is and to disarm on the ground. Idempotent. A
-    /// vehicle never heard from, or heard but never armed, is done at once.
-    pub fn land(&mut self, now: SimTime) {
-        if self.land_requested {
-            return;
-        }
-        self.land_requested = true;
-        match self.phase {
-            Phase::Discovering => self.phase = Phase::Done,
-            Phase::Overridden => {} // someone else flies it
-            Phase::Streaming(_) if !self.state.armed => {
-                self.pending = None;
-                self.phase = Phase::Done;
-            }
-            Phase::Lost => {} // sent when the vehicle is heard again
-            _ => self.request_land(now),
-        }
-    }
-
-    /// Whether [`VehicleLink::land`] was called.
-    pub fn land_requested(&self) -> bool {
-        self.land_requested
-    }
-
-    fn request_land(&mut self, now: SimTime) {
-        self.phase = Phase::Landing;
-        let nan = f32::NAN; // PX4: NaN lat/lon/alt/yaw = here, current heading
-        let params = [0.0, 0.0, 0.0, nan, nan, nan, nan];
-        self.send_pending(now, MavCmd::MAV_CMD_NAV_LAND, params, 1);
-    }
-
-    fn request_disarm(&mut self, now: SimTime) {
-        self.phase = Phase::Disarming;
-        self.events.push_back(LinkEvent::Landed);
-        let params = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-        self.send_pending(now, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, params, 1);
-    }
-
-    fn finish(&mut self) {
-        self.pending = None;
-        self.phase = Phase::Done;
-        self.events.push_back(LinkEvent::Disarmed);
-    }
-
-    /// Handles one datagram from the vehicle's address.
-    pub fn handle_datagram(&mut self, now: SimTime, bytes: &[u8]) {
-        for frame in decode_datagram(bytes) {
-            let Ok(frame) = frame else {
-                self.ignored_frames += 1;
-                continue;
-            };
-            let system_id = frame.header.system_id as u8;
-            if system_id != self.cfg.system_id {
-                self.ignored_frames += 1;
-                if self.wrong_system != Some(system_id) {
-                    // Reported once per foreign system id, not per frame.
-                    self.wrong_system = Some(system_id);
-                    self.events.push_back(LinkEvent::WrongSystem { system_id });
-                }
-                continue;
-            }
-            if frame.header.component_id != 1 {
-                self.ignored_frames += 1;
-                continue;
-            }
-            if let MavMessage::COMMAND_ACK(ack) = &frame.msg
-                && (ack.target_system != 0 && ack.target_system != self.cfg.own_ids.0)
-            {
-                continue; // an acknowledgement meant for another ground station
-            }
-            self.state.last_heard = Some(now);
-            if let Some(update) = inbound(&frame.msg) {
-                self.apply(now, update);
-            }
-        }
-    }
-
-    fn apply(&mut self, now: SimTime, update: Inbound) {
-        match update {
-            Inbound::Heartbeat {
-                armed,
-                custom_mode,
-                autopilot,
-            } => {
-                if self.phase == Phase::Discovering && autopilot != AUTOPILOT_PX4 {
-                    self.refuse_autopilot(autopilot);
-                    return;
-                }
-                self.state.last_heartbeat = Some(now);
-                self.state.custom_mode = custom_mode;
-                if armed && !self.state.armed {
-                    self.events.push_back(LinkEvent::Armed);
-                }
-                self.state.armed = armed;
-                match self.phase {
-                    Phase::Discovering => {
-                        self.events.push_back(LinkEvent::Discovered);
-                        self.start_streaming(now);
-                    }
-                    Phase::Lost => {
-                        self.events.push_back(LinkEvent::Recovered);
-                        if self.land_requested {
-                            self.request_land(now);
-                        } else {
-                            self.start_streaming(now);
-                        }
-                    }
-                    Phase::Flying => {
-                        // Two in a row: a heartbeat sent just before the switch may still
-                        // arrive after the acknowledgement.
-                        if self.state.in_offboard() {
-                            self.heartbeats_out_of_offboard = 0;
-                        } else {
-                            self.heartbeats_out_of_offboard += 1;
-                            if self.heartbeats_out_of_offboard >= 2 {
-                                tracing::warn!(
-                                    sysid = self.cfg.system_id,
-                                    custom_mode,
-                                    "vehicle left OFFBOARD: no longer commanded"
-                                );
-                                self.phase = Phase::Overridden;
-                                self.pending = None;
-                                self.events
-                                    .push_back(LinkEvent::LeftOffboard { custom_mode });
-                            }
-                        }
-                    }
-                    _ => self.advance_on_state(now),
-                }
-            }
-            Inbound::LocalPosition {
-                pos_ned_m,
-                vel_ned_mps,
-            } => {
-                self.state.pos_local_ned_m = pos_ned_m;
-                self.state.vel_ned_mps = vel_ned_mps;
-                self.state.last_position = Some(now);
-            }
-            Inbound::Attitude(q) => self.state.attitude = Some(q),
-            Inbound::Origin(origin) => self.state.origin = Some(origin),
-            Inbound::Landed(landed) => {
-                self.state.landed = landed;
-                self.advance_on_state(now);
-            }
-            Inbound::Ack { command, result } => self.on_ack(now, command, result),
-        }
-    }
-
-    /// A vehicle whose autopilot is not PX4 is never commanded: PX4's mode numbers and
-    /// offboard rules would mean something else to it.
-    fn refuse_autopilot(&mut self, autopilot: u8) {
-        let reason = format!(
-            "vehicle {}: autopilot is {}, not PX4: refused (ringswarm speaks PX4's modes only)",
-            self.cfg.system_id,
-            autopilot_name(autopilot)
-        );
-        tracing::error!(sysid = self.cfg.system_id, autopilot, "autopilot not PX4");
-        self.phase = Phase::Failed;
-        self.pending = None;
-        self.events.push_back(LinkEvent::Failed(reason));
-    }
-
-    fn start_streaming(&mut self, now: SimTime) {
-        self.phase = Phase::Streaming(now);
-        self.pending = None;
-        self.next_setpoint = now;
-        let interval_us = self.cfg.telemetry_interval.as_micros() as f32;
-        for id in [LOCAL_POSITION_NED, ATTITUDE_QUATERNION] {
-            self.send_command(
-                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
-                [id, interval_us, 0.0, 0.0, 0.0, 0.0, 0.0],
-                0,
-            );
-        }
-        self.send_command(
-            MavCmd::MAV_CMD_REQUEST_MESSAGE,
-            [GPS_GLOBAL_ORIGIN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            0,
-        );
-    }
-
-    /// A heartbeat may show that a command took effect even if its ack was lost.
-    fn advance_on_state(&mut self, now: SimTime) {
-        if self.phase == Phase::Arming && self.state.armed {
-            self.request_offboard(now);
-        }
-        if self.phase == Phase::Offboarding && self.state.armed && self.state.in_offboard() {
-            self.pending = None;
-            self.phase = Phase::Flying;
-            self.events.push_back(LinkEvent::Flying);
-        }
-        if self.phase == Phase::Landing {
-            if self
-                .pending
-                .is_some_and(|p| p.command == MavCmd::MAV_CMD_NAV_LAND)
-                && self.state.in_land()
-            {
-                self.pending = None;
-                self.events.push_back(LinkEvent::Landing);
-            }
-            if self.state.landed {
-                if self.state.armed {
-                    self.request_disarm(now);
-                } else {
-                    self.events.push_back(LinkEvent::Landed);
-                    self.finish();
-                }
-            }
-        }
-        if self.phase == Phase::Disarming && !self.state.armed {
-            self.finish();
-        }
-    }
-
-    fn on_ack(&mut self, now: SimTime, command: u16, result: u8) {
-        let Some(pending) = self.pending else { return };
-        if pending.command as u16 != command {
-            return;
-        }
-        if result != ACCEPTED {
-            tracing::warn!(
-                sysid = self.cfg.system_id,
-                command,
-                result,
-                "command refused"
-            );
-            if let Some(p) = &mut self.pending
-                && p.accepted
-            {
-                // The real answer after an early ACCEPTED: refused after all.
-                p.accepted = false;
-                p.deadline = now + self.cfg.ack_timeout;
-            }
-            return; // resent at the deadline
-        }
-        match self.phase {
-            Phase::Arming => self.request_offboard(now),
-            Phase::Offboarding => {
-                if let Some(p) = &mut self.pending {
-                    p.accepted = true;
-                    p.deadline = now + MODE_ACK_SETTLE;
-                }
-            }
-            Phase::Landing => {
-                self.pending = None;
-                self.events.push_back(LinkEvent::Landing);
-            }
-            Phase::Disarming => self.finish(),
-            _ => {}
-        }
-    }
-
-    fn request_arm(&mut self, now: SimTime) {
-        self.phase = Phase::Arming;
-        self.send_pending(
-            now,
-            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            1,
-        );
-    }
-
-    fn request_offboard(&mut self, now: SimTime) {
-        self.phase = Phase::Offboarding;
-        let params = [1.0, PX4_MAIN_OFFBOARD as f32, 0.0, 0.0, 0.0, 0.0, 0.0];
-        self.send_pending(now, MavCmd::MAV_CMD_DO_SET_MODE, params, 1);
-    }
-
-    fn send_pending(&mut self, now: SimTime, command: MavCmd, params: [f32; 7], attempt: u8) {
-        self.send_command(command, params, attempt - 1);
-        self.pending = Some(Pending {
-            command,
-            params,
-            attempt,
-            deadline: now + self.cfg.ack_timeout,
-            accepted: false,
-        });
-    }
-
-    fn send_command(&mut self, command: MavCmd, params: [f32; 7], confirmation: u8) {
-        let msg = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-            target_system: self.cfg.system_id,
-            target_component: 1,
-            command,
-            confirmation,
-            param1: params[0],
-            param2: params[1],
-            param3: params[2],
-            param4: params[3],
-            param5: params[4],
-            param6: params[5],
-            param7: params[6],
-        });
-        self.outbox.push_back(self.encoder.encode(&msg));
-    }
-
-    /// Runs the timers due at `now`: the setpoint stream, the pre-stream, command
-    /// deadlines and link loss.
-    pub fn handle_timeout(&mut self, now: SimTime) {
-        if now >= self.next_heartbeat {
-            self.outbox.push_back(self.encoder.encode(&gcs_heartbeat()));
-            let next = self.next_heartbeat + self.cfg.heartbeat_interval;
-            self.next_heartbeat = if next <= now {
-                now + self.cfg.heartbeat_interval
-            } else {
-                next
-            };
-        }
-        if self.phase == Phase::Discovering
-            && !self.never_heard_reported
-            && now >= SimTime::ZERO + self.cfg.discovery_warning
-        {
-            self.never_heard_reported = true;
-            tracing::warn!(
-                sysid = self.cfg.system_id,
-                "no heartbeat from the vehicle yet"
-            );
-            self.events.push_back(LinkEvent::NeverHeard {
-                after: self.cfg.discovery_warning,
-            });
-        }
-        if let Some(last) = self.state.last_heard
-            && now - last > self.cfg.link_timeout
-            && !matches!(
-                self.phase,
-                Phase::Lost | Phase::Failed | Phase::Discovering | Phase::Done | Phase::Overridden
-            )
-        {
-            self.phase = Phase::Lost;
-            self.pending = None;
-            self.events.push_back(LinkEvent::Lost);
-            tracing::warn!(
-                sysid = self.cfg.system_id,
-                silent_ms = (now - last).as_millis() as u64,
-                "vehicle lost"
-            );
-        }
-        if let Phase::Streaming(since) = self.phase
-            && now - since >= self.cfg.pre_stream
-        {
-            if self.state.armed {
-                self.request_offboard(now)
-            } else {
-                self.request_arm(now)
-            }
-        }
-        if let Some(p) = self.pending
-            && now >= p.deadline
-            && p.accepted
-            && self.phase == Phase::Offboarding
-        {
-            // ACCEPTED and nothing else came: OFFBOARD it is.
-            self.pending = None;
-            self.phase = Phase::Flying;
-            self.events.push_back(LinkEvent::Flying);
-        }
-        if let Some(p) = self.pending
-            && now >= p.deadline
-        {
-            if p.attempt >= self.cfg.max_attempts {
-                self.pending = None;
-                self.phase = Phase::Failed;
-                let reason = format!(
-                    "vehicle {}: {:?} not accepted after {} attempts",
-                    self.cfg.system_id, p.command, p.attempt
-                );
-                tracing::error!(sysid = self.cfg.system_id, %reason, "handshake failed");
-                self.events.push_back(LinkEvent::Failed(reason));
-            } else {
-                self.events.push_back(LinkEvent::Retrying {
-                    command: p.command as u16,
-                    attempt: p.attempt + 1,
-                });
-                self.send_pending(now, p.command, p.params, p.attempt + 1);
-            }
-        }
-        if self.streams() && now >= self.next_setpoint {
-            self.send_setpoint(now);
-            let next = self.next_setpoint + self.cfg.setpoint_interval;
-            self.next_setpoint = if next <= now {
-                now + self.cfg.setpoint_interval
-            } else {
-                next
-            };
-        }
+    /// Whether the heartbeat says AUTO.LOITER (Hold).
+    pub fn in_hold(&self) -> bool {
+        (self.custom_mode >> 16) & 0xFF == PX4_MAIN_AUTO
+            && (self.custom_mode >> 24) & 0xFF == PX4_SUB_AUTO_LOITER
     }
 }

@@ -54,6 +54,6 @@ def test_a_gcs_sees_every_vehicle_armed_in_offboard_then_disarmed(tmp_path):
     # Landed and disarmed at the end (the last heartbeat each vehicle sent the GCS may
     # predate the disarm by up to 1 s, so the summary says where it ended).
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["final_phase"].startswith("Landing")
+    assert summary["final_phase"] == "landing"
     assert summary["formation_error_m"] < 0.5
     assert abs(summary["sim_seconds"] - summary["wall_seconds"]) < 1.0  # real time

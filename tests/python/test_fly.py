@@ -65,7 +65,7 @@ def test_the_law_converges_and_every_vehicle_lands(run_dir):
     assert 0.0 <= summary["saturated_fraction"] <= 1.0
     # Consensus for the configured 8 s, within a control period.
     assert summary["consensus_ended_s"] - summary["consensus_started_s"] == pytest.approx(8.0, abs=0.05)
-    assert summary["final_phase"].startswith("Landing")
+    assert summary["final_phase"] == "landing"
     # Cross-check the prediction's basis: the slowest mode is what the docstring says.
     assert ref.closed_loop_abscissa(2, 1.0, 0.6, 1.2) == pytest.approx(-0.6, abs=1e-9)
 

@@ -1,0 +1,327 @@
+//! The coordinator's TOML configuration: the schema (serde structs with
+//! `deny_unknown_fields`, defaults), [`Config::validate`] in `validate` (every number
+//! checked, every problem reported at once, the typed [`crate::swarm::SwarmSetup`]
+//! built), and what the file means for the built-in emulator and the transport in
+//! `emulator`. docs/configuration.md lists every key with its unit, range and default.
+//!
+//! Frames: vehicle start states and formation offsets are in the paper's ENU frame (x
+//! east, y north, z up, metres) about the common reference point.
+
+mod emulator;
+mod validate;
+
+use std::net::SocketAddr;
+
+use serde::Deserialize;
+
+use ringswarm_sitl::time::SimTime;
+
+use crate::control::SaturationMode;
+use crate::swarm::{EndAction, LossPolicy};
+
+pub(crate) use validate::show;
+pub use validate::{MAX_DISTANCE_M, MAX_DURATION_S, MAX_GAIN, MAX_SPEED_MPS};
+
+/// The whole file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Rates, duration and end of flight.
+    #[serde(default)]
+    pub swarm: SwarmSection,
+    /// Consensus and altitude gains.
+    pub gains: GainsSection,
+    /// The formation and its altitude.
+    pub formation: FormationSection,
+    /// Tilt and thrust limits.
+    #[serde(default)]
+    pub envelope: EnvelopeSection,
+    /// The common frame's reference point.
+    #[serde(default)]
+    pub frame: FrameSection,
+    /// The world of the built-in emulator.
+    #[serde(default)]
+    pub emulator: EmulatorSection,
+    /// One table per vehicle, in ring order.
+    #[serde(default)]
+    pub vehicle: Vec<VehicleSection>,
+    /// A final velocity to reach with the planner (optional).
+    pub target: Option<TargetSection>,
+}
+
+/// `[target]`: the planner chooses `k` (and re-targets one agent if needed) so that the
+/// swarm's consensus velocity is `velocity_enu_mps`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetSection {
+    /// The final velocity (ENU, m/s).
+    pub velocity_enu_mps: [f64; 2],
+    /// `k ≥ k_min + k_margin` (default 0.1).
+    #[serde(default = "default_k_margin")]
+    pub k_margin: f64,
+    /// `k ≤ k_max` (default 10).
+    #[serde(default = "default_k_max")]
+    pub k_max: f64,
+    /// Largest speed a re-targeted agent may be asked for (m/s).
+    pub max_speed_mps: Option<f64>,
+    /// Stage 1 ends when the re-targeted agent is this close to its velocity (default
+    /// 0.05 m/s).
+    #[serde(default = "default_tolerance")]
+    pub tolerance_mps: f64,
+}
+
+fn default_k_margin() -> f64 {
+    0.1
+}
+
+fn default_k_max() -> f64 {
+    10.0
+}
+
+fn default_tolerance() -> f64 {
+    0.05
+}
+
+/// The coordinator's default system id: not QGroundControl's 255, not MAVSDK's 245.
+pub const DEFAULT_GCS_SYSTEM_ID: u8 = 253;
+/// The coordinator's default component id (MAV_COMP_ID_MISSIONPLANNER).
+pub const DEFAULT_GCS_COMPONENT_ID: u8 = 190;
+
+/// `[swarm]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SwarmSection {
+    /// Control (and setpoint stream) rate, 1..=250 Hz.
+    pub control_rate_hz: f64,
+    /// Flight duration after consensus starts (s).
+    pub duration_s: f64,
+    /// Silence after which a vehicle is lost (ms).
+    pub link_timeout_ms: u64,
+    /// At the end of the duration: `land` (default) or `hold`.
+    pub end: EndAction,
+    /// When a vehicle is lost during consensus: `hold` (default) or `land`.
+    pub on_link_loss: LossPolicy,
+    /// The coordinator's own MAVLink system id, in its 1 Hz ground-station heartbeat and
+    /// every frame it sends (default 253: neither QGroundControl's 255 nor MAVSDK's 245,
+    /// so either can watch the same vehicles).
+    pub gcs_system_id: u8,
+    /// The coordinator's own MAVLink component id (default 190, MAV_COMP_ID_MISSIONPLANNER).
+    pub gcs_component_id: u8,
+    /// How long the vehicles have to be flying in OFFBOARD (s, default 30); those that
+    /// are not by then are named, the others land, and `fly` exits with code 3.
+    pub handshake_timeout_s: f64,
+    /// Age (ms) after which a vehicle's position and velocity are too old to fly on
+    /// (default 300: 15 telemetry samples at 50 Hz, a fifth of the link timeout); the
+    /// vehicle then counts as lost for the swarm even while its heartbeat goes on.
+    pub state_timeout_ms: u64,
+    /// Whether a vehicle that left OFFBOARD by itself (its failsafe, a pilot, another
+    /// station) is re-armed and taken back (default false: its own decision wins).
+    pub retake_offboard: bool,
+}
+
+impl Default for SwarmSection {
+    fn default() -> Self {
+        Self {
+            control_rate_hz: 50.0,
+            duration_s: 60.0,
+            link_timeout_ms: 1500,
+            end: EndAction::Land,
+            on_link_loss: LossPolicy::Hold,
+            gcs_system_id: DEFAULT_GCS_SYSTEM_ID,
+            gcs_component_id: DEFAULT_GCS_COMPONENT_ID,
+            handshake_timeout_s: 30.0,
+            state_timeout_ms: 300,
+            retake_offboard: false,
+        }
+    }
+}
+
+/// `[gains]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GainsSection {
+    /// Ring gain k.
+    pub k: f64,
+    /// Position coupling α (1/s²).
+    pub alpha: f64,
+    /// Velocity coupling β (1/s).
+    pub beta: f64,
+    /// Altitude P (1/s²).
+    pub k_pz: f64,
+    /// Altitude D (1/s).
+    pub k_vz: f64,
+    /// Time scale `c` of the horizontal law: flies `α·c²` and `β·c`, which slows every
+    /// mode by `c` and keeps the final velocity and stability (default 1).
+    #[serde(default = "default_time_scale")]
+    pub time_scale: f64,
+}
+
+fn default_time_scale() -> f64 {
+    1.0
+}
+
+/// `[formation]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FormationSection {
+    /// `polygon` (radius_m), `line` (spacing_m) or `offsets` (offsets_m).
+    pub kind: String,
+    /// Polygon radius (m).
+    pub radius_m: Option<f64>,
+    /// Line spacing (m).
+    pub spacing_m: Option<f64>,
+    /// Explicit ENU offsets (m), one per vehicle.
+    pub offsets_m: Option<Vec<[f64; 2]>>,
+    /// Commanded altitude in the common frame (m, z up).
+    pub altitude_m: f64,
+}
+
+/// `[envelope]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EnvelopeSection {
+    /// Largest tilt (deg).
+    pub max_tilt_deg: f64,
+    /// Thrust limits, normalised 0..1.
+    pub min_thrust: f64,
+    /// Upper thrust limit, normalised.
+    pub max_thrust: f64,
+    /// `conserve` (default) or `clip`.
+    pub saturation: SaturationMode,
+    /// Thrust kept for horizontal control when the vertical command saturates
+    /// (normalised, like PX4's MPC_THR_XY_MARG; default 0.3).
+    pub xy_margin: f64,
+}
+
+impl Default for EnvelopeSection {
+    fn default() -> Self {
+        Self {
+            max_tilt_deg: 35.0,
+            min_thrust: 0.1,
+            max_thrust: 0.9,
+            saturation: SaturationMode::Conserve,
+            xy_margin: 0.3,
+        }
+    }
+}
+
+/// `[frame]`: the common reference point.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FrameSection {
+    /// Latitude (deg).
+    pub latitude_deg: f64,
+    /// Longitude (deg).
+    pub longitude_deg: f64,
+    /// Altitude AMSL (m).
+    pub altitude_amsl_m: f64,
+}
+
+impl Default for FrameSection {
+    fn default() -> Self {
+        Self {
+            latitude_deg: 47.397742,
+            longitude_deg: 8.545594,
+            altitude_amsl_m: 488.0,
+        }
+    }
+}
+
+/// `[emulator]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EmulatorSection {
+    /// Height of the paper's z = 0 above the ground (m).
+    pub ground_below_m: f64,
+    /// Lockstep links (`demo`, tests): one-way latency (ms).
+    pub latency_ms: f64,
+    /// Lockstep links: uniform extra latency `0..jitter` (ms).
+    pub jitter_ms: f64,
+    /// Lockstep links: datagrams lost, each direction (%).
+    pub loss_pct: f64,
+    /// Seed of the loss and jitter draws.
+    pub seed: u64,
+    /// Lockstep links silenced for a while: `[[emulator.silence]]`.
+    pub silence: Vec<SilenceSection>,
+}
+
+impl Default for EmulatorSection {
+    fn default() -> Self {
+        Self {
+            ground_below_m: 0.0,
+            latency_ms: 0.0,
+            jitter_ms: 0.0,
+            loss_pct: 0.0,
+            seed: 1,
+            silence: Vec::new(),
+        }
+    }
+}
+
+/// `[[emulator.silence]]`: vehicle `vehicle` (1-based, in table order) neither sends nor
+/// receives between `from_s` and `until_s` (simulated seconds).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SilenceSection {
+    /// Which vehicle (1-based position in the `[[vehicle]]` list).
+    pub vehicle: usize,
+    /// Start (s).
+    pub from_s: f64,
+    /// End (s).
+    pub until_s: f64,
+}
+
+/// Link faults of a lockstep run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LockstepFaults {
+    /// Latency, jitter, loss and seed on every link.
+    pub conditions: crate::driver::lockstep::LinkConditions,
+    /// `(vehicle index, from, until)`.
+    pub silences: Vec<(usize, SimTime, SimTime)>,
+}
+
+/// `[[vehicle]]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VehicleSection {
+    /// MAVLink system id.
+    pub system_id: u8,
+    /// Where its offboard link listens (default PX4's 127.0.0.1:14580+i).
+    pub address: Option<SocketAddr>,
+    /// Where the coordinator's socket for it is bound (default 0.0.0.0:14540+i, the
+    /// port PX4 SITL sends its offboard link to).
+    pub bind: Option<SocketAddr>,
+    /// Emulator profile (`ideal`, `x500`).
+    #[serde(default = "default_profile")]
+    pub profile: String,
+    /// Mass (kg) for the law's thrust.
+    pub mass_kg: f64,
+    /// Hover throttle (0..1).
+    pub hover_throttle: f64,
+    /// Linear drag fed forward (1/s).
+    #[serde(default)]
+    pub drag_per_s: f64,
+    /// Start position (ENU, m) for the emulator.
+    #[serde(default)]
+    pub start_enu_m: [f64; 3],
+    /// Start velocity (ENU, m/s) for the emulator.
+    #[serde(default)]
+    pub start_velocity_enu_mps: [f64; 3],
+    /// Started in the air (armed, a pilot holds the start velocity).
+    #[serde(default)]
+    pub in_air: bool,
+}
+
+fn default_profile() -> String {
+    "x500".to_owned()
+}
+
+impl Config {
+    /// Parses a TOML text.
+    ///
+    /// # Errors
+    /// The parser's message (syntax, unknown keys, wrong types).
+    pub fn from_toml(text: &str) -> Result<Self, String> {
+        toml::from_str(text).map_err(|e| e.to_string())
+    }
+}

@@ -1,0 +1,434 @@
+//! [`Config::validate`]: every number of the file is checked where it enters, against a
+//! range a flight can use (docs/configuration.md lists them), and every problem is reported
+//! at once, one per line, naming the key and the value. Nothing non-finite or absurd gets
+//! past this point into a setpoint.
+
+use std::f64::consts::PI;
+use std::time::Duration;
+
+use nalgebra::Vector2;
+
+use super::Config;
+use crate::consensus::{CouplingGains, RingDigraph, analyze};
+use crate::control::{AltitudeGains, Envelope, VehicleModel};
+use crate::frame::{CommonFrame, Geodetic};
+use crate::swarm::{SwarmSetup, TargetVelocity};
+use crate::vehicle::LinkConfig;
+
+/// Longest flight (s): about eleven days. `Duration` cannot hold 1e20 s, and no battery
+/// lasts a day.
+pub const MAX_DURATION_S: f64 = 1.0e6;
+/// Largest distance (m) an offset, radius, spacing or start position may have: 10 km, far
+/// beyond any formation flown over one radio link.
+pub const MAX_DISTANCE_M: f64 = 1.0e4;
+/// Largest speed (m/s) a start velocity or target velocity may have.
+pub const MAX_SPEED_MPS: f64 = 100.0;
+/// Largest gain any coupling (`k`, `alpha`, `beta`, `k_pz`, `k_vz`) may have.
+pub const MAX_GAIN: f64 = 1.0e4;
+
+/// Collects problems, one line each.
+#[derive(Debug, Default)]
+struct Problems(Vec<String>);
+
+impl Problems {
+    /// Requires `lo <= value <= hi` (so also finite); `unit` is printed after the range.
+    fn within(&mut self, key: &str, value: f64, lo: f64, hi: f64, unit: &str) -> bool {
+        let good = value.is_finite() && value >= lo && value <= hi;
+        if !good {
+            self.0.push(format!(
+                "{key} must be a finite number in [{lo}, {hi}]{unit}, got {}",
+                show(value)
+            ));
+        }
+        good
+    }
+
+    /// Requires `0 < value <= hi`.
+    fn positive(&mut self, key: &str, value: f64, hi: f64, unit: &str) -> bool {
+        let good = value.is_finite() && value > 0.0 && value <= hi;
+        if !good {
+            self.0.push(format!(
+                "{key} must be a finite number in (0, {hi}]{unit}, got {}",
+                show(value)
+            ));
+        }
+        good
+    }
+
+    /// Requires every element finite with magnitude at most `hi`.
+    fn vector(&mut self, key: &str, values: &[f64], hi: f64, unit: &str) -> bool {
+        let bad = values
+            .iter()
+            .position(|v| !(v.is_finite() && v.abs() <= hi));
+        if let Some(j) = bad {
+            self.0.push(format!(
+                "{key}[{j}] must be a finite number in [-{hi}, {hi}]{unit}, got {}",
+                show(values[j])
+            ));
+        }
+        bad.is_none()
+    }
+
+    fn push(&mut self, problem: String) {
+        self.0.push(problem);
+    }
+}
+
+/// A value as a person would write it: `1e20`, not twenty-one digits.
+pub(crate) fn show(value: f64) -> String {
+    let a = value.abs();
+    if value.is_finite() && (a >= 1e7 || (a > 0.0 && a < 1e-4)) {
+        format!("{value:e}")
+    } else {
+        value.to_string()
+    }
+}
+
+impl Config {
+    /// Checks everything and builds the swarm's setup; every problem is reported, one per
+    /// line.
+    ///
+    /// # Errors
+    /// All problems found, each naming the key and the value.
+    pub fn validate(&self) -> Result<SwarmSetup, String> {
+        let mut p = Problems::default();
+        let n = self.vehicle.len();
+        let g = &self.gains;
+        let gains_ok = p.within("gains.k", g.k, -2.0, MAX_GAIN, "")
+            & p.positive("gains.alpha", g.alpha, MAX_GAIN, " 1/s²")
+            & p.positive("gains.beta", g.beta, MAX_GAIN, " 1/s")
+            & p.positive("gains.time_scale", g.time_scale, 10.0, "");
+        let altitude_ok = p.positive("gains.k_pz", g.k_pz, MAX_GAIN, " 1/s²")
+            & p.positive("gains.k_vz", g.k_vz, MAX_GAIN, " 1/s");
+        let ring = RingDigraph::for_agents(n, g.k)
+            .map_err(|e| p.push(format!("vehicle count / gains.k: {e}")))
+            .ok();
+        let c = g.time_scale;
+        let gains = gains_ok
+            .then(|| {
+                CouplingGains::new(g.alpha * c * c, g.beta * c)
+                    .map_err(|e| p.push(format!("gains: {e}")))
+                    .ok()
+            })
+            .flatten();
+        if let (Some(ring), Some(gains)) = (&ring, gains) {
+            match analyze(ring, Some(gains)) {
+                Ok(report) if !report.stable => p.push(format!(
+                    "gains are unstable: k = {} (bound k > {:.6}, margin {:+.6}), beta^2/alpha = {:.6} vs Yu's bound {}",
+                    g.k,
+                    report.k_min,
+                    report.k_margin,
+                    gains.ratio(),
+                    report.yu_bound.map_or("none (k below the bound)".to_owned(), |b| format!("{b:.6}"))
+                )),
+                Ok(_) => {}
+                Err(e) => p.push(format!("gains: {e}")),
+            }
+        }
+        let altitude_gains = altitude_ok
+            .then(|| {
+                AltitudeGains::new(g.k_pz, g.k_vz)
+                    .map_err(|e| p.push(format!("gains: {e}")))
+                    .ok()
+            })
+            .flatten();
+        let offsets = self.offsets(n, &mut p);
+        p.within(
+            "formation.altitude_m",
+            self.formation.altitude_m,
+            -MAX_DISTANCE_M,
+            MAX_DISTANCE_M,
+            " m",
+        );
+        let e = &self.envelope;
+        let envelope_ok = p.positive("envelope.max_tilt_deg", e.max_tilt_deg, 80.0, " deg")
+            & p.within("envelope.min_thrust", e.min_thrust, 0.0, 1.0, "")
+            & p.within("envelope.max_thrust", e.max_thrust, 0.0, 1.0, "")
+            & p.within("envelope.xy_margin", e.xy_margin, 0.0, 1.0, "");
+        let envelope = envelope_ok
+            .then(|| {
+                Envelope::new(e.max_tilt_deg.to_radians(), e.min_thrust, e.max_thrust)
+                    .and_then(|env| env.with_xy_margin(e.xy_margin))
+                    .map_err(|err| p.push(format!("envelope: {err}")))
+                    .ok()
+            })
+            .flatten();
+        let f = &self.frame;
+        p.within("frame.latitude_deg", f.latitude_deg, -85.0, 85.0, " deg");
+        p.within(
+            "frame.longitude_deg",
+            f.longitude_deg,
+            -180.0,
+            180.0,
+            " deg",
+        );
+        p.within(
+            "frame.altitude_amsl_m",
+            f.altitude_amsl_m,
+            -500.0,
+            1.0e4,
+            " m",
+        );
+        p.within(
+            "emulator.ground_below_m",
+            self.emulator.ground_below_m,
+            -MAX_DISTANCE_M,
+            MAX_DISTANCE_M,
+            " m",
+        );
+        let timing = self.check_swarm(&mut p);
+        let target = self.target(&mut p);
+        let models = self.models(envelope.as_ref(), &mut p);
+        if !p.0.is_empty() {
+            return Err(p.0.join("\n"));
+        }
+        let (
+            Some(ring),
+            Some(gains),
+            Some(altitude_gains),
+            Some(offsets),
+            Some(envelope),
+            Some(timing),
+        ) = (ring, gains, altitude_gains, offsets, envelope, timing)
+        else {
+            return Err("invalid configuration".to_owned());
+        };
+        let s = &self.swarm;
+        Ok(SwarmSetup {
+            ring,
+            gains,
+            altitude_gains,
+            altitude_m: self.formation.altitude_m,
+            offsets_m: offsets,
+            models,
+            drag_per_s: self.vehicle.iter().map(|v| v.drag_per_s).collect(),
+            envelope,
+            saturation: e.saturation,
+            control_interval: timing.control_interval,
+            frame: CommonFrame::new(Geodetic {
+                lat_deg: f.latitude_deg,
+                lon_deg: f.longitude_deg,
+                alt_amsl_m: f.altitude_amsl_m,
+            }),
+            links: self
+                .vehicle
+                .iter()
+                .map(|v| LinkConfig {
+                    setpoint_interval: timing.control_interval,
+                    telemetry_interval: timing.control_interval,
+                    link_timeout: timing.link_timeout,
+                    own_ids: (s.gcs_system_id, s.gcs_component_id),
+                    retake_offboard: s.retake_offboard,
+                    state_timeout: timing.state_timeout,
+                    ..LinkConfig::new(v.system_id)
+                })
+                .collect(),
+            duration: Some(timing.duration),
+            handshake_timeout: timing.handshake_timeout,
+            end_action: s.end,
+            loss_policy: s.on_link_loss,
+            target,
+        })
+    }
+
+    /// `[swarm]`: rates, durations and timeouts, and the coordinator's own ids.
+    fn check_swarm(&self, p: &mut Problems) -> Option<Timing> {
+        let s = &self.swarm;
+        let rate_ok = p.within(
+            "swarm.control_rate_hz",
+            s.control_rate_hz,
+            1.0,
+            250.0,
+            " Hz",
+        );
+        let duration_ok = p.positive("swarm.duration_s", s.duration_s, MAX_DURATION_S, " s");
+        let link_ok = p.within(
+            "swarm.link_timeout_ms",
+            s.link_timeout_ms as f64,
+            100.0,
+            60_000.0,
+            " ms",
+        );
+        let handshake_ok = p.within(
+            "swarm.handshake_timeout_s",
+            s.handshake_timeout_s,
+            1.0,
+            3600.0,
+            " s",
+        );
+        // The state must be allowed to miss a couple of telemetry samples (streamed at the
+        // control rate), and a stale state must be noticed before the link itself is lost.
+        let period_ms = if rate_ok {
+            1000.0 / s.control_rate_hz
+        } else {
+            20.0
+        };
+        let state_lo = (3.0 * period_ms).ceil();
+        let state_ok = p.within(
+            "swarm.state_timeout_ms",
+            s.state_timeout_ms as f64,
+            state_lo,
+            s.link_timeout_ms as f64,
+            " ms (three control periods up to swarm.link_timeout_ms)",
+        );
+        if s.gcs_system_id == 0 {
+            p.push("swarm.gcs_system_id must be 1..=255, got 0".to_owned());
+        }
+        (rate_ok && duration_ok && link_ok && handshake_ok && state_ok).then(|| Timing {
+            control_interval: Duration::from_secs_f64(1.0 / s.control_rate_hz),
+            duration: Duration::from_secs_f64(s.duration_s),
+            link_timeout: Duration::from_millis(s.link_timeout_ms),
+            handshake_timeout: Duration::from_secs_f64(s.handshake_timeout_s),
+            state_timeout: Duration::from_millis(s.state_timeout_ms),
+        })
+    }
+
+    /// `[target]`, if any.
+    fn target(&self, p: &mut Problems) -> Option<TargetVelocity> {
+        let t = self.target.as_ref()?;
+        let mut ok = p.vector(
+            "target.velocity_enu_mps",
+            &t.velocity_enu_mps,
+            MAX_SPEED_MPS,
+            " m/s",
+        );
+        ok &= p.within("target.k_margin", t.k_margin, 0.0, MAX_GAIN, "");
+        ok &= p.positive("target.k_max", t.k_max, MAX_GAIN, "");
+        ok &= p.positive("target.tolerance_mps", t.tolerance_mps, 10.0, " m/s");
+        if let Some(max) = t.max_speed_mps {
+            ok &= p.positive("target.max_speed_mps", max, MAX_SPEED_MPS, " m/s");
+        }
+        ok.then(|| TargetVelocity {
+            velocity_mps: Vector2::from(t.velocity_enu_mps),
+            k_margin: t.k_margin,
+            k_max: t.k_max,
+            max_speed_mps: t.max_speed_mps,
+            tolerance_mps: t.tolerance_mps,
+        })
+    }
+
+    /// `[[vehicle]]`: ids, models and start states.
+    fn models(&self, envelope: Option<&Envelope>, p: &mut Problems) -> Vec<VehicleModel> {
+        let mut models = Vec::new();
+        let mut ids = Vec::new();
+        for (i, v) in self.vehicle.iter().enumerate() {
+            let key = |name: &str| format!("vehicle[{i}].{name}");
+            if v.system_id == 0 || v.system_id > 250 {
+                p.push(format!(
+                    "vehicle[{i}].system_id must be 1..=250, got {}",
+                    v.system_id
+                ));
+            }
+            if ids.contains(&v.system_id) {
+                p.push(format!(
+                    "vehicle[{i}].system_id {} is used twice",
+                    v.system_id
+                ));
+            }
+            ids.push(v.system_id);
+            if v.system_id == self.swarm.gcs_system_id {
+                p.push(format!(
+                    "vehicle[{i}].system_id {} is the coordinator's own swarm.gcs_system_id",
+                    v.system_id
+                ));
+            }
+            let mass_ok = p.positive(&key("mass_kg"), v.mass_kg, 1000.0, " kg");
+            let hover_ok = p.within(&key("hover_throttle"), v.hover_throttle, 0.01, 0.99, "");
+            if mass_ok && hover_ok {
+                match VehicleModel::from_hover_throttle(v.mass_kg, v.hover_throttle) {
+                    Ok(m) => {
+                        if let Some(env) = envelope
+                            && let Err(err) = env.check_hover(&m)
+                        {
+                            p.push(format!("vehicle[{i}]: {err}"));
+                        }
+                        models.push(m);
+                    }
+                    Err(err) => p.push(format!("vehicle[{i}]: {err}")),
+                }
+            }
+            p.within(&key("drag_per_s"), v.drag_per_s, 0.0, 10.0, " 1/s");
+            p.vector(&key("start_enu_m"), &v.start_enu_m, MAX_DISTANCE_M, " m");
+            p.vector(
+                &key("start_velocity_enu_mps"),
+                &v.start_velocity_enu_mps,
+                MAX_SPEED_MPS,
+                " m/s",
+            );
+        }
+        models
+    }
+
+    /// The formation offsets `dᵢ` (ENU, m).
+    fn offsets(&self, n: usize, p: &mut Problems) -> Option<Vec<Vector2<f64>>> {
+        let f = &self.formation;
+        match f.kind.as_str() {
+            "polygon" => {
+                let Some(r) = f.radius_m else {
+                    p.push("formation.radius_m is required for kind = \"polygon\"".to_owned());
+                    return None;
+                };
+                p.positive("formation.radius_m", r, MAX_DISTANCE_M, " m")
+                    .then(|| {
+                        (0..n)
+                            .map(|l| {
+                                let angle = 2.0 * PI * l as f64 / n as f64;
+                                Vector2::new(angle.cos(), angle.sin()) * r
+                            })
+                            .collect()
+                    })
+            }
+            "line" => {
+                let Some(d) = f.spacing_m else {
+                    p.push("formation.spacing_m is required for kind = \"line\"".to_owned());
+                    return None;
+                };
+                p.positive(
+                    "formation.spacing_m",
+                    d,
+                    MAX_DISTANCE_M / n.max(1) as f64,
+                    " m",
+                )
+                .then(|| (0..n).map(|i| Vector2::new(d * i as f64, 0.0)).collect())
+            }
+            "offsets" => {
+                let Some(list) = f.offsets_m.as_ref() else {
+                    p.push("formation.offsets_m is required for kind = \"offsets\"".to_owned());
+                    return None;
+                };
+                if list.len() != n {
+                    p.push(format!(
+                        "formation.offsets_m has {} entries for {n} vehicles",
+                        list.len()
+                    ));
+                    return None;
+                }
+                let mut ok = true;
+                for (j, o) in list.iter().enumerate() {
+                    ok &= p.vector(
+                        &format!("formation.offsets_m[{j}]"),
+                        o,
+                        MAX_DISTANCE_M,
+                        " m",
+                    );
+                }
+                ok.then(|| list.iter().map(|o| Vector2::new(o[0], o[1])).collect())
+            }
+            other => {
+                p.push(format!(
+                    "formation.kind \"{other}\" is not one of polygon, line, offsets"
+                ));
+                None
+            }
+        }
+    }
+}
+
+/// The validated times of `[swarm]`.
+struct Timing {
+    control_interval: Duration,
+    duration: Duration,
+    link_timeout: Duration,
+    handshake_timeout: Duration,
+    state_timeout: Duration,
+}

@@ -1,0 +1,105 @@
+//! What the swarm machine is given: the validated setup and its policies.
+
+use std::time::Duration;
+
+use nalgebra::Vector2;
+
+use crate::consensus::{CouplingGains, RingDigraph};
+use crate::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel};
+use crate::frame::CommonFrame;
+use crate::vehicle::LinkConfig;
+
+/// Everything the swarm machine needs, validated by the caller (see `config`).
+#[derive(Debug, Clone)]
+pub struct SwarmSetup {
+    /// The ring.
+    pub ring: RingDigraph,
+    /// `(α, β)`.
+    pub gains: CouplingGains,
+    /// `(k_pz, k_vz)`.
+    pub altitude_gains: AltitudeGains,
+    /// Commanded altitude in the common frame (m, z up).
+    pub altitude_m: f64,
+    /// Formation offsets `dᵢ` (m, ENU), one per vehicle.
+    pub offsets_m: Vec<Vector2<f64>>,
+    /// Vehicle models, one per vehicle.
+    pub models: Vec<VehicleModel>,
+    /// Linear drag of each vehicle (1/s), fed forward.
+    pub drag_per_s: Vec<f64>,
+    /// Envelope and saturation mode.
+    pub envelope: Envelope,
+    /// How commands are saturated.
+    pub saturation: SaturationMode,
+    /// Control period.
+    pub control_interval: Duration,
+    /// The common frame.
+    pub frame: CommonFrame,
+    /// One link configuration per vehicle.
+    pub links: Vec<LinkConfig>,
+    /// How long consensus runs before the end action (`None`: until told to land).
+    pub duration: Option<Duration>,
+    /// How long the vehicles have to be flying before the swarm gives up and lands.
+    pub handshake_timeout: Duration,
+    /// What the swarm does when the duration is over.
+    pub end_action: EndAction,
+    /// What the swarm does when a vehicle is lost during consensus.
+    pub loss_policy: LossPolicy,
+    /// A final velocity to reach with the planner (stage 1), if any.
+    pub target: Option<TargetVelocity>,
+}
+
+/// The planner's job: reach `velocity_mps` by choosing `k` and, if needed, re-targeting
+/// one agent before consensus starts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TargetVelocity {
+    /// Desired final velocity (m/s, ENU).
+    pub velocity_mps: Vector2<f64>,
+    /// `k ≥ k_min + k_margin`.
+    pub k_margin: f64,
+    /// `k ≤ k_max`.
+    pub k_max: f64,
+    /// Largest speed a re-targeted agent may be asked for (m/s).
+    pub max_speed_mps: Option<f64>,
+    /// Stage 1 ends when the re-targeted agent is this close to its planned velocity (m/s).
+    pub tolerance_mps: f64,
+}
+
+/// A re-targeted agent (0-based) and its planned velocity (m/s, ENU).
+pub type Retargeted = (usize, Vector2<f64>);
+
+/// What the planner decided when consensus was about to start.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PlanDecision {
+    /// Flying the planned `k`, after re-targeting `agent` (0-based) to `velocity_mps`.
+    Planned {
+        /// The gain flown.
+        k: f64,
+        /// The re-targeted agent and its planned velocity, if any.
+        retarget: Option<Retargeted>,
+    },
+    /// Not used: the configured `k` is flown. Why, in words.
+    Rejected(String),
+}
+
+/// What the swarm does at the end of the configured duration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EndAction {
+    /// Every vehicle lands and disarms.
+    #[default]
+    Land,
+    /// Every vehicle brakes and hovers in place until told to land.
+    Hold,
+}
+
+/// What the swarm does when a vehicle's link is lost during consensus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LossPolicy {
+    /// The others brake and hover in place; when the vehicle is handshaken again the
+    /// consensus resumes (with a new predicted final velocity).
+    #[default]
+    Hold,
+    /// Every vehicle lands.
+    Land,
+}

@@ -1,0 +1,713 @@
+//! The link machine itself (the phases are drawn in the module above).
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd, MavMessage};
+use ringswarm_sitl::time::SimTime;
+
+use super::telemetry::{OriginVerdict, PositionVerdict, TelemetryGate};
+use super::{
+    LinkConfig, LinkEvent, PX4_MAIN_AUTO, PX4_MAIN_OFFBOARD, PX4_SUB_AUTO_LOITER, Phase,
+    VehicleState,
+};
+use crate::control::AttitudeThrust;
+use crate::link::{
+    AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, decode_datagram, gcs_heartbeat, inbound,
+    set_attitude_target,
+};
+
+/// MAV_RESULT_ACCEPTED.
+const ACCEPTED: u8 = 0;
+/// How long an ACCEPTED for DO_SET_MODE waits for a second, real answer (PX4 main sends
+/// it a few milliseconds after its early ACCEPTED).
+const MODE_ACK_SETTLE: Duration = Duration::from_millis(100);
+/// Message ids the coordinator asks to be streamed, and GPS_GLOBAL_ORIGIN asked once.
+const LOCAL_POSITION_NED: f32 = 32.0;
+const ATTITUDE_QUATERNION: f32 = 31.0;
+const GPS_GLOBAL_ORIGIN: f32 = 49.0;
+
+/// A command waiting for its acknowledgement.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    command: MavCmd,
+    params: [f32; 7],
+    attempt: u8,
+    deadline: SimTime,
+    /// An ACCEPTED that may still be followed by the real answer.
+    accepted: bool,
+}
+
+/// One vehicle link.
+#[derive(Debug, Clone)]
+pub struct VehicleLink {
+    cfg: LinkConfig,
+    phase: Phase,
+    state: VehicleState,
+    setpoint: AttitudeThrust,
+    next_setpoint: SimTime,
+    next_heartbeat: SimTime,
+    pending: Option<Pending>,
+    encoder: Encoder,
+    outbox: VecDeque<Vec<u8>>,
+    events: VecDeque<LinkEvent>,
+    ignored_frames: u64,
+    wrong_system: Option<u8>,
+    land_requested: bool,
+    never_heard_reported: bool,
+    heartbeats_out_of_offboard: u8,
+    gate: TelemetryGate,
+    /// Reached Flying at least once: from then on the vehicle's own decisions count.
+    has_flown: bool,
+    /// In (or, lost, last in) VehicleHold; `true` when it returns once fresh.
+    held: Option<bool>,
+    /// The vehicle confirmed the Hold we asked for (acknowledged, or its heartbeat).
+    hold_confirmed: bool,
+    /// A run of refused telemetry reports is going on (reported once per run).
+    refusing: bool,
+    refused_reports: u64,
+    next_origin: Option<crate::frame::Geodetic>,
+}
+
+impl VehicleLink {
+    /// A link that starts discovering, with `idle` as the setpoint to stream until the law
+    /// takes over (normally level at hover throttle).
+    pub fn new(cfg: LinkConfig, idle: AttitudeThrust) -> Self {
+        let encoder = Encoder::new(cfg.own_ids.0, cfg.own_ids.1);
+        Self {
+            cfg,
+            phase: Phase::Discovering,
+            state: VehicleState::default(),
+            setpoint: idle,
+            next_setpoint: SimTime::ZERO,
+            next_heartbeat: SimTime::ZERO,
+            pending: None,
+            encoder,
+            outbox: VecDeque::new(),
+            events: VecDeque::new(),
+            ignored_frames: 0,
+            wrong_system: None,
+            land_requested: false,
+            never_heard_reported: false,
+            heartbeats_out_of_offboard: 0,
+            gate: TelemetryGate::default(),
+            has_flown: false,
+            held: None,
+            hold_confirmed: false,
+            refusing: false,
+            refused_reports: 0,
+            next_origin: None,
+        }
+    }
+
+    /// Position reports and origins refused by the telemetry gate.
+    pub fn refused_reports(&self) -> u64 {
+        self.refused_reports
+    }
+
+    /// Whether the last accepted position is younger than the state timeout (and its
+    /// origin known): what the swarm may fly on.
+    pub fn state_fresh(&self, now: SimTime) -> bool {
+        self.state.origin.is_some()
+            && self
+                .state
+                .last_position
+                .is_some_and(|t| now - t <= self.cfg.state_timeout)
+    }
+
+    /// Hands a flying vehicle to its own Hold mode (AUTO.LOITER) for good: the swarm could
+    /// not compute its command. Nothing more is streamed to it; it can still be landed.
+    pub fn hold_on_own(&mut self, now: SimTime, reason: &str) {
+        if matches!(
+            self.phase,
+            Phase::Flying | Phase::Streaming(_) | Phase::Arming | Phase::Offboarding
+        ) {
+            self.hand_to_hold(now, reason.to_owned(), false);
+        }
+    }
+
+    fn hand_to_hold(&mut self, now: SimTime, reason: String, resume_when_fresh: bool) {
+        self.phase = Phase::VehicleHold;
+        self.held = Some(resume_when_fresh);
+        self.hold_confirmed = false;
+        self.heartbeats_out_of_offboard = 0;
+        self.events.push_back(LinkEvent::HandedToHold(reason));
+        let params = [
+            1.0,
+            PX4_MAIN_AUTO as f32,
+            PX4_SUB_AUTO_LOITER as f32,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+        ];
+        self.send_pending(now, MavCmd::MAV_CMD_DO_SET_MODE, params, 1);
+    }
+
+    /// The phase.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// What is known of the vehicle.
+    pub fn state(&self) -> &VehicleState {
+        &self.state
+    }
+
+    /// The setpoint being streamed.
+    pub fn setpoint(&self) -> AttitudeThrust {
+        self.setpoint
+    }
+
+    /// Frames ignored (undecodable, another system, another component).
+    pub fn ignored_frames(&self) -> u64 {
+        self.ignored_frames
+    }
+
+    /// Replaces the setpoint. While streaming it is sent at once, so the stream follows
+    /// the control ticks; the link's own timer only resends it if no new setpoint comes
+    /// within one and a half periods (it never doubles the rate when the two timers drift).
+    pub fn set_setpoint(&mut self, now: SimTime, setpoint: AttitudeThrust) {
+        self.setpoint = setpoint;
+        if self.streams() {
+            self.send_setpoint(now);
+            self.next_setpoint = now + self.cfg.setpoint_interval.mul_f64(1.5);
+        }
+    }
+
+    fn send_setpoint(&mut self, now: SimTime) {
+        let msg = set_attitude_target(&self.setpoint, self.cfg.system_id, now.boot_ms());
+        self.outbox.push_back(self.encoder.encode(&msg));
+    }
+
+    /// The next datagram to send to the vehicle.
+    pub fn poll_transmit(&mut self) -> Option<Vec<u8>> {
+        self.outbox.pop_front()
+    }
+
+    /// The next event.
+    pub fn poll_event(&mut self) -> Option<LinkEvent> {
+        self.events.pop_front()
+    }
+
+    /// When [`VehicleLink::handle_timeout`] must next be called.
+    pub fn poll_timeout(&self) -> SimTime {
+        let mut next = self
+            .state
+            .last_heard
+            .map_or(SimTime::from_millis(100), |t| t + self.cfg.link_timeout)
+            .min(self.next_heartbeat);
+        if self.streams() {
+            next = next.min(self.next_setpoint);
+        }
+        if let Some(p) = self.pending {
+            next = next.min(p.deadline);
+        }
+        if let Phase::Streaming(since) = self.phase {
+            next = next.min(since + self.cfg.pre_stream);
+        }
+        if self.phase == Phase::Discovering && !self.never_heard_reported {
+            next = next.min(SimTime::ZERO + self.cfg.discovery_warning);
+        }
+        if self.phase == Phase::Flying {
+            // Stale one microsecond after the state timeout.
+            let stale = self.state.last_position.map_or(SimTime::ZERO, |t| {
+                t + self.cfg.state_timeout + Duration::from_micros(1)
+            });
+            next = next.min(stale);
+        }
+        next
+    }
+
+    fn streams(&self) -> bool {
+        match self.phase {
+            Phase::Discovering
+            | Phase::Lost
+            | Phase::Failed
+            | Phase::Disarming
+            | Phase::Done
+            | Phase::Overridden
+            | Phase::VehicleHold => false,
+            // Keep OFFBOARD fed until the vehicle has taken NAV_LAND.
+            Phase::Landing => self.pending.is_some() && self.state.in_offboard(),
+            _ => true,
+        }
+    }
+
+    /// Tells the vehicle to land where it is and to disarm on the ground. Idempotent. A
+    /// vehicle never heard from, or heard but never armed, is done at once.
+    pub fn land(&mut self, now: SimTime) {
+        if self.land_requested {
+            return;
+        }
+        self.land_requested = true;
+        match self.phase {
+            Phase::Discovering => self.phase = Phase::Done,
+            Phase::Overridden => {} // someone else flies it
+            Phase::Streaming(_) if !self.state.armed => {
+                self.pending = None;
+                self.phase = Phase::Done;
+            }
+            Phase::Lost => {} // sent when the vehicle is heard again
+            _ => self.request_land(now),
+        }
+    }
+
+    /// Whether [`VehicleLink::land`] was called.
+    pub fn land_requested(&self) -> bool {
+        self.land_requested
+    }
+
+    fn request_land(&mut self, now: SimTime) {
+        self.phase = Phase::Landing;
+        let nan = f32::NAN; // PX4: NaN lat/lon/alt/yaw = here, current heading
+        let params = [0.0, 0.0, 0.0, nan, nan, nan, nan];
+        self.send_pending(now, MavCmd::MAV_CMD_NAV_LAND, params, 1);
+    }
+
+    fn request_disarm(&mut self, now: SimTime) {
+        self.phase = Phase::Disarming;
+        self.events.push_back(LinkEvent::Landed);
+        let params = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        self.send_pending(now, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, params, 1);
+    }
+
+    fn finish(&mut self) {
+        self.pending = None;
+        self.phase = Phase::Done;
+        self.events.push_back(LinkEvent::Disarmed);
+    }
+
+    /// Handles one datagram from the vehicle's address.
+    pub fn handle_datagram(&mut self, now: SimTime, bytes: &[u8]) {
+        for frame in decode_datagram(bytes) {
+            let Ok(frame) = frame else {
+                self.ignored_frames += 1;
+                continue;
+            };
+            let system_id = frame.header.system_id as u8;
+            if system_id != self.cfg.system_id {
+                self.ignored_frames += 1;
+                if self.wrong_system != Some(system_id) {
+                    // Reported once per foreign system id, not per frame.
+                    self.wrong_system = Some(system_id);
+                    self.events.push_back(LinkEvent::WrongSystem { system_id });
+                }
+                continue;
+            }
+            if frame.header.component_id != 1 {
+                self.ignored_frames += 1;
+                continue;
+            }
+            if let MavMessage::COMMAND_ACK(ack) = &frame.msg
+                && (ack.target_system != 0 && ack.target_system != self.cfg.own_ids.0)
+            {
+                continue; // an acknowledgement meant for another ground station
+            }
+            self.state.last_heard = Some(now);
+            if let Some(update) = inbound(&frame.msg) {
+                self.apply(now, update);
+            }
+        }
+    }
+
+    fn apply(&mut self, now: SimTime, update: Inbound) {
+        match update {
+            Inbound::Heartbeat {
+                armed,
+                custom_mode,
+                autopilot,
+                failsafe,
+            } => {
+                if self.phase == Phase::Discovering && autopilot != AUTOPILOT_PX4 {
+                    self.refuse_autopilot(autopilot);
+                    return;
+                }
+                self.state.last_heartbeat = Some(now);
+                self.state.custom_mode = custom_mode;
+                self.state.failsafe = failsafe;
+                if armed && !self.state.armed {
+                    self.events.push_back(LinkEvent::Armed);
+                }
+                self.state.armed = armed;
+                match self.phase {
+                    Phase::Discovering => {
+                        self.events.push_back(LinkEvent::Discovered);
+                        self.start_streaming(now);
+                    }
+                    Phase::Lost => self.recover(now),
+                    Phase::Flying => {
+                        // Two in a row: a heartbeat sent just before the switch may still
+                        // arrive after the acknowledgement.
+                        if self.state.in_offboard() && armed {
+                            self.heartbeats_out_of_offboard = 0;
+                        } else {
+                            self.heartbeats_out_of_offboard += 1;
+                            if self.heartbeats_out_of_offboard >= 2 {
+                                self.left_offboard(now);
+                            }
+                        }
+                    }
+                    Phase::VehicleHold => {
+                        if self.state.in_hold() {
+                            self.heartbeats_out_of_offboard = 0;
+                            if self.pending.is_some() {
+                                self.pending = None;
+                                self.hold_confirmed = true;
+                            }
+                        } else if self.hold_confirmed {
+                            // Out of the Hold we asked for, by itself (a pilot, its
+                            // battery failsafe): its decision.
+                            self.heartbeats_out_of_offboard += 1;
+                            if self.heartbeats_out_of_offboard >= 2 {
+                                self.held = None;
+                                self.left_offboard(now);
+                            }
+                        }
+                    }
+                    _ => self.advance_on_state(now),
+                }
+            }
+            Inbound::LocalPosition {
+                pos_ned_m,
+                vel_ned_mps,
+            } => {
+                let verdict =
+                    self.gate
+                        .position_report(now, pos_ned_m, vel_ned_mps, self.cfg.state_timeout);
+                match verdict {
+                    PositionVerdict::Refused(why) => self.refuse_report(why),
+                    accepted => {
+                        if let PositionVerdict::Reset { jump_m } = accepted {
+                            self.events.push_back(LinkEvent::PositionReset { jump_m });
+                        }
+                        self.refusing = false;
+                        self.state.pos_local_ned_m = pos_ned_m;
+                        self.state.vel_ned_mps = vel_ned_mps;
+                        self.state.last_position = Some(now);
+                        if let Some(origin) = self.next_origin.take() {
+                            self.state.origin = Some(origin);
+                        }
+                        if self.held == Some(true) && self.phase == Phase::VehicleHold {
+                            self.start_streaming(now);
+                        }
+                    }
+                }
+            }
+            Inbound::Attitude(q) => self.state.attitude = Some(q),
+            Inbound::Origin(origin) => match self.gate.origin_report(origin) {
+                OriginVerdict::First | OriginVerdict::Same => self.state.origin = Some(origin),
+                OriginVerdict::Changed { shift_m } => {
+                    // The position in hand was reported against the old origin: the new
+                    // one is taken with the next position the gate accepts.
+                    self.next_origin = Some(origin);
+                    self.events.push_back(LinkEvent::OriginChanged { shift_m });
+                }
+                OriginVerdict::Refused(why) => self.refuse_report(why),
+            },
+            Inbound::Landed(landed) => {
+                self.state.landed = landed;
+                self.advance_on_state(now);
+            }
+            Inbound::Ack { command, result } => self.on_ack(now, command, result),
+        }
+    }
+
+    fn refuse_report(&mut self, why: String) {
+        self.refused_reports += 1;
+        if !self.refusing {
+            self.refusing = true;
+            self.events.push_back(LinkEvent::TelemetryRefused(why));
+        }
+    }
+
+    /// Heard again after a loss. Before it first flew, the handshake starts over. After,
+    /// the vehicle's own decisions win: still armed in OFFBOARD, it is taken on; anything
+    /// else it chose (its failsafe's Hold, Return or Land, a disarm) is left alone unless
+    /// `retake_offboard`. A vehicle we had handed to its Hold and that is in it without a
+    /// failsafe (PX4 says CRITICAL while one acts) stays ours.
+    fn recover(&mut self, now: SimTime) {
+        self.events.push_back(LinkEvent::Recovered);
+        // In the Hold we asked for, and not because its own failsafe chose it.
+        let ours = self.held.is_some() && self.state.in_hold() && !self.state.failsafe;
+        if !ours {
+            self.held = None;
+        }
+        if self.land_requested {
+            self.request_land(now);
+        } else if ours {
+            self.phase = Phase::VehicleHold;
+        } else if !self.has_flown
+            || self.cfg.retake_offboard
+            || (self.state.armed && self.state.in_offboard())
+        {
+            // Still armed in OFFBOARD (a loss shorter than its COM_OF_LOSS_T): the usual
+            // stream then DO_SET_MODE, which it already is in; no arming.
+            self.start_streaming(now);
+        } else {
+            self.left_offboard(now);
+        }
+    }
+
+    /// The vehicle left OFFBOARD (or disarmed) by itself.
+    fn left_offboard(&mut self, now: SimTime) {
+        self.pending = None;
+        self.events.push_back(LinkEvent::LeftOffboard {
+            custom_mode: self.state.custom_mode,
+            armed: self.state.armed,
+        });
+        if self.cfg.retake_offboard {
+            self.start_streaming(now);
+        } else {
+            self.phase = Phase::Overridden;
+        }
+    }
+
+    /// A vehicle whose autopilot is not PX4 is never commanded: PX4's mode numbers and
+    /// offboard rules would mean something else to it.
+    fn refuse_autopilot(&mut self, autopilot: u8) {
+        let reason = format!(
+            "vehicle {}: autopilot is {}, not PX4: refused (ringswarm speaks PX4's modes only)",
+            self.cfg.system_id,
+            autopilot_name(autopilot)
+        );
+        self.phase = Phase::Failed;
+        self.pending = None;
+        self.events.push_back(LinkEvent::Failed(reason));
+    }
+
+    fn start_streaming(&mut self, now: SimTime) {
+        self.phase = Phase::Streaming(now);
+        self.pending = None;
+        self.next_setpoint = now;
+        let interval_us = self.cfg.telemetry_interval.as_micros() as f32;
+        for id in [LOCAL_POSITION_NED, ATTITUDE_QUATERNION] {
+            self.send_command(
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                [id, interval_us, 0.0, 0.0, 0.0, 0.0, 0.0],
+                0,
+            );
+        }
+        self.send_command(
+            MavCmd::MAV_CMD_REQUEST_MESSAGE,
+            [GPS_GLOBAL_ORIGIN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            0,
+        );
+    }
+
+    /// A heartbeat may show that a command took effect even if its ack was lost.
+    fn advance_on_state(&mut self, now: SimTime) {
+        if self.phase == Phase::Arming && self.state.armed {
+            self.request_offboard(now);
+        }
+        if self.phase == Phase::Offboarding && self.state.armed && self.state.in_offboard() {
+            self.enter_flying();
+        }
+        if self.phase == Phase::Landing {
+            if self
+                .pending
+                .is_some_and(|p| p.command == MavCmd::MAV_CMD_NAV_LAND)
+                && self.state.in_land()
+            {
+                self.pending = None;
+                self.events.push_back(LinkEvent::Landing);
+            }
+            if self.state.landed {
+                if self.state.armed {
+                    self.request_disarm(now);
+                } else {
+                    self.events.push_back(LinkEvent::Landed);
+                    self.finish();
+                }
+            }
+        }
+        if self.phase == Phase::Disarming && !self.state.armed {
+            self.finish();
+        }
+    }
+
+    fn enter_flying(&mut self) {
+        self.pending = None;
+        self.phase = Phase::Flying;
+        self.has_flown = true;
+        self.held = None;
+        self.heartbeats_out_of_offboard = 0;
+        self.events.push_back(LinkEvent::Flying);
+    }
+
+    fn on_ack(&mut self, now: SimTime, command: u16, result: u8) {
+        let Some(pending) = self.pending else { return };
+        if pending.command as u16 != command {
+            return;
+        }
+        if result != ACCEPTED {
+            self.events
+                .push_back(LinkEvent::Refused { command, result });
+            if let Some(p) = &mut self.pending
+                && p.accepted
+            {
+                // The real answer after an early ACCEPTED: refused after all.
+                p.accepted = false;
+                p.deadline = now + self.cfg.ack_timeout;
+            }
+            return; // resent at the deadline
+        }
+        match self.phase {
+            Phase::Arming => self.request_offboard(now),
+            Phase::Offboarding => {
+                if let Some(p) = &mut self.pending {
+                    p.accepted = true;
+                    p.deadline = now + MODE_ACK_SETTLE;
+                }
+            }
+            Phase::Landing => {
+                self.pending = None;
+                self.events.push_back(LinkEvent::Landing);
+            }
+            Phase::Disarming => self.finish(),
+            Phase::VehicleHold => {
+                self.pending = None;
+                self.hold_confirmed = true;
+            }
+            _ => {}
+        }
+    }
+
+    fn request_arm(&mut self, now: SimTime) {
+        self.phase = Phase::Arming;
+        self.send_pending(
+            now,
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            1,
+        );
+    }
+
+    fn request_offboard(&mut self, now: SimTime) {
+        self.phase = Phase::Offboarding;
+        let params = [1.0, PX4_MAIN_OFFBOARD as f32, 0.0, 0.0, 0.0, 0.0, 0.0];
+        self.send_pending(now, MavCmd::MAV_CMD_DO_SET_MODE, params, 1);
+    }
+
+    fn send_pending(&mut self, now: SimTime, command: MavCmd, params: [f32; 7], attempt: u8) {
+        self.send_command(command, params, attempt - 1);
+        self.pending = Some(Pending {
+            command,
+            params,
+            attempt,
+            deadline: now + self.cfg.ack_timeout,
+            accepted: false,
+        });
+    }
+
+    fn send_command(&mut self, command: MavCmd, params: [f32; 7], confirmation: u8) {
+        let msg = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            target_system: self.cfg.system_id,
+            target_component: 1,
+            command,
+            confirmation,
+            param1: params[0],
+            param2: params[1],
+            param3: params[2],
+            param4: params[3],
+            param5: params[4],
+            param6: params[5],
+            param7: params[6],
+        });
+        self.outbox.push_back(self.encoder.encode(&msg));
+    }
+
+    /// Runs the timers due at `now`: the setpoint stream, the pre-stream, command
+    /// deadlines and link loss.
+    pub fn handle_timeout(&mut self, now: SimTime) {
+        if now >= self.next_heartbeat {
+            self.outbox.push_back(self.encoder.encode(&gcs_heartbeat()));
+            let next = self.next_heartbeat + self.cfg.heartbeat_interval;
+            self.next_heartbeat = if next <= now {
+                now + self.cfg.heartbeat_interval
+            } else {
+                next
+            };
+        }
+        if self.phase == Phase::Discovering
+            && !self.never_heard_reported
+            && now >= SimTime::ZERO + self.cfg.discovery_warning
+        {
+            self.never_heard_reported = true;
+            self.events.push_back(LinkEvent::NeverHeard {
+                after: self.cfg.discovery_warning,
+            });
+        }
+        if let Some(last) = self.state.last_heard
+            && now - last > self.cfg.link_timeout
+            && !matches!(
+                self.phase,
+                Phase::Lost | Phase::Failed | Phase::Discovering | Phase::Done | Phase::Overridden
+            )
+        {
+            self.phase = Phase::Lost;
+            self.pending = None;
+            self.events.push_back(LinkEvent::Lost);
+        }
+        if self.phase == Phase::Flying && !self.state_fresh(now) {
+            let age = self.state.last_position.map_or("none".to_owned(), |t| {
+                format!("{} ms old", (now - t).as_millis())
+            });
+            let reason = format!(
+                "no usable position within the {} ms state timeout (last {age})",
+                self.cfg.state_timeout.as_millis()
+            );
+            self.hand_to_hold(now, reason, true);
+        }
+        if self.held == Some(true) && self.phase == Phase::VehicleHold && self.state_fresh(now) {
+            self.start_streaming(now);
+        }
+        if let Phase::Streaming(since) = self.phase
+            && now - since >= self.cfg.pre_stream
+        {
+            if self.state.armed {
+                self.request_offboard(now)
+            } else {
+                self.request_arm(now)
+            }
+        }
+        if let Some(p) = self.pending
+            && now >= p.deadline
+            && p.accepted
+            && self.phase == Phase::Offboarding
+        {
+            // ACCEPTED and nothing else came: OFFBOARD it is.
+            self.enter_flying();
+        }
+        if let Some(p) = self.pending
+            && now >= p.deadline
+        {
+            if p.attempt >= self.cfg.max_attempts {
+                self.pending = None;
+                self.phase = Phase::Failed;
+                let reason = format!(
+                    "vehicle {}: {} not accepted after {} attempts",
+                    self.cfg.system_id,
+                    super::command_name(p.command as u16),
+                    p.attempt
+                );
+                self.events.push_back(LinkEvent::Failed(reason));
+            } else {
+                self.events.push_back(LinkEvent::Retrying {
+                    command: p.command as u16,
+                    attempt: p.attempt + 1,
+                });
+                self.send_pending(now, p.command, p.params, p.attempt + 1);
+            }
+        }
+        if self.streams() && now >= self.next_setpoint {
+            self.send_setpoint(now);
+            let next = self.next_setpoint + self.cfg.setpoint_interval;
+            self.next_setpoint = if next <= now {
+                now + self.cfg.setpoint_interval
+            } else {
+                next
+            };
+        }
+    }
+}
