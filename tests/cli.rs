@@ -272,3 +272,125 @@ fn fly_reports_every_config_problem_before_touching_the_network() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// paper-sim1 with `from` replaced by `to`, written to a fresh directory; returns the
+/// directory and the file.
+fn paper_sim1_with(tag: &str, from: &str, to: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    let dir = std::env::temp_dir().join(format!("ringswarm-cli-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml"),
+    )
+    .unwrap();
+    assert!(text.contains(from), "{from}");
+    let path = dir.join("scenario.toml");
+    std::fs::write(&path, text.replacen(from, to, 1)).unwrap();
+    (dir, path)
+}
+
+#[test]
+fn an_absurd_duration_is_refused_by_name_not_a_panic() {
+    let (dir, path) = paper_sim1_with("duration", "k = 5.0", "k = 5.0");
+    for (value, shown) in [("1e20", "1e20"), ("nan", "NaN"), ("-1", "-1")] {
+        let out = ringswarm(&[
+            "fly",
+            "--config",
+            path.to_str().unwrap(),
+            "--out",
+            dir.join("run").to_str().unwrap(),
+            &format!("--duration-s={value}"),
+        ]);
+        assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+        assert!(
+            stderr(&out).contains(&format!(
+                "--duration-s must be a finite number in (0, 1000000] s, got {shown}"
+            )),
+            "{}",
+            stderr(&out)
+        );
+    }
+    assert!(!dir.join("run").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_nan_offset_is_refused_before_anything_flies() {
+    let (dir, path) = paper_sim1_with(
+        "nan-offset",
+        "kind = \"polygon\"\nradius_m = 20.0",
+        "kind = \"offsets\"\noffsets_m = [[20.0, 0.0], [10.0, 17.3], [-10.0, nan], [-20.0, 0.0], [-10.0, -17.3], [10.0, -17.3]]",
+    );
+    let out = ringswarm(&[
+        "demo",
+        "--scenario",
+        path.to_str().unwrap(),
+        "--no-plots",
+        "--out",
+        dir.join("run").to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains(
+            "formation.offsets_m[2][1] must be a finite number in [-10000, 10000] m, got NaN"
+        ),
+        "{}",
+        stderr(&out)
+    );
+    assert!(!dir.join("run").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_vehicle_never_heard_makes_demo_exit_3_naming_it_and_warnings_show_without_rust_log() {
+    let (dir, path) = paper_sim1_with(
+        "never-heard",
+        "[[vehicle]]",
+        "[[emulator.silence]]\nvehicle = 4\nfrom_s = 0.0\nuntil_s = 100000.0\n\n[[vehicle]]",
+    );
+    let text = std::fs::read_to_string(&path)
+        .unwrap()
+        .replace(
+            "duration_s = 60.0",
+            "duration_s = 60.0\nhandshake_timeout_s = 3.0",
+        )
+        .replace("ground_below_m = 100.0", "ground_below_m = 2.0");
+    std::fs::write(&path, text).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_ringswarm"))
+        .args([
+            "demo",
+            "--scenario",
+            path.to_str().unwrap(),
+            "--no-plots",
+            "--out",
+            dir.join("run").to_str().unwrap(),
+        ])
+        .env_remove("RUST_LOG")
+        .output()
+        .unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("error: handshake not complete after 3.0 s: vehicle 4 not flying (never heard); the vehicles that flew were landed"),
+        "{err}"
+    );
+    // The warning log line, printed with RUST_LOG unset, and the events file.
+    assert!(
+        err.contains("WARN") && err.contains("swarm: handshake not complete"),
+        "{err}"
+    );
+    let events = std::fs::read_to_string(dir.join("run/events.csv")).unwrap();
+    assert!(
+        events.starts_with("t_s,system_id,level,event\n"),
+        "{events}"
+    );
+    assert!(
+        events.contains("3.0000,,warning,\"handshake not complete after 3.0 s: vehicle 4 not flying (never heard)"),
+        "{events}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("run/summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(summary["final_phase"], "landing");
+    assert!(summary["failure"].as_str().unwrap().contains("vehicle 4"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -229,6 +229,7 @@ impl SitlConfig {
                     gust_tau_s: v.gust_tau_s,
                 },
                 seed: u64::from(system_id),
+                estimator: Default::default(),
             };
             if let Err(e) = cfg.validate() {
                 problems.push(format!("vehicle[{i}]: {e}"));

@@ -6,12 +6,14 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use nalgebra::Vector3;
+use ringswarm_sitl::autopilot::estimator::{EstimatorConfig, FaultKind, TelemetryFault};
 use ringswarm_sitl::autopilot::{StartState, VehicleConfig};
 use ringswarm_sitl::profile::Profile;
 use ringswarm_sitl::time::SimTime;
 use ringswarm_sitl::world::World;
 
-use super::{Config, LockstepFaults};
+use super::validate::Problems;
+use super::{AirframeSection, Config, FaultKindName, LockstepFaults};
 use crate::control::enu_to_ned;
 
 impl Config {
@@ -115,26 +117,165 @@ impl Config {
             },
             ground_down_m: self.emulator.ground_below_m,
         };
-        let vehicles = self
-            .vehicle
-            .iter()
-            .enumerate()
-            .map(|(i, v)| {
-                let profile = v
-                    .profile
-                    .parse::<Profile>()
-                    .map_err(|e| format!("vehicle[{i}].profile: {e}"))?;
-                let mut cfg = VehicleConfig::new(v.system_id, profile);
-                cfg.start = StartState {
-                    pos_world_ned_m: enu_to_ned(Vector3::from(v.start_enu_m)),
-                    vel_ned_mps: enu_to_ned(Vector3::from(v.start_velocity_enu_mps)),
-                    yaw_rad: 0.0,
-                    in_air: v.in_air,
-                };
-                cfg.validate().map_err(|e| format!("vehicle[{i}]: {e}"))?;
-                Ok(cfg)
-            })
-            .collect::<Result<Vec<_>, String>>()?;
+        let mut p = Problems::default();
+        let estimator = self.estimator(&mut p);
+        let mut vehicles = Vec::new();
+        for (i, v) in self.vehicle.iter().enumerate() {
+            let mut profile = match v.profile.parse::<Profile>() {
+                Ok(profile) => profile,
+                Err(e) => {
+                    p.push(format!("vehicle[{i}].profile: {e}"));
+                    continue;
+                }
+            };
+            if let Some(airframe) = &v.airframe {
+                apply_airframe(&mut profile, airframe, i, &mut p);
+            }
+            let mut cfg = VehicleConfig::new(v.system_id, profile);
+            cfg.start = StartState {
+                pos_world_ned_m: enu_to_ned(Vector3::from(v.start_enu_m)),
+                vel_ned_mps: enu_to_ned(Vector3::from(v.start_velocity_enu_mps)),
+                yaw_rad: 0.0,
+                in_air: v.in_air,
+            };
+            cfg.estimator = estimator.clone();
+            cfg.estimator.faults = self.faults_of(i, &mut p);
+            if let Err(e) = cfg.validate() {
+                p.push(format!("vehicle[{i}]: {e}"));
+            }
+            vehicles.push(cfg);
+        }
+        if !p.0.is_empty() {
+            return Err(p.0.join("\n"));
+        }
         Ok((world, vehicles))
+    }
+
+    /// The estimate's errors of `[emulator]`, the same for every vehicle (each draws its
+    /// own numbers).
+    fn estimator(&self, p: &mut Problems) -> EstimatorConfig {
+        let e = &self.emulator;
+        p.within(
+            "emulator.position_noise_m",
+            e.position_noise_m,
+            0.0,
+            100.0,
+            " m",
+        );
+        p.within(
+            "emulator.velocity_noise_mps",
+            e.velocity_noise_mps,
+            0.0,
+            10.0,
+            " m/s",
+        );
+        p.within("emulator.drift_std_m", e.drift_std_m, 0.0, 100.0, " m");
+        p.positive("emulator.drift_tau_s", e.drift_tau_s, 1.0e4, " s");
+        let latency_ok = p.within(
+            "emulator.estimator_latency_ms",
+            e.estimator_latency_ms,
+            0.0,
+            2000.0,
+            " ms",
+        );
+        EstimatorConfig {
+            position_noise_m: e.position_noise_m,
+            velocity_noise_mps: e.velocity_noise_mps,
+            drift_std_m: e.drift_std_m,
+            drift_tau_s: e.drift_tau_s,
+            latency: if latency_ok {
+                Duration::from_secs_f64(e.estimator_latency_ms / 1000.0)
+            } else {
+                Duration::ZERO
+            },
+            faults: Vec::new(),
+        }
+    }
+
+    /// The `[[emulator.fault]]` tables of vehicle `i` (0-based).
+    fn faults_of(&self, i: usize, p: &mut Problems) -> Vec<TelemetryFault> {
+        let n = self.vehicle.len();
+        let mut faults = Vec::new();
+        for (j, f) in self.emulator.fault.iter().enumerate() {
+            if i == 0 && (f.vehicle == 0 || f.vehicle > n) {
+                p.push(format!(
+                    "emulator.fault[{j}].vehicle must be 1..={n}, got {}",
+                    f.vehicle
+                ));
+            }
+            if f.vehicle != i + 1 {
+                continue;
+            }
+            let key = format!("emulator.fault[{j}]");
+            let times_ok = p.within(
+                &format!("{key}.from_s"),
+                f.from_s,
+                0.0,
+                super::MAX_DURATION_S,
+                " s",
+            ) & p.within(
+                &format!("{key}.until_s"),
+                f.until_s,
+                0.0,
+                super::MAX_DURATION_S,
+                " s",
+            );
+            if times_ok && f.until_s <= f.from_s {
+                p.push(format!(
+                    "{key} needs from_s < until_s, got {} .. {}",
+                    f.from_s, f.until_s
+                ));
+                continue;
+            }
+            let kind = match f.kind {
+                FaultKindName::NanPosition => FaultKind::NanPosition,
+                FaultKindName::NoPosition => FaultKind::NoPosition,
+                FaultKindName::OriginShift => {
+                    let Some(shift) = f.shift_ned_m else {
+                        p.push(format!(
+                            "{key}.shift_ned_m is required for kind = \"origin_shift\""
+                        ));
+                        continue;
+                    };
+                    if !p.vector(&format!("{key}.shift_ned_m"), &shift, 1.0e5, " m") {
+                        continue;
+                    }
+                    FaultKind::OriginShift {
+                        shift_ned_m: Vector3::from(shift),
+                        positions_follow: f.positions_follow,
+                    }
+                }
+            };
+            if times_ok {
+                let t = |x: f64| SimTime::from_micros((x * 1e6).round() as u64);
+                faults.push(TelemetryFault {
+                    from: t(f.from_s),
+                    until: t(f.until_s),
+                    kind,
+                });
+            }
+        }
+        faults
+    }
+}
+
+/// Replaces the profile's mass, thrust and drag by the airframe's true numbers.
+fn apply_airframe(profile: &mut Profile, a: &AirframeSection, i: usize, p: &mut Problems) {
+    let key = |name: &str| format!("vehicle[{i}].airframe.{name}");
+    let hover = profile.hover_throttle();
+    if let Some(m) = a.mass_kg
+        && p.positive(&key("mass_kg"), m, 1000.0, " kg")
+    {
+        profile.mass_kg = m;
+    }
+    let hover = a.hover_throttle.unwrap_or(hover);
+    if p.within(&key("hover_throttle"), hover, 0.01, 0.99, "") {
+        profile.max_motor_thrust_n =
+            profile.mass_kg * ringswarm_sitl::profile::GRAVITY_MPS2 / hover / 4.0;
+    }
+    if let Some(d) = a.drag_per_s
+        && p.within(&key("drag_per_s"), d, 0.0, 10.0, " 1/s")
+    {
+        profile.linear_drag_per_s = d;
     }
 }

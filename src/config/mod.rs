@@ -243,6 +243,56 @@ pub struct EmulatorSection {
     pub seed: u64,
     /// Lockstep links silenced for a while: `[[emulator.silence]]`.
     pub silence: Vec<SilenceSection>,
+    /// White noise on each reported position axis (m, one standard deviation).
+    pub position_noise_m: f64,
+    /// White noise on each reported velocity axis (m/s, one standard deviation).
+    pub velocity_noise_mps: f64,
+    /// Standard deviation of a slow GPS-like horizontal position drift (m).
+    pub drift_std_m: f64,
+    /// Correlation time of that drift (s).
+    pub drift_tau_s: f64,
+    /// Age of the reported position and velocity (ms).
+    pub estimator_latency_ms: f64,
+    /// Telemetry faults of one vehicle for a while: `[[emulator.fault]]`.
+    pub fault: Vec<FaultSection>,
+}
+
+/// `[[emulator.fault]]`: vehicle `vehicle` (1-based) reports something wrong between
+/// `from_s` and `until_s` (simulated seconds).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FaultSection {
+    /// Which vehicle (1-based position in the `[[vehicle]]` list).
+    pub vehicle: usize,
+    /// Start (s).
+    pub from_s: f64,
+    /// End (s).
+    pub until_s: f64,
+    /// `nan_position` (LOCAL_POSITION_NED all NaN), `no_position` (not sent, the
+    /// heartbeat goes on) or `origin_shift` (GPS_GLOBAL_ORIGIN moves by `shift_ned_m`).
+    pub kind: FaultKindName,
+    /// For `origin_shift`: where the new origin is from the old one (m, NED).
+    pub shift_ned_m: Option<[f64; 3]>,
+    /// For `origin_shift`: whether LOCAL_POSITION_NED moves with the origin, as PX4's
+    /// estimator does (default true).
+    #[serde(default = "default_true")]
+    pub positions_follow: bool,
+}
+
+fn default_true() -> bool {
+    true
+}
+
+/// The kinds of `[[emulator.fault]]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FaultKindName {
+    /// LOCAL_POSITION_NED all NaN.
+    NanPosition,
+    /// LOCAL_POSITION_NED not sent.
+    NoPosition,
+    /// The estimator's origin moves.
+    OriginShift,
 }
 
 impl Default for EmulatorSection {
@@ -254,6 +304,12 @@ impl Default for EmulatorSection {
             loss_pct: 0.0,
             seed: 1,
             silence: Vec::new(),
+            position_noise_m: 0.0,
+            velocity_noise_mps: 0.0,
+            drift_std_m: 0.0,
+            drift_tau_s: 60.0,
+            estimator_latency_ms: 0.0,
+            fault: Vec::new(),
         }
     }
 }
@@ -310,6 +366,22 @@ pub struct VehicleSection {
     /// Started in the air (armed, a pilot holds the start velocity).
     #[serde(default)]
     pub in_air: bool,
+    /// The emulated airframe where it differs from the model above (the coordinator's
+    /// model is never exactly right): `airframe = { hover_throttle = 0.55 }`.
+    pub airframe: Option<AirframeSection>,
+}
+
+/// `[[vehicle]] airframe`: the emulated airframe's true numbers, each defaulting to the
+/// profile's.
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AirframeSection {
+    /// True mass (kg).
+    pub mass_kg: Option<f64>,
+    /// True hover throttle (0..1): sets the motors' thrust for the true mass.
+    pub hover_throttle: Option<f64>,
+    /// True linear drag (1/s).
+    pub drag_per_s: Option<f64>,
 }
 
 fn default_profile() -> String {

@@ -28,11 +28,11 @@ pub const MAX_GAIN: f64 = 1.0e4;
 
 /// Collects problems, one line each.
 #[derive(Debug, Default)]
-struct Problems(Vec<String>);
+pub(super) struct Problems(pub(super) Vec<String>);
 
 impl Problems {
     /// Requires `lo <= value <= hi` (so also finite); `unit` is printed after the range.
-    fn within(&mut self, key: &str, value: f64, lo: f64, hi: f64, unit: &str) -> bool {
+    pub(super) fn within(&mut self, key: &str, value: f64, lo: f64, hi: f64, unit: &str) -> bool {
         let good = value.is_finite() && value >= lo && value <= hi;
         if !good {
             self.0.push(format!(
@@ -44,7 +44,7 @@ impl Problems {
     }
 
     /// Requires `0 < value <= hi`.
-    fn positive(&mut self, key: &str, value: f64, hi: f64, unit: &str) -> bool {
+    pub(super) fn positive(&mut self, key: &str, value: f64, hi: f64, unit: &str) -> bool {
         let good = value.is_finite() && value > 0.0 && value <= hi;
         if !good {
             self.0.push(format!(
@@ -56,7 +56,7 @@ impl Problems {
     }
 
     /// Requires every element finite with magnitude at most `hi`.
-    fn vector(&mut self, key: &str, values: &[f64], hi: f64, unit: &str) -> bool {
+    pub(super) fn vector(&mut self, key: &str, values: &[f64], hi: f64, unit: &str) -> bool {
         let bad = values
             .iter()
             .position(|v| !(v.is_finite() && v.abs() <= hi));
@@ -69,7 +69,7 @@ impl Problems {
         bad.is_none()
     }
 
-    fn push(&mut self, problem: String) {
+    pub(super) fn push(&mut self, problem: String) {
         self.0.push(problem);
     }
 }

@@ -97,8 +97,9 @@ pub enum Inbound {
     },
 }
 
-/// Converts an inbound message, refusing non-finite values; `None` for messages the
-/// coordinator does not use or cannot trust.
+/// Converts an inbound message; `None` for messages the coordinator does not use or
+/// cannot trust (a non-finite attitude). Positions and origins are checked by the
+/// vehicle's telemetry gate, which names what it refuses.
 pub fn inbound(msg: &MavMessage) -> Option<Inbound> {
     match msg {
         MavMessage::HEARTBEAT(h) => Some(Inbound::Heartbeat {
@@ -115,12 +116,11 @@ pub fn inbound(msg: &MavMessage) -> Option<Inbound> {
         MavMessage::LOCAL_POSITION_NED(p) => {
             let pos = Vector3::new(p.x, p.y, p.z).map(f64::from);
             let vel = Vector3::new(p.vx, p.vy, p.vz).map(f64::from);
-            (pos.iter().chain(vel.iter()).all(|x| x.is_finite())).then_some(
-                Inbound::LocalPosition {
-                    pos_ned_m: pos,
-                    vel_ned_mps: vel,
-                },
-            )
+            // Checked by the vehicle's telemetry gate, which names a bad field.
+            Some(Inbound::LocalPosition {
+                pos_ned_m: pos,
+                vel_ned_mps: vel,
+            })
         }
         MavMessage::ATTITUDE_QUATERNION(a) => {
             let q = Quaternion::new(

@@ -3,6 +3,7 @@
 
 use nalgebra::Vector3;
 
+use super::estimator::EstimatorConfig;
 use crate::profile::Profile;
 
 /// Where and how a vehicle starts.
@@ -55,8 +56,10 @@ pub struct VehicleConfig {
     pub fast_rate_hz: f64,
     /// Wind.
     pub wind: WindConfig,
-    /// Seed of the vehicle's random numbers (gusts).
+    /// Seed of the vehicle's random numbers (gusts, and the estimate's errors).
     pub seed: u64,
+    /// How the reported estimate differs from the truth (noise, drift, latency, faults).
+    pub estimator: EstimatorConfig,
 }
 
 impl VehicleConfig {
@@ -74,6 +77,7 @@ impl VehicleConfig {
             fast_rate_hz: 50.0,
             wind: WindConfig::default(),
             seed: u64::from(system_id),
+            estimator: EstimatorConfig::default(),
         }
     }
 
@@ -109,6 +113,9 @@ impl VehicleConfig {
                 self.system_id
             ));
         }
+        self.estimator
+            .validate()
+            .map_err(|e| format!("vehicle {}: estimator {e}", self.system_id))?;
         Ok(())
     }
 }

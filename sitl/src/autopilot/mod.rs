@@ -28,6 +28,7 @@
 mod commands;
 mod config;
 mod datalink;
+pub mod estimator;
 mod flight;
 mod inbound;
 mod mission;
@@ -200,6 +201,9 @@ pub struct Vehicle {
     battery: Battery,
     gust_ned_mps: Vector3<f64>,
     rng: ChaCha8Rng,
+    estimator: estimator::Estimator,
+    /// The origin shift last reported in GPS_GLOBAL_ORIGIN (m, NED).
+    origin_shift_sent_ned_m: Vector3<f64>,
     links: [Link; 2],
     outbox: VecDeque<Transmit>,
     events: VecDeque<VehicleEvent>,
@@ -287,6 +291,8 @@ impl Vehicle {
             },
             gust_ned_mps: Vector3::zeros(),
             rng,
+            estimator: estimator::Estimator::new(cfg.estimator.clone(), cfg.seed),
+            origin_shift_sent_ned_m: Vector3::zeros(),
             links,
             outbox: VecDeque::new(),
             events: VecDeque::new(),
@@ -399,6 +405,8 @@ impl Vehicle {
         };
         self.update_wind(dt);
         self.state = self.frame.step(&self.state, &motors, &self.env, dt);
+        self.estimator
+            .step(t, dt, self.state.pos_ned_m, self.state.vel_ned_mps);
         self.update_battery(dt);
         self.update_landed(t);
     }

@@ -87,6 +87,16 @@ impl Vehicle {
     }
 
     pub(super) fn emit_due_telemetry(&mut self, now: SimTime) {
+        // An estimator origin that moved is reported at once, as PX4 does on a reset.
+        let shift = self.estimator.origin_shift_ned_m(now);
+        if shift != self.origin_shift_sent_ned_m {
+            self.origin_shift_sent_ned_m = shift;
+            if let Some(msg) = self.build(now, GPS_GLOBAL_ORIGIN) {
+                for link in [LinkId::Offboard, LinkId::Gcs] {
+                    self.send(link, &msg);
+                }
+            }
+        }
         for link in [LinkId::Offboard, LinkId::Gcs] {
             for i in 0..self.links[link as usize].streams.len() {
                 let stream = self.links[link as usize].streams[i];
@@ -183,7 +193,9 @@ impl Vehicle {
             GPS_RAW_INT => self.gps_raw_int(now),
             HOME_POSITION => self.home_position(now),
             GPS_GLOBAL_ORIGIN => {
-                let origin = self.world.to_geodetic(&self.cfg.start.pos_world_ned_m);
+                let origin = self.world.to_geodetic(
+                    &(self.cfg.start.pos_world_ned_m + self.estimator.origin_shift_ned_m(now)),
+                );
                 MavMessage::GPS_GLOBAL_ORIGIN(GPS_GLOBAL_ORIGIN_DATA {
                     latitude: origin.lat_e7(),
                     longitude: origin.lon_e7(),
@@ -220,7 +232,9 @@ impl Vehicle {
                 })
             }
             LOCAL_POSITION_NED => {
-                let (p, v) = (self.state.pos_ned_m, self.state.vel_ned_mps);
+                let (p, v) =
+                    self.estimator
+                        .report(now, self.state.pos_ned_m, self.state.vel_ned_mps)?;
                 MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
                     time_boot_ms: self.boot_ms(now),
                     x: p.x as f32,
