@@ -69,7 +69,9 @@ fn nasty(rng: &mut ChaCha8Rng) -> Value {
         2 => Value::Integer(rng.random_range(i64::MIN..i64::MAX)),
         3 => Value::Integer(rng.random_range(-3..300)),
         4 => Value::Boolean(rng.random()),
-        5 => Value::String(["", "nan", "polygon", "x500", "clip", "hold"][rng.random_range(0..6)].into()),
+        5 => Value::String(
+            ["", "nan", "polygon", "x500", "clip", "hold"][rng.random_range(0..6)].into(),
+        ),
         6 => Value::Array(
             (0..rng.random_range(0..4))
                 .map(|_| Value::Float(floats[rng.random_range(0..floats.len())]))
@@ -85,7 +87,13 @@ fn random_values_in_any_key_never_panic() {
     let mut rng = ChaCha8Rng::seed_from_u64(11);
     let mut valid = 0;
     let mut flown = 0;
-    for name in ["paper-sim1", "paper-sim2", "hexagon-x500", "link-loss", "ground-start"] {
+    for name in [
+        "paper-sim1",
+        "paper-sim2",
+        "hexagon-x500",
+        "link-loss",
+        "ground-start",
+    ] {
         let text = std::fs::read_to_string(root.join(format!("{name}.toml"))).unwrap();
         let base: Value = Value::Table(text.parse::<Table>().unwrap());
         let mut paths = Vec::new();
@@ -112,8 +120,15 @@ fn random_values_in_any_key_never_panic() {
             };
             valid += 1;
             let finite = |x: f64| x.is_finite();
-            assert!(finite(setup.altitude_m) && finite(setup.gains.alpha) && finite(setup.gains.beta));
-            assert!(setup.offsets_m.iter().all(|d| d.iter().all(|x| x.is_finite())));
+            assert!(
+                finite(setup.altitude_m) && finite(setup.gains.alpha) && finite(setup.gains.beta)
+            );
+            assert!(
+                setup
+                    .offsets_m
+                    .iter()
+                    .all(|d| d.iter().all(|x| x.is_finite()))
+            );
             assert!(setup.drag_per_s.iter().all(|x| x.is_finite()));
             assert!(setup.control_interval > Duration::ZERO);
             if let Ok(mut run) = Lockstep::from_config(&config) {

@@ -112,10 +112,19 @@ fn altitudes(run: &Lockstep) -> Vec<f64> {
 
 #[test]
 fn hexagon_x500_conserve_reaches_the_prediction_and_clip_misses_it() {
+    // (saturation, k_vmean): the paper's pure law in both modes, then clip with the
+    // mean-velocity correction (the default).
+    let cases = [
+        (SaturationMode::Conserve, 0.0),
+        (SaturationMode::Clip, 0.0),
+        (SaturationMode::Clip, 0.2),
+        (SaturationMode::Conserve, 0.2),
+    ];
     let mut errors = Vec::new();
-    for mode in [SaturationMode::Conserve, SaturationMode::Clip] {
+    for (mode, k_vmean) in cases {
         let mut config = load("hexagon-x500");
         config.envelope.saturation = mode;
+        config.gains.k_vmean = k_vmean;
         let mut run = Lockstep::from_config(&config).unwrap();
         let seen = fly(&mut run, 61.2);
         let predicted = run.swarm().predicted_final_velocity().unwrap();
@@ -142,16 +151,19 @@ fn hexagon_x500_conserve_reaches_the_prediction_and_clip_misses_it() {
         );
     }
     eprintln!(
-        "hexagon-x500 error: conserve {:.4}, clip {:.4}",
-        errors[0], errors[1]
+        "hexagon-x500 error: pure conserve {:.4}, pure clip {:.4}, clip corrected {:.4}, conserve corrected {:.4}",
+        errors[0], errors[1], errors[2], errors[3]
     );
     assert!(errors[0] <= 0.02, "conserve {:.4}", errors[0]);
-    // Measured: conserve 0.67 %, clip 40 %.
+    // Measured: pure conserve 0.67 %, pure clip 40 %: clip breaks w·v.
     assert!(
         errors[1] > 0.10 && errors[1] > 5.0 * errors[0],
         "clip {:.4}",
         errors[1]
     );
+    // The mean-velocity correction restores it even with clip, and keeps conserve's.
+    assert!(errors[2] <= 0.01, "clip corrected {:.4}", errors[2]);
+    assert!(errors[3] <= 0.01, "conserve corrected {:.4}", errors[3]);
 }
 
 #[test]

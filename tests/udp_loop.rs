@@ -74,6 +74,8 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         links: (1..=N as u8).map(LinkConfig::new).collect(),
         duration: None,
         handshake_timeout: Duration::from_secs(30),
+        estimate_hover: true,
+        mean_velocity_gain: 0.2,
         end_action: EndAction::Land,
         loss_policy: LossPolicy::Hold,
         target: None,

@@ -68,6 +68,14 @@ pub struct TargetSection {
     /// 0.05 m/s).
     #[serde(default = "default_tolerance")]
     pub tolerance_mps: f64,
+    /// Stage 1 ends at the latest after this long (s, default 30): consensus then starts
+    /// from the velocities reached, with a warning.
+    #[serde(default = "default_retarget_timeout")]
+    pub timeout_s: f64,
+}
+
+fn default_retarget_timeout() -> f64 {
+    30.0
 }
 
 fn default_k_margin() -> f64 {
@@ -117,6 +125,9 @@ pub struct SwarmSection {
     /// Whether a vehicle that left OFFBOARD by itself (its failsafe, a pilot, another
     /// station) is re-armed and taken back (default false: its own decision wins).
     pub retake_offboard: bool,
+    /// Estimate each vehicle's hover thrust in flight (PX4's hover thrust EKF) and fly
+    /// with it instead of the configured `hover_throttle` (default true).
+    pub estimate_hover: bool,
 }
 
 impl Default for SwarmSection {
@@ -132,6 +143,7 @@ impl Default for SwarmSection {
             handshake_timeout_s: 30.0,
             state_timeout_ms: 300,
             retake_offboard: false,
+            estimate_hover: true,
         }
     }
 }
@@ -154,6 +166,17 @@ pub struct GainsSection {
     /// mode by `c` and keeps the final velocity and stability (default 1).
     #[serde(default = "default_time_scale")]
     pub time_scale: f64,
+    /// Altitude integral (1/s³): removes a steady altitude error; default
+    /// `k_pz·k_vz/40` (a fortieth of the Routh bound), 0 turns it off.
+    pub k_iz: Option<f64>,
+    /// Rate (1/s) at which a uniform correction drives the w-weighted mean velocity to
+    /// the predicted final velocity (default 0.2); 0 flies the paper's law as printed.
+    #[serde(default = "default_k_vmean")]
+    pub k_vmean: f64,
+}
+
+fn default_k_vmean() -> f64 {
+    0.2
 }
 
 fn default_time_scale() -> f64 {

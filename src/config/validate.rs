@@ -94,6 +94,7 @@ impl Config {
         let mut p = Problems::default();
         let n = self.vehicle.len();
         let g = &self.gains;
+        p.within("gains.k_vmean", g.k_vmean, 0.0, 10.0, " 1/s");
         let gains_ok = p.within("gains.k", g.k, -2.0, MAX_GAIN, "")
             & p.positive("gains.alpha", g.alpha, MAX_GAIN, " 1/s²")
             & p.positive("gains.beta", g.beta, MAX_GAIN, " 1/s")
@@ -125,9 +126,11 @@ impl Config {
                 Err(e) => p.push(format!("gains: {e}")),
             }
         }
+        let k_iz = g.k_iz.unwrap_or(g.k_pz * g.k_vz / 40.0);
         let altitude_gains = altitude_ok
             .then(|| {
                 AltitudeGains::new(g.k_pz, g.k_vz)
+                    .and_then(|a| a.with_integral(k_iz))
                     .map_err(|e| p.push(format!("gains: {e}")))
                     .ok()
             })
@@ -225,6 +228,8 @@ impl Config {
                 .collect(),
             duration: Some(timing.duration),
             handshake_timeout: timing.handshake_timeout,
+            estimate_hover: s.estimate_hover,
+            mean_velocity_gain: g.k_vmean,
             end_action: s.end,
             loss_policy: s.on_link_loss,
             target,
@@ -295,6 +300,7 @@ impl Config {
         ok &= p.within("target.k_margin", t.k_margin, 0.0, MAX_GAIN, "");
         ok &= p.positive("target.k_max", t.k_max, MAX_GAIN, "");
         ok &= p.positive("target.tolerance_mps", t.tolerance_mps, 10.0, " m/s");
+        ok &= p.positive("target.timeout_s", t.timeout_s, 3600.0, " s");
         if let Some(max) = t.max_speed_mps {
             ok &= p.positive("target.max_speed_mps", max, MAX_SPEED_MPS, " m/s");
         }
@@ -304,6 +310,7 @@ impl Config {
             k_max: t.k_max,
             max_speed_mps: t.max_speed_mps,
             tolerance_mps: t.tolerance_mps,
+            timeout: Duration::from_secs_f64(t.timeout_s),
         })
     }
 

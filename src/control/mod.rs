@@ -1,4 +1,5 @@
-//! From the laws' accelerations to what a vehicle is sent: the altitude PD loop, the
+//! From the laws' accelerations to what a vehicle is sent: the altitude PID loop, the
+//! in-flight hover thrust estimate,
 //! actuator envelope with its two saturation modes, and the conversion of an acceleration
 //! into an attitude quaternion (NED→FRD) and normalised thrust. Pure and synchronous:
 //! no I/O, no clock, no tokio or mavlink.
@@ -7,10 +8,12 @@ mod altitude;
 mod attitude;
 mod envelope;
 mod frames;
+mod hover;
 mod vehicle;
 
 pub use altitude::AltitudeGains;
 pub use attitude::{AttitudeThrust, attitude_thrust_from_acceleration, tilt_rad};
 pub use envelope::{Envelope, SaturationMode, SaturationSummary, saturate};
 pub use frames::{enu_to_ned, euler_ned_frd, ned_to_enu, quaternion_to_wxyz};
+pub use hover::HoverThrustEkf;
 pub use vehicle::{GRAVITY_MPS2, VehicleModel};

@@ -29,6 +29,8 @@
 //! velocity is computed from the velocities at the start of consensus.
 
 mod events;
+mod laws;
+mod model;
 mod plan;
 mod setup;
 
@@ -38,20 +40,15 @@ use ringswarm_sitl::time::SimTime;
 use std::fmt;
 use std::time::Duration;
 
-use crate::consensus::{HorizontalState, predicted_final_velocity, ring_accelerations};
-use crate::control::{AttitudeThrust, SaturationMode, attitude_thrust_from_acceleration, saturate};
+use crate::consensus::{HorizontalState, predicted_final_velocity};
+use crate::control::{
+    AttitudeThrust, VehicleModel, attitude_thrust_from_acceleration, saturate, tilt_rad,
+};
 use crate::vehicle::{Phase, VehicleLink};
 use events::EventLog;
 pub use events::{MAX_KEPT_EVENTS, SwarmEvent};
+use model::{FlownModel, TRACKING_DEG};
 pub use setup::{EndAction, LossPolicy, PlanDecision, Retargeted, SwarmSetup, TargetVelocity};
-
-/// Braking law gains: velocity (1/s) and position (1/s²), about critically damped.
-const HOLD_K_V: f64 = 2.5;
-const HOLD_K_P: f64 = 1.5;
-/// Below this speed (m/s) a braking vehicle takes its hold point.
-const HOLD_CAPTURE_MPS: f64 = 1.0;
-/// Stage 1 velocity gain (1/s): the re-targeted agent's acceleration per m/s of error.
-const RETARGET_K_V: f64 = 2.0;
 
 /// Where the swarm is.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -149,6 +146,11 @@ pub struct Swarm {
     log: EventLog,
     failure: Option<SwarmFailure>,
     isolated: Vec<bool>,
+    flown: Vec<FlownModel>,
+    flown_models: Vec<VehicleModel>,
+    altitude_integral: Vec<f64>,
+    u_z: Vec<f64>,
+    keep_velocity: Vec<Option<Vector2<f64>>>,
     first_consensus: Option<SimTime>,
     hold_points: Vec<Option<Vector2<f64>>>,
     control_ticks: u64,
@@ -172,6 +174,17 @@ impl Swarm {
             })
             .collect();
         let setpoints = links.iter().map(VehicleLink::setpoint).collect();
+        let (lo, hi) = (
+            setup.envelope.min_thrust_norm().max(0.05),
+            setup.envelope.max_thrust_norm().min(0.95),
+        );
+        let flown = setup
+            .models
+            .iter()
+            .zip(&setup.drag_per_s)
+            .map(|(m, d)| FlownModel::new(*m, *d, setup.estimate_hover, (lo, hi)))
+            .collect();
+        let flown_models = setup.models.clone();
         Self {
             w,
             setup,
@@ -190,6 +203,11 @@ impl Swarm {
             log: EventLog::default(),
             failure: None,
             isolated: vec![false; n],
+            flown,
+            flown_models,
+            altitude_integral: vec![0.0; n],
+            u_z: vec![0.0; n],
+            keep_velocity: vec![None; n],
             first_consensus: None,
             hold_points: vec![None; n],
             control_ticks: 0,
@@ -240,6 +258,17 @@ impl Swarm {
     /// Events not kept because the log was full.
     pub fn dropped_events(&self) -> u64 {
         self.log.dropped()
+    }
+
+    /// Vehicle `i`'s hover thrust estimate and its standard deviation (the configured
+    /// hover throttle while the estimator is off).
+    pub fn hover_estimate(&self, i: usize) -> Option<(f64, f64)> {
+        self.flown.get(i).map(FlownModel::hover_estimate)
+    }
+
+    /// The model vehicle `i` is flown with now.
+    pub fn flown_model(&self, i: usize) -> Option<VehicleModel> {
+        self.flown_models.get(i).copied()
     }
 
     /// Whether vehicle `i` was handed to its own Hold because its command could not be
@@ -407,7 +436,30 @@ impl Swarm {
                 let tolerance = self.setup.target.map_or(0.05, |t| t.tolerance_mps);
                 let reached =
                     self.states[agent].is_some_and(|s| (s.vel_enu_mps.xy() - v).norm() < tolerance);
+                let SwarmPhase::Retargeting(since) = self.phase else {
+                    return;
+                };
+                let timeout = self
+                    .setup
+                    .target
+                    .map_or(Duration::from_secs(30), |t| t.timeout);
                 if reached {
+                    self.start_consensus(now);
+                } else if now - since >= timeout {
+                    let at = self.states[agent].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
+                    self.log.push(
+                        now,
+                        Some(self.setup.links[agent].system_id),
+                        true,
+                        format!(
+                            "re-target stage timed out after {:.1} s at ({:.2}, {:.2}) m/s, planned ({:.2}, {:.2}) m/s: consensus from the velocities now",
+                            timeout.as_secs_f64(),
+                            at.x,
+                            at.y,
+                            v.x,
+                            v.y
+                        ),
+                    );
                     self.start_consensus(now);
                 }
             }
@@ -530,6 +582,7 @@ impl Swarm {
             };
         }
         self.transition(now);
+        self.observe_models(now);
         for (i, state) in self.states.iter().enumerate() {
             let s = state.unwrap_or_default();
             self.horizontal[i] = HorizontalState {
@@ -541,11 +594,13 @@ impl Swarm {
         let saturation = self.horizontal_law();
         for (i, state) in self.states.iter().enumerate() {
             let s = state.unwrap_or_default();
-            let u_z = self.setup.altitude_gains.acceleration(
+            let u_z = self.setup.altitude_gains.acceleration_with(
                 s.pos_enu_m.z,
                 s.vel_enu_mps.z,
                 self.setup.altitude_m,
+                self.altitude_integral[i],
             );
+            self.u_z[i] = u_z;
             let drag = s.vel_enu_mps * self.setup.drag_per_s[i];
             self.commands[i] = Vector3::new(self.accel[i].x, self.accel[i].y, u_z) + drag;
         }
@@ -553,7 +608,7 @@ impl Swarm {
         if let Ok(summary) = saturate(
             saturation,
             &self.setup.envelope,
-            &self.setup.models,
+            &self.flown_models,
             &self.w,
             &mut self.commands,
         ) && matches!(self.phase, SwarmPhase::Consensus(_))
@@ -563,6 +618,7 @@ impl Swarm {
                 u64::from(summary.horizontal_limited + summary.vertical_limited > 0);
         }
         self.isolate_non_finite(now, "the saturated command");
+        self.integrate_altitude();
         for (i, link) in self.links.iter_mut().enumerate() {
             // No usable state (or isolated): level at hover thrust, never a motor cut.
             let command = if self.states[i].is_some() && !self.isolated[i] {
@@ -570,57 +626,75 @@ impl Swarm {
             } else {
                 Vector3::zeros()
             };
-            self.setpoints[i] =
-                attitude_thrust_from_acceleration(command, 0.0, &self.setup.models[i]);
+            let sp = attitude_thrust_from_acceleration(command, 0.0, &self.flown_models[i]);
+            self.setpoints[i] = sp;
             if self.states[i].is_some() || link.phase() == Phase::Flying {
-                link.set_setpoint(now, self.setpoints[i]);
+                link.set_setpoint(now, sp);
+            }
+            if link.phase() == Phase::Flying
+                && let Some(q) = link.state().attitude
+            {
+                let tracking = q.angle_to(&sp.attitude_ned_frd).to_degrees() <= TRACKING_DEG;
+                self.flown[i].commanded(sp.thrust_norm * tilt_rad(&q).cos(), tracking);
             }
         }
         self.drain_link_events(now);
     }
 
-    /// The horizontal accelerations of this phase into `accel`; the saturation to use.
-    fn horizontal_law(&mut self) -> SaturationMode {
-        match self.phase {
-            SwarmPhase::Consensus(_) => {
-                ring_accelerations(
-                    &self.setup.ring,
-                    self.setup.gains,
-                    &self.horizontal,
-                    &mut self.accel,
+    /// Whether vehicle `i` flies on our commands in the air now.
+    pub(super) fn ours_in_air(&self, i: usize) -> bool {
+        let link = &self.links[i];
+        link.phase() == Phase::Flying && !link.state().landed && !self.isolated[i]
+    }
+
+    /// Feeds each vehicle's hover thrust estimator with its latest report and takes the
+    /// model to fly this tick.
+    fn observe_models(&mut self, now: SimTime) {
+        for i in 0..self.links.len() {
+            let ours = self.ours_in_air(i);
+            let trusted = self.flown[i].trusted();
+            if let (Some(s), Some(at)) = (self.states[i], self.links[i].state().last_position) {
+                self.flown[i].observe(at, s.vel_enu_mps.z, s.vel_enu_mps.xy().norm(), ours);
+            }
+            if !trusted && self.flown[i].trusted() {
+                let (hover, std) = self.flown[i].hover_estimate();
+                self.log.push(
+                    now,
+                    Some(self.setup.links[i].system_id),
+                    true,
+                    format!(
+                        "hover thrust estimated at {hover:.3} ± {std:.3}, not the configured {:.3}: flying the estimate",
+                        self.setup.models[i].hover_throttle()
+                    ),
                 );
-                self.setup.saturation
             }
-            SwarmPhase::Holding(_) | SwarmPhase::Ended(_) | SwarmPhase::Landing(_) => {
-                for ((a, h), hold) in self
-                    .accel
-                    .iter_mut()
-                    .zip(&self.horizontal)
-                    .zip(&mut self.hold_points)
-                {
-                    if hold.is_none() && h.vel_mps.norm() < HOLD_CAPTURE_MPS {
-                        *hold = Some(h.pos_m);
-                    }
-                    *a = -HOLD_K_V * h.vel_mps
-                        + hold.map_or(Vector2::zeros(), |p| HOLD_K_P * (p - h.pos_m));
-                }
-                SaturationMode::Clip
+            self.flown_models[i] = self.flown[i].model();
+        }
+    }
+
+    /// The altitude integrals, for the vehicles flown on our commands in the air (not
+    /// while landing), frozen while a vertical command is saturated.
+    fn integrate_altitude(&mut self) {
+        if matches!(self.phase, SwarmPhase::Landing(_)) {
+            return;
+        }
+        let dt = self.setup.control_interval.as_secs_f64();
+        for i in 0..self.links.len() {
+            let Some(s) = self.states[i] else { continue };
+            if !self.ours_in_air(i) {
+                continue;
             }
-            SwarmPhase::Handshake => {
-                self.accel.iter_mut().for_each(|a| *a = Vector2::zeros());
-                self.setup.saturation
-            }
-            SwarmPhase::Retargeting(_) => {
-                self.accel.iter_mut().for_each(|a| *a = Vector2::zeros());
-                if let Some(PlanDecision::Planned {
-                    retarget: Some((agent, v)),
-                    ..
-                }) = self.plan
-                {
-                    self.accel[agent] = RETARGET_K_V * (v - self.horizontal[agent].vel_mps);
-                }
-                SaturationMode::Clip
-            }
+            let saturated =
+                (self.commands[i].z - self.u_z[i] - s.vel_enu_mps.z * self.setup.drag_per_s[i])
+                    .abs()
+                    > 1e-9;
+            self.altitude_integral[i] = self.setup.altitude_gains.integrate(
+                self.altitude_integral[i],
+                s.pos_enu_m.z,
+                self.setup.altitude_m,
+                dt,
+                saturated,
+            );
         }
     }
 

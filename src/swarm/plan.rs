@@ -21,6 +21,10 @@ impl Swarm {
             .flatten()
             .map(|s| s.vel_enu_mps.xy())
             .collect();
+        // Stage 1: the others keep these velocities, with feedback.
+        for (keep, v) in self.keep_velocity.iter_mut().zip(&velocities) {
+            *keep = Some(*v);
+        }
         let decision = match self.planned_ring(&target, velocities) {
             Ok((ring, retarget)) => {
                 let k = ring.k();
@@ -29,11 +33,25 @@ impl Swarm {
                 PlanDecision::Planned { k, retarget }
             }
             Err(reason) => {
-                tracing::warn!(%reason, "target velocity not used; flying the configured k");
+                self.log.push(
+                    now,
+                    None,
+                    true,
+                    format!("target velocity not used ({reason}): flying the configured k"),
+                );
                 PlanDecision::Rejected(reason)
             }
         };
-        tracing::info!(?decision, "plan");
+        if let PlanDecision::Planned { k, retarget } = &decision {
+            let text = match retarget {
+                Some((agent, v)) => format!(
+                    "plan: k = {k:.6}, vehicle {} re-targeted to ({:.3}, {:.3}) m/s",
+                    self.setup.links[*agent].system_id, v.x, v.y
+                ),
+                None => format!("plan: k = {k:.6}, no re-target needed"),
+            };
+            self.log.push(now, None, false, text);
+        }
         let retargeting = matches!(
             decision,
             PlanDecision::Planned {
@@ -54,12 +72,17 @@ impl Swarm {
         target: &TargetVelocity,
         velocities: Vec<Vector2<f64>>,
     ) -> Result<(RingDigraph, Option<Retargeted>), String> {
+        let airframe = self.airframe_speed_limit_mps();
+        let max_speed_mps = match (target.max_speed_mps, airframe) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        };
         let plan = crate::consensus::plan(&PlanRequest {
             velocities_mps: velocities,
             target_mps: target.velocity_mps,
             k_margin: target.k_margin,
             k_max: target.k_max,
-            max_speed_mps: target.max_speed_mps,
+            max_speed_mps,
         })
         .map_err(|e| e.to_string())?;
         let (k, retarget) = match plan.outcome {
@@ -77,4 +100,20 @@ impl Swarm {
         }
         Ok((ring, retarget.map(|r| (r.agent, r.new_velocity_mps))))
     }
+
+    /// The fastest any vehicle can fly level against its drag, with a margin:
+    /// [`SPEED_MARGIN`]` · a_h / drag`, where `a_h` is the horizontal acceleration the
+    /// envelope allows at hover (`g·tan θ_max` when thrust allows). `None` without drag.
+    pub(super) fn airframe_speed_limit_mps(&self) -> Option<f64> {
+        self.setup
+            .drag_per_s
+            .iter()
+            .zip(&self.flown_models)
+            .filter(|(d, _)| **d > 0.0)
+            .map(|(d, m)| SPEED_MARGIN * self.setup.envelope.horizontal_limit_mps2(0.0, m) / d)
+            .reduce(f64::min)
+    }
 }
+
+/// Fraction of the drag-limited top speed the planner may ask for.
+pub const SPEED_MARGIN: f64 = 0.8;

@@ -40,6 +40,11 @@ pub struct SwarmSetup {
     pub duration: Option<Duration>,
     /// How long the vehicles have to be flying before the swarm gives up and lands.
     pub handshake_timeout: Duration,
+    /// Estimate each vehicle's hover thrust in flight and fly with it.
+    pub estimate_hover: bool,
+    /// Rate (1/s) at which the w-weighted mean velocity is driven to the predicted final
+    /// velocity during consensus; 0 flies the paper's law as printed.
+    pub mean_velocity_gain: f64,
     /// What the swarm does when the duration is over.
     pub end_action: EndAction,
     /// What the swarm does when a vehicle is lost during consensus.
@@ -62,6 +67,9 @@ pub struct TargetVelocity {
     pub max_speed_mps: Option<f64>,
     /// Stage 1 ends when the re-targeted agent is this close to its planned velocity (m/s).
     pub tolerance_mps: f64,
+    /// Stage 1 ends at the latest after this long; consensus then starts from the
+    /// velocities reached (with a warning).
+    pub timeout: Duration,
 }
 
 /// A re-targeted agent (0-based) and its planned velocity (m/s, ENU).

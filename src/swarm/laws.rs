@@ -1,0 +1,122 @@
+//! The horizontal law of each phase. Every phase that holds a velocity holds it with
+//! velocity feedback, never by feed-forward alone (a vehicle whose drag or thrust is not
+//! the model's would otherwise drift):
+//!
+//! - **Handshake:** each flying vehicle keeps the velocity it had when it was first seen
+//!   flying: `u = K_KEEP·(v_keep − v)`.
+//! - **Retargeting:** the re-targeted agent goes to its planned velocity
+//!   (`RETARGET_K_V`), the others keep the velocity they had at the plan.
+//! - **Consensus:** the ring law `u = −αL(p − d) − βLv`, plus, unless `k_vmean = 0`, a
+//!   uniform correction `−k_vmean·(v̄_w − v_f)` that drives the w-weighted mean velocity
+//!   `v̄_w = Σwᵢvᵢ / Σwᵢ` to the predicted final velocity `v_f`. The correction is the same
+//!   for every vehicle, so it leaves the formation dynamics (`L·1 = 0`) untouched; for a
+//!   vehicle that is the model, `v̄_w = v_f` already (the law keeps `w·v`) and it is zero.
+//!   With model error (a wrong hover thrust, drag, PX4's own loops) it stops the drift
+//!   the pure law cannot see. A documented deviation from the paper.
+//! - **Holding, Ended, Landing:** each vehicle brakes on its own and holds where it
+//!   stopped: `u = −HOLD_K_V·v + HOLD_K_P·(p_hold − p)`.
+
+use nalgebra::Vector2;
+
+use super::{PlanDecision, Swarm, SwarmPhase};
+use crate::consensus::ring_accelerations;
+use crate::control::SaturationMode;
+
+/// Braking law gains: velocity (1/s) and position (1/s²), about critically damped.
+const HOLD_K_V: f64 = 2.5;
+const HOLD_K_P: f64 = 1.5;
+/// Below this speed (m/s) a braking vehicle takes its hold point.
+const HOLD_CAPTURE_MPS: f64 = 1.0;
+/// Stage 1 velocity gain (1/s): the re-targeted agent's acceleration per m/s of error.
+const RETARGET_K_V: f64 = 2.0;
+/// Velocity keeping gain (1/s) of the handshake and of the others during stage 1.
+const KEEP_K_V: f64 = 1.0;
+
+impl Swarm {
+    /// The horizontal accelerations of this phase into `accel`; the saturation to use.
+    pub(super) fn horizontal_law(&mut self) -> SaturationMode {
+        match self.phase {
+            SwarmPhase::Consensus(_) => {
+                ring_accelerations(
+                    &self.setup.ring,
+                    self.setup.gains,
+                    &self.horizontal,
+                    &mut self.accel,
+                );
+                if let Some(correction) = self.mean_velocity_correction() {
+                    self.accel.iter_mut().for_each(|a| *a += correction);
+                }
+                self.setup.saturation
+            }
+            SwarmPhase::Holding(_) | SwarmPhase::Ended(_) | SwarmPhase::Landing(_) => {
+                for ((a, h), hold) in self
+                    .accel
+                    .iter_mut()
+                    .zip(&self.horizontal)
+                    .zip(&mut self.hold_points)
+                {
+                    if hold.is_none() && h.vel_mps.norm() < HOLD_CAPTURE_MPS {
+                        *hold = Some(h.pos_m);
+                    }
+                    *a = -HOLD_K_V * h.vel_mps
+                        + hold.map_or(Vector2::zeros(), |p| HOLD_K_P * (p - h.pos_m));
+                }
+                SaturationMode::Clip
+            }
+            SwarmPhase::Handshake => {
+                for i in 0..self.accel.len() {
+                    if self.keep_velocity[i].is_none()
+                        && self.states[i].is_some()
+                        && self.ours_in_air(i)
+                    {
+                        self.keep_velocity[i] = Some(self.horizontal[i].vel_mps);
+                    }
+                }
+                self.keep_velocities();
+                self.setup.saturation
+            }
+            SwarmPhase::Retargeting(_) => {
+                self.keep_velocities();
+                if let Some(PlanDecision::Planned {
+                    retarget: Some((agent, v)),
+                    ..
+                }) = self.plan
+                {
+                    self.accel[agent] = RETARGET_K_V * (v - self.horizontal[agent].vel_mps);
+                }
+                SaturationMode::Clip
+            }
+        }
+    }
+
+    /// `u = K_KEEP·(v_keep − v)` for every vehicle with a velocity to keep, zero for the
+    /// others.
+    fn keep_velocities(&mut self) {
+        for ((a, h), keep) in self
+            .accel
+            .iter_mut()
+            .zip(&self.horizontal)
+            .zip(&self.keep_velocity)
+        {
+            *a = keep.map_or(Vector2::zeros(), |v| KEEP_K_V * (v - h.vel_mps));
+        }
+    }
+
+    /// The uniform correction of the w-weighted mean velocity, if it is on.
+    fn mean_velocity_correction(&self) -> Option<Vector2<f64>> {
+        let k = self.setup.mean_velocity_gain;
+        let target = self.predicted_final_velocity?;
+        let total: f64 = self.w.iter().sum();
+        if k == 0.0 || total.abs() < 1e-12 {
+            return None;
+        }
+        let mean = self
+            .w
+            .iter()
+            .zip(&self.horizontal)
+            .map(|(w, h)| *w * h.vel_mps)
+            .sum::<Vector2<f64>>()
+            / total;
+        Some(-k * (mean - target))
+    }
+}
