@@ -48,6 +48,16 @@ pub const SCENARIOS: &[Scenario] = &[
         toml: include_str!("../config/hexagon-x500.toml"),
     },
     Scenario {
+        name: "hexagon-x500-wrong-model",
+        about: "hexagon-x500 with hover throttles 10 % off and drag 0.05-0.2 1/s: estimated and corrected",
+        toml: include_str!("../config/hexagon-x500-wrong-model.toml"),
+    },
+    Scenario {
+        name: "hexagon-x500-noisy",
+        about: "hexagon-x500 with telemetry noise, GPS drift, 40 ms estimate delay and battery sag",
+        toml: include_str!("../config/hexagon-x500-noisy.toml"),
+    },
+    Scenario {
         name: "ground-start",
         about: "six x500 on the ground: arm, climb, hexagon, cruise at a planned (3, 2) m/s",
         toml: include_str!("../config/ground-start.toml"),
@@ -79,7 +89,7 @@ const LANDING_ALLOWANCE: Duration = Duration::from_secs(600);
 pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     if args.list {
         for s in SCENARIOS {
-            crate::report::emit(&format!("{:<14} {}", s.name, s.about))?;
+            crate::report::emit(&format!("{:<26} {}", s.name, s.about))?;
         }
         return Ok(());
     }

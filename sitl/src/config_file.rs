@@ -25,6 +25,16 @@
 //! wind_ned_mps = [0.0, 0.0, 0.0]
 //! gust_std_mps = 0.0
 //! gust_tau_s = 2.0
+//! mass_kg = 2.0                # the true airframe, where it differs from the profile
+//! hover_throttle = 0.5         #   (sets the motors' thrust for that mass)
+//! drag_per_s = 0.1
+//! position_noise_m = 0.0       # what the estimator reports: white noise (1 sigma),
+//! velocity_noise_mps = 0.0
+//! drift_std_m = 0.0            #   a slow GPS-like horizontal drift and its correlation time,
+//! drift_tau_s = 60.0
+//! estimator_latency_ms = 0.0   #   and a delay
+//! battery_sag = 0.0            # thrust lost when the battery is empty (0..0.5)
+//! battery_capacity_mah = 5000.0    # default: the profile's BAT1_CAPACITY
 //! ```
 //!
 //! Unknown keys are refused; every problem found after parsing is reported at once.
@@ -32,7 +42,10 @@
 use nalgebra::Vector3;
 use serde::Deserialize;
 
-use crate::autopilot::{StartState, VehicleConfig, WindConfig};
+use std::time::Duration;
+
+use crate::autopilot::estimator::EstimatorConfig;
+use crate::autopilot::{BatteryConfig, StartState, VehicleConfig, WindConfig};
 use crate::profile::Profile;
 use crate::udp::LinkFaults;
 use crate::world::{Geodetic, World};
@@ -126,6 +139,26 @@ struct RawVehicle {
     gust_std_mps: f64,
     #[serde(default = "default_gust_tau")]
     gust_tau_s: f64,
+    mass_kg: Option<f64>,
+    hover_throttle: Option<f64>,
+    drag_per_s: Option<f64>,
+    #[serde(default)]
+    position_noise_m: f64,
+    #[serde(default)]
+    velocity_noise_mps: f64,
+    #[serde(default)]
+    drift_std_m: f64,
+    #[serde(default = "default_drift_tau")]
+    drift_tau_s: f64,
+    #[serde(default)]
+    estimator_latency_ms: f64,
+    #[serde(default)]
+    battery_sag: f64,
+    battery_capacity_mah: Option<f64>,
+}
+
+fn default_drift_tau() -> f64 {
+    60.0
 }
 
 fn default_profile() -> String {
@@ -213,6 +246,20 @@ impl SitlConfig {
                     continue;
                 }
             };
+            let profile = match profile.with_airframe(v.mass_kg, v.hover_throttle, v.drag_per_s) {
+                Ok(p) => p,
+                Err(e) => {
+                    problems.push(format!("vehicle[{i}].{e}"));
+                    continue;
+                }
+            };
+            let latency_ms = v.estimator_latency_ms;
+            if !(latency_ms.is_finite() && (0.0..=2000.0).contains(&latency_ms)) {
+                problems.push(format!(
+                    "vehicle[{i}].estimator_latency_ms must be in [0, 2000] ms, got {latency_ms}"
+                ));
+                continue;
+            }
             let cfg = VehicleConfig {
                 system_id,
                 profile,
@@ -229,7 +276,18 @@ impl SitlConfig {
                     gust_tau_s: v.gust_tau_s,
                 },
                 seed: u64::from(system_id),
-                estimator: Default::default(),
+                estimator: EstimatorConfig {
+                    position_noise_m: v.position_noise_m,
+                    velocity_noise_mps: v.velocity_noise_mps,
+                    drift_std_m: v.drift_std_m,
+                    drift_tau_s: v.drift_tau_s,
+                    latency: Duration::from_secs_f64(latency_ms / 1000.0),
+                    faults: Vec::new(),
+                },
+                battery: BatteryConfig {
+                    capacity_mah: v.battery_capacity_mah,
+                    sag: v.battery_sag,
+                },
             };
             if let Err(e) = cfg.validate() {
                 problems.push(format!("vehicle[{i}]: {e}"));
@@ -292,6 +350,40 @@ mod tests {
         assert_eq!(cfg.world.ground_down_m, 20.0);
         assert!((cfg.faults.loss - 0.2).abs() < 1e-12);
         assert_eq!(cfg.faults.latency, Duration::from_millis(20));
+    }
+
+    #[test]
+    fn the_reality_knobs_reach_the_vehicle() {
+        let cfg = SitlConfig::from_toml(
+            r#"
+            [[vehicle]]
+            mass_kg = 2.2
+            hover_throttle = 0.55
+            drag_per_s = 0.3
+            position_noise_m = 0.2
+            velocity_noise_mps = 0.05
+            drift_std_m = 1.0
+            drift_tau_s = 30.0
+            estimator_latency_ms = 40.0
+            battery_sag = 0.2
+            battery_capacity_mah = 800.0
+            "#,
+        )
+        .unwrap();
+        let v = &cfg.vehicles[0];
+        assert_eq!(v.profile.mass_kg, 2.2);
+        assert!((v.profile.hover_throttle() - 0.55).abs() < 1e-12);
+        assert_eq!(v.profile.linear_drag_per_s, 0.3);
+        assert_eq!(v.estimator.position_noise_m, 0.2);
+        assert_eq!(v.estimator.latency, Duration::from_millis(40));
+        assert_eq!(v.battery.sag, 0.2);
+        assert_eq!(v.battery.capacity_mah, Some(800.0));
+        let err = SitlConfig::from_toml("[[vehicle]]\nhover_throttle = 1.5\nbattery_sag = 0.9\n")
+            .unwrap_err();
+        assert!(
+            err.contains("vehicle[0].hover_throttle must be in [0.01, 0.99], got 1.5"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -108,6 +108,40 @@ impl Profile {
         }
     }
 
+    /// The same airframe with another true mass (kg), hover throttle (the motors' thrust
+    /// for that mass) or linear drag (1/s); `None` keeps the profile's.
+    ///
+    /// # Errors
+    /// The first value out of range, named (`mass_kg` in (0, 1000], `hover_throttle` in
+    /// [0.01, 0.99], `drag_per_s` in [0, 10]).
+    pub fn with_airframe(
+        mut self,
+        mass_kg: Option<f64>,
+        hover_throttle: Option<f64>,
+        drag_per_s: Option<f64>,
+    ) -> Result<Self, String> {
+        let hover = hover_throttle.unwrap_or(self.hover_throttle());
+        if let Some(m) = mass_kg {
+            if !(m.is_finite() && m > 0.0 && m <= 1000.0) {
+                return Err(format!("mass_kg must be in (0, 1000] kg, got {m}"));
+            }
+            self.mass_kg = m;
+        }
+        if !(hover.is_finite() && (0.01..=0.99).contains(&hover)) {
+            return Err(format!(
+                "hover_throttle must be in [0.01, 0.99], got {hover}"
+            ));
+        }
+        self.max_motor_thrust_n = self.mass_kg * GRAVITY_MPS2 / hover / 4.0;
+        if let Some(d) = drag_per_s {
+            if !(d.is_finite() && (0.0..=10.0).contains(&d)) {
+                return Err(format!("drag_per_s must be in [0, 10] 1/s, got {d}"));
+            }
+            self.linear_drag_per_s = d;
+        }
+        Ok(self)
+    }
+
     /// Every profile, for listings.
     pub fn all() -> [Self; 2] {
         [Self::ideal(), Self::x500()]

@@ -7,13 +7,13 @@ use std::time::Duration;
 
 use nalgebra::Vector3;
 use ringswarm_sitl::autopilot::estimator::{EstimatorConfig, FaultKind, TelemetryFault};
-use ringswarm_sitl::autopilot::{StartState, VehicleConfig};
+use ringswarm_sitl::autopilot::{BatteryConfig, StartState, VehicleConfig};
 use ringswarm_sitl::profile::Profile;
 use ringswarm_sitl::time::SimTime;
 use ringswarm_sitl::world::World;
 
 use super::validate::Problems;
-use super::{AirframeSection, Config, FaultKindName, LockstepFaults};
+use super::{Config, FaultKindName, LockstepFaults};
 use crate::control::enu_to_ned;
 
 impl Config {
@@ -119,17 +119,24 @@ impl Config {
         };
         let mut p = Problems::default();
         let estimator = self.estimator(&mut p);
+        let battery = self.battery(&mut p);
         let mut vehicles = Vec::new();
         for (i, v) in self.vehicle.iter().enumerate() {
-            let mut profile = match v.profile.parse::<Profile>() {
+            let mut profile: Profile = match v.profile.parse::<Profile>() {
                 Ok(profile) => profile,
                 Err(e) => {
                     p.push(format!("vehicle[{i}].profile: {e}"));
                     continue;
                 }
             };
-            if let Some(airframe) = &v.airframe {
-                apply_airframe(&mut profile, airframe, i, &mut p);
+            if let Some(a) = &v.airframe {
+                match profile
+                    .clone()
+                    .with_airframe(a.mass_kg, a.hover_throttle, a.drag_per_s)
+                {
+                    Ok(changed) => profile = changed,
+                    Err(e) => p.push(format!("vehicle[{i}].airframe.{e}")),
+                }
             }
             let mut cfg = VehicleConfig::new(v.system_id, profile);
             cfg.start = StartState {
@@ -139,6 +146,7 @@ impl Config {
                 in_air: v.in_air,
             };
             cfg.estimator = estimator.clone();
+            cfg.battery = battery;
             cfg.estimator.faults = self.faults_of(i, &mut p);
             if let Err(e) = cfg.validate() {
                 p.push(format!("vehicle[{i}]: {e}"));
@@ -189,6 +197,19 @@ impl Config {
                 Duration::ZERO
             },
             faults: Vec::new(),
+        }
+    }
+
+    /// The battery of `[emulator]`, the same for every vehicle.
+    fn battery(&self, p: &mut Problems) -> BatteryConfig {
+        let e = &self.emulator;
+        p.within("emulator.battery_sag", e.battery_sag, 0.0, 0.5, "");
+        if let Some(c) = e.battery_capacity_mah {
+            p.within("emulator.battery_capacity_mah", c, 1.0, 1.0e6, " mAh");
+        }
+        BatteryConfig {
+            capacity_mah: e.battery_capacity_mah,
+            sag: e.battery_sag,
         }
     }
 
@@ -256,26 +277,5 @@ impl Config {
             }
         }
         faults
-    }
-}
-
-/// Replaces the profile's mass, thrust and drag by the airframe's true numbers.
-fn apply_airframe(profile: &mut Profile, a: &AirframeSection, i: usize, p: &mut Problems) {
-    let key = |name: &str| format!("vehicle[{i}].airframe.{name}");
-    let hover = profile.hover_throttle();
-    if let Some(m) = a.mass_kg
-        && p.positive(&key("mass_kg"), m, 1000.0, " kg")
-    {
-        profile.mass_kg = m;
-    }
-    let hover = a.hover_throttle.unwrap_or(hover);
-    if p.within(&key("hover_throttle"), hover, 0.01, 0.99, "") {
-        profile.max_motor_thrust_n =
-            profile.mass_kg * ringswarm_sitl::profile::GRAVITY_MPS2 / hover / 4.0;
-    }
-    if let Some(d) = a.drag_per_s
-        && p.within(&key("drag_per_s"), d, 0.0, 10.0, " 1/s")
-    {
-        profile.linear_drag_per_s = d;
     }
 }

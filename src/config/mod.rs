@@ -276,6 +276,12 @@ pub struct EmulatorSection {
     pub drift_tau_s: f64,
     /// Age of the reported position and velocity (ms).
     pub estimator_latency_ms: f64,
+    /// Fraction of the motors' thrust lost when a battery is empty (0..0.5, linear in the
+    /// charge used; 0 = no sag).
+    pub battery_sag: f64,
+    /// Battery capacity (mAh; default the profile's BAT1_CAPACITY): a small one makes the
+    /// sag show within a test flight.
+    pub battery_capacity_mah: Option<f64>,
     /// Telemetry faults of one vehicle for a while: `[[emulator.fault]]`.
     pub fault: Vec<FaultSection>,
 }
@@ -332,6 +338,8 @@ impl Default for EmulatorSection {
             drift_std_m: 0.0,
             drift_tau_s: 60.0,
             estimator_latency_ms: 0.0,
+            battery_sag: 0.0,
+            battery_capacity_mah: None,
             fault: Vec::new(),
         }
     }

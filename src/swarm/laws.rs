@@ -7,7 +7,8 @@
 //! - **Retargeting:** the re-targeted agent goes to its planned velocity
 //!   (`RETARGET_K_V`), the others keep the velocity they had at the plan.
 //! - **Consensus:** the ring law `u = −αL(p − d) − βLv`, plus, unless `k_vmean = 0`, a
-//!   uniform correction `−k_vmean·(v̄_w − v_f)` that drives the w-weighted mean velocity
+//!   uniform PI correction `−k·e − (k²/2)·∫e`, `e = v̄_w − v_f`, `k = k_vmean`, that drives
+//!   the w-weighted mean velocity
 //!   `v̄_w = Σwᵢvᵢ / Σwᵢ` to the predicted final velocity `v_f`. The correction is the same
 //!   for every vehicle, so it leaves the formation dynamics (`L·1 = 0`) untouched; for a
 //!   vehicle that is the model, `v̄_w = v_f` already (the law keeps `w·v`) and it is zero.
@@ -31,10 +32,13 @@ const HOLD_CAPTURE_MPS: f64 = 1.0;
 const RETARGET_K_V: f64 = 2.0;
 /// Velocity keeping gain (1/s) of the handshake and of the others during stage 1.
 const KEEP_K_V: f64 = 1.0;
+/// Largest acceleration the mean-velocity integral may add (m/s²).
+pub const MEAN_INTEGRAL_LIMIT_MPS2: f64 = 1.0;
 
 impl Swarm {
     /// The horizontal accelerations of this phase into `accel`; the saturation to use.
     pub(super) fn horizontal_law(&mut self) -> SaturationMode {
+        let dt_s = self.setup.control_interval.as_secs_f64();
         match self.phase {
             SwarmPhase::Consensus(_) => {
                 ring_accelerations(
@@ -43,7 +47,7 @@ impl Swarm {
                     &self.horizontal,
                     &mut self.accel,
                 );
-                if let Some(correction) = self.mean_velocity_correction() {
+                if let Some(correction) = self.mean_velocity_correction(dt_s) {
                     self.accel.iter_mut().for_each(|a| *a += correction);
                 }
                 self.setup.saturation
@@ -102,8 +106,10 @@ impl Swarm {
         }
     }
 
-    /// The uniform correction of the w-weighted mean velocity, if it is on.
-    fn mean_velocity_correction(&self) -> Option<Vector2<f64>> {
+    /// The uniform correction of the w-weighted mean velocity, if it is on: a PI loop on
+    /// `e = v̄_w − v_f`, `−k·e − (k²/2)·∫e` (damping 0.707), the integral kept within
+    /// [`MEAN_INTEGRAL_LIMIT_MPS2`] and reset when consensus (re)starts.
+    fn mean_velocity_correction(&mut self, dt_s: f64) -> Option<Vector2<f64>> {
         let k = self.setup.mean_velocity_gain;
         let target = self.predicted_final_velocity?;
         let total: f64 = self.w.iter().sum();
@@ -117,6 +123,11 @@ impl Swarm {
             .map(|(w, h)| *w * h.vel_mps)
             .sum::<Vector2<f64>>()
             / total;
-        Some(-k * (mean - target))
+        let error = mean - target;
+        let k_i = 0.5 * k * k;
+        let limit = MEAN_INTEGRAL_LIMIT_MPS2 / k_i;
+        self.mean_velocity_integral =
+            (self.mean_velocity_integral + error * dt_s).map(|x| x.clamp(-limit, limit));
+        Some(-k * error - k_i * self.mean_velocity_integral)
     }
 }

@@ -47,7 +47,7 @@ use crate::control::{
 use crate::vehicle::{Phase, VehicleLink};
 use events::EventLog;
 pub use events::{MAX_KEPT_EVENTS, SwarmEvent};
-use model::{FlownModel, TRACKING_DEG};
+use model::FlownModel;
 pub use setup::{EndAction, LossPolicy, PlanDecision, Retargeted, SwarmSetup, TargetVelocity};
 
 /// Where the swarm is.
@@ -151,6 +151,7 @@ pub struct Swarm {
     altitude_integral: Vec<f64>,
     u_z: Vec<f64>,
     keep_velocity: Vec<Option<Vector2<f64>>>,
+    mean_velocity_integral: Vector2<f64>,
     first_consensus: Option<SimTime>,
     hold_points: Vec<Option<Vector2<f64>>>,
     control_ticks: u64,
@@ -208,6 +209,7 @@ impl Swarm {
             altitude_integral: vec![0.0; n],
             u_z: vec![0.0; n],
             keep_velocity: vec![None; n],
+            mean_velocity_integral: Vector2::zeros(),
             first_consensus: None,
             hold_points: vec![None; n],
             control_ticks: 0,
@@ -535,6 +537,7 @@ impl Swarm {
 
     fn start_consensus(&mut self, now: SimTime) {
         self.phase = SwarmPhase::Consensus(now);
+        self.mean_velocity_integral = Vector2::zeros();
         self.first_consensus.get_or_insert(now);
         let v0: Vec<Vector2<f64>> = self
             .states
@@ -634,8 +637,9 @@ impl Swarm {
             if link.phase() == Phase::Flying
                 && let Some(q) = link.state().attitude
             {
-                let tracking = q.angle_to(&sp.attitude_ned_frd).to_degrees() <= TRACKING_DEG;
-                self.flown[i].commanded(sp.thrust_norm * tilt_rad(&q).cos(), tracking);
+                // The thrust's vertical part on the reported tilt: the vehicle's attitude
+                // may lag the command, its motors hardly.
+                self.flown[i].commanded(sp.thrust_norm * tilt_rad(&q).cos());
             }
         }
         self.drain_link_events(now);

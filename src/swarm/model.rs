@@ -3,12 +3,11 @@
 //! costs altitude nor scales the vehicle's horizontal acceleration (which would break the
 //! conservation of `w·v`). Fed once per new position report while the vehicle flies in
 //! OFFBOARD in the air: the upward acceleration is the difference of two reported
-//! vertical velocities, the thrust the mean of the commanded thrust times the cosine of
-//! the reported tilt in between. An interval in which the reported attitude is more than
-//! [`TRACKING_DEG`] from the commanded one is not used: the thrust's direction is then
-//! not known well enough (a vehicle tilting to 45° in a few tenths of a second would
-//! otherwise bias the estimate by a percent, enough to break `w·v`). The known drag is
-//! added back to the measured acceleration.
+//! vertical velocities [`WINDOW_S`] apart, the thrust the mean of the commanded thrust
+//! times the cosine of the reported tilt in between (the commanded tilt would bias the
+//! estimate by a percent while a vehicle tilts to 45° in a few tenths of a second: its
+//! attitude lags, its motors hardly). The known drag is added back to the measured
+//! acceleration.
 //!
 //! The configured model is flown until the estimate disagrees with it significantly:
 //! by more than [`SIGNIFICANT_FRACTION`] of it and three standard deviations, with the
@@ -20,14 +19,16 @@ use ringswarm_sitl::time::SimTime;
 
 use crate::control::{HoverThrustEkf, VehicleModel};
 
-/// Longest gap between two reports that still gives an acceleration (s).
-const MAX_GAP_S: f64 = 0.2;
-/// Largest gap between the commanded and the reported attitude for a usable interval.
-pub(super) const TRACKING_DEG: f64 = 2.0;
+/// The acceleration is measured over this window (s): differencing noisy velocities over
+/// one report interval (20 ms) would multiply their noise by 70; over 0.2 s by 7, about
+/// what PX4's own estimator gives its hover thrust EKF.
+pub const WINDOW_S: f64 = 0.2;
+/// Longest window that still gives an acceleration (s).
+const MAX_GAP_S: f64 = 0.5;
 /// A disagreement smaller than this fraction of the configured hover thrust is kept.
 pub const SIGNIFICANT_FRACTION: f64 = 0.03;
 /// The estimate is settled below this standard deviation.
-pub const SETTLED_STD: f64 = 0.01;
+pub const SETTLED_STD: f64 = 0.025;
 
 /// One vehicle's flown model.
 #[derive(Debug, Clone)]
@@ -40,7 +41,6 @@ pub(super) struct FlownModel {
     last: Option<(SimTime, f64)>,
     thrust_sum: f64,
     thrust_ticks: u32,
-    untracked: bool,
 }
 
 impl FlownModel {
@@ -60,7 +60,6 @@ impl FlownModel {
             last: None,
             thrust_sum: 0.0,
             thrust_ticks: 0,
-            untracked: false,
         }
     }
 
@@ -85,13 +84,12 @@ impl FlownModel {
     }
 
     /// The vertical part of the normalised thrust on this tick (commanded thrust times
-    /// the cosine of the reported tilt), and whether the attitude tracks its command.
-    pub(super) fn commanded(&mut self, thrust_up: f64, tracking: bool) {
+    /// the cosine of the reported tilt).
+    pub(super) fn commanded(&mut self, thrust_up: f64) {
         if thrust_up.is_finite() {
             self.thrust_sum += thrust_up;
             self.thrust_ticks += 1;
         }
-        self.untracked |= !tracking;
     }
 
     /// The latest report: when it arrived, the upward and horizontal speeds, and
@@ -100,10 +98,16 @@ impl FlownModel {
         if !self.estimate || self.last.is_some_and(|(t, _)| t == at) {
             return;
         }
+        let usable = ours;
+        if let Some((t0, _)) = self.last
+            && usable
+            && (at - t0).as_secs_f64() < WINDOW_S
+        {
+            return; // the window goes on
+        }
         if let Some((t0, vz0)) = self.last
-            && ours
+            && usable
             && self.thrust_ticks > 0
-            && !self.untracked
         {
             let dt = (at - t0).as_secs_f64();
             if dt > 0.0 && dt <= MAX_GAP_S {
@@ -114,7 +118,7 @@ impl FlownModel {
                 let (hover, std) = (self.ekf.hover_throttle(), self.ekf.std());
                 let configured = self.configured.hover_throttle();
                 let gap = (hover - configured).abs();
-                if std < SETTLED_STD && gap > (SIGNIFICANT_FRACTION * configured).max(3.0 * std) {
+                if std < SETTLED_STD && gap > (SIGNIFICANT_FRACTION * configured).max(2.0 * std) {
                     self.trusted = true;
                 }
             }
@@ -122,6 +126,5 @@ impl FlownModel {
         self.last = Some((at, vz_up_mps));
         self.thrust_sum = 0.0;
         self.thrust_ticks = 0;
-        self.untracked = false;
     }
 }

@@ -60,6 +60,19 @@ pub struct VehicleConfig {
     pub seed: u64,
     /// How the reported estimate differs from the truth (noise, drift, latency, faults).
     pub estimator: EstimatorConfig,
+    /// The battery.
+    pub battery: BatteryConfig,
+}
+
+/// The battery: its capacity and how much thrust its voltage sag costs.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct BatteryConfig {
+    /// Capacity (mAh); `None` keeps the profile's (BAT1_CAPACITY).
+    pub capacity_mah: Option<f64>,
+    /// Fraction of the motors' thrust lost when the battery is empty, linear in the
+    /// charge used (0 = no sag; a real pack loses 15–25 % between full and empty when
+    /// nothing compensates its voltage).
+    pub sag: f64,
 }
 
 impl VehicleConfig {
@@ -78,6 +91,7 @@ impl VehicleConfig {
             wind: WindConfig::default(),
             seed: u64::from(system_id),
             estimator: EstimatorConfig::default(),
+            battery: BatteryConfig::default(),
         }
     }
 
@@ -110,6 +124,21 @@ impl VehicleConfig {
         if !finite(&w.steady_ned_mps) || !gusts_ok {
             return Err(format!(
                 "vehicle {}: wind needs finite steady wind, gust_std ≥ 0 and gust_tau > 0",
+                self.system_id
+            ));
+        }
+        let b = &self.battery;
+        if !(b.sag.is_finite() && (0.0..=0.5).contains(&b.sag)) {
+            return Err(format!(
+                "vehicle {}: battery sag must be in [0, 0.5], got {}",
+                self.system_id, b.sag
+            ));
+        }
+        if let Some(c) = b.capacity_mah
+            && !(c.is_finite() && (1.0..=1.0e6).contains(&c))
+        {
+            return Err(format!(
+                "vehicle {}: battery capacity must be in [1, 1000000] mAh, got {c}",
                 self.system_id
             ));
         }

@@ -48,7 +48,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-pub use config::{StartState, VehicleConfig, WindConfig};
+pub use config::{BatteryConfig, StartState, VehicleConfig, WindConfig};
 pub use mission::{MissionItem, MissionStore};
 pub use mode::FlightMode;
 
@@ -242,7 +242,12 @@ impl Vehicle {
             wind_ned_mps: cfg.wind.steady_ned_mps,
             ground_z_ned_m: ground_local_z,
         };
-        let params = ParamTable::new(cfg.system_id, &cfg.profile);
+        let mut params = ParamTable::new(cfg.system_id, &cfg.profile);
+        if let Some(capacity) = cfg.battery.capacity_mah {
+            params
+                .set("BAT1_CAPACITY", capacity as f32)
+                .map_err(|e| format!("vehicle {}: battery capacity: {e:?}", cfg.system_id))?;
+        }
         let tuning = Tuning::from_params(&params);
         let links = [LinkId::Offboard, LinkId::Gcs].map(|_| Link {
             encoder: Encoder::new(cfg.system_id, 1),
@@ -394,6 +399,7 @@ impl Vehicle {
         self.check_datalink(t);
         self.mission_timers(t);
         let dt = Self::dt_s();
+        let sag = self.thrust_available();
         let motors = match self.attitude_command(t, dt) {
             Some(command) => self
                 .controller
@@ -404,6 +410,8 @@ impl Vehicle {
             }
         };
         self.update_wind(dt);
+        // A sagging battery: every motor gives that much less than it was asked for.
+        let motors = motors * sag;
         self.state = self.frame.step(&self.state, &motors, &self.env, dt);
         self.estimator
             .step(t, dt, self.state.pos_ned_m, self.state.vel_ned_mps);
@@ -528,6 +536,12 @@ impl Vehicle {
             0.3
         };
         self.battery.consumed_mah += self.battery.current_a * dt / 3.6;
+    }
+
+    /// The fraction of its thrust the battery's voltage still gives the motors.
+    fn thrust_available(&self) -> f64 {
+        let used = (self.battery.consumed_mah / self.tuning.battery_capacity_mah).clamp(0.0, 1.0);
+        1.0 - self.cfg.battery.sag * used
     }
 
     fn battery_remaining_pct(&self) -> f64 {
