@@ -133,6 +133,14 @@ pub struct AnalyzeArgs {
     /// Relative margin of the recommended gains over Yu's bound (0.25 = 25 %).
     #[arg(long, default_value_t = 0.25)]
     pub gain_margin: f64,
+    /// The airframe's attitude bandwidth (rad/s, about its attitude P gain: PX4's
+    /// MC_ROLL_P, 6.5 by default): with the gains, checks that the airframe can fly them
+    /// and recommends a time scale.
+    #[arg(long, requires = "alpha")]
+    pub attitude_bandwidth: Option<f64>,
+    /// The control rate (Hz) for the bandwidth gate.
+    #[arg(long, default_value_t = 50.0)]
+    pub control_rate: f64,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,

@@ -99,6 +99,9 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     if let Some(mode) = args.saturation {
         config.envelope.saturation = mode;
     }
+    if config.validate().is_ok() {
+        crate::config::warn_if_too_fast(&config);
+    }
     if args.realtime {
         return realtime(&name, &config, args);
     }

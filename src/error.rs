@@ -121,6 +121,16 @@ pub enum InputError {
         /// The largest accepted.
         max: usize,
     },
+    /// A number out of its range.
+    #[error("{name} must be a finite number in {range}, got {value}")]
+    OutOfRange {
+        /// The flag.
+        name: &'static str,
+        /// The range, as written.
+        range: &'static str,
+        /// The value given.
+        value: f64,
+    },
     /// An error of the maths layer.
     #[error(transparent)]
     Consensus(#[from] ConsensusError),

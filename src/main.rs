@@ -58,6 +58,7 @@ fn analyze(args: &AnalyzeArgs) -> anyhow::Result<bool> {
         gains: args.alpha.zip(args.beta),
         design_k: args.design_k,
         gain_margin: args.gain_margin,
+        airframe: args.attitude_bandwidth.map(|a| (a, args.control_rate)),
     })?;
     if args.json {
         emit(&serde_json::to_string_pretty(&output)?)?;

@@ -8,8 +8,9 @@ use nalgebra::Vector2;
 use serde::Serialize;
 
 use crate::consensus::{
-    CouplingGains, PlanOutcome, PlanRequest, RingDigraph, StabilityReport, analyze,
-    numeric_k_lower_bound, plan, recommend_gains,
+    BandwidthCheck, CouplingGains, PlanOutcome, PlanRequest, RingDigraph, StabilityReport, analyze,
+    check_bandwidth, fastest_mode_per_s, nonzero_eigenvalues, numeric_k_lower_bound, plan,
+    recommend_gains,
 };
 use crate::error::InputError;
 
@@ -33,6 +34,8 @@ pub struct AnalyzeRequest {
     pub design_k: Option<f64>,
     /// Relative margin of the recommended gains.
     pub gain_margin: f64,
+    /// Attitude bandwidth (rad/s) and control rate (Hz) for the bandwidth gate.
+    pub airframe: Option<(f64, f64)>,
 }
 
 /// Recommended gains in the output.
@@ -83,6 +86,8 @@ pub struct AnalyzeOutput {
     pub closed_loop_abscissa: Option<f64>,
     /// Recommended gains when none were given and `k` is stable.
     pub recommended: Option<Recommendation>,
+    /// The bandwidth gate, with gains and an airframe.
+    pub bandwidth: Option<BandwidthCheck>,
     /// The verdict.
     pub stable: bool,
 }
@@ -136,6 +141,35 @@ pub fn run_analyze(request: &AnalyzeRequest) -> Result<AnalyzeOutput, InputError
         }
         _ => None,
     };
+    let bandwidth = match (gains, request.airframe) {
+        (Some(gains), Some((attitude, rate))) => {
+            for (name, range, value, ok) in [
+                (
+                    "--attitude-bandwidth",
+                    "(0, 1000] rad/s",
+                    attitude,
+                    attitude > 0.0 && attitude <= 1000.0,
+                ),
+                (
+                    "--control-rate",
+                    "[1, 1000] Hz",
+                    rate,
+                    (1.0..=1000.0).contains(&rate),
+                ),
+            ] {
+                if !(value.is_finite() && ok) {
+                    return Err(InputError::OutOfRange { name, range, value });
+                }
+            }
+            let mu = nonzero_eigenvalues(&report.laplacian_eigenvalues);
+            Some(check_bandwidth(
+                fastest_mode_per_s(&mu, gains),
+                attitude,
+                rate,
+            ))
+        }
+        _ => None,
+    };
     let check = report.gain_check.as_ref();
     Ok(AnalyzeOutput {
         macro_vertices: report.macro_vertices,
@@ -157,6 +191,7 @@ pub fn run_analyze(request: &AnalyzeRequest) -> Result<AnalyzeOutput, InputError
         meets_yu_bound: check.map(|c| c.yu_margin.is_some_and(|m| m > 0.0)),
         closed_loop_abscissa: check.map(|c| c.closed_loop_abscissa),
         recommended,
+        bandwidth,
         stable: report.stable,
     })
 }
@@ -225,10 +260,41 @@ impl fmt::Display for AnalyzeOutput {
                 self.k
             )?;
         }
+        if let Some(b) = &self.bandwidth {
+            writeln!(f, "{}", bandwidth_text(b, 1.0))?;
+        }
         write!(
             f,
             "verdict: {}",
             if self.stable { "STABLE" } else { "UNSTABLE" }
+        )
+    }
+}
+
+/// The bandwidth gate in words, for gains flown at time scale `time_scale`.
+pub fn bandwidth_text(b: &BandwidthCheck, time_scale: f64) -> String {
+    let limit = match b.limited_by {
+        "attitude" => format!(
+            "{:.1} × attitude bandwidth {} rad/s",
+            crate::consensus::ATTITUDE_RATIO,
+            b.attitude_bandwidth_rps
+        ),
+        _ => format!(
+            "{} × control rate {} Hz",
+            crate::consensus::SAMPLING_PRODUCT,
+            b.control_rate_hz
+        ),
+    };
+    let fits = time_scale * b.scale_that_fits;
+    if b.fits {
+        format!(
+            "bandwidth: the law's fastest mode {:.2} 1/s fits the airframe ({:.2} 1/s = {limit}); time scales up to {:.2} fit",
+            b.fastest_mode_per_s, b.allowed_per_s, fits
+        )
+    } else {
+        format!(
+            "bandwidth: the law's fastest mode {:.2} 1/s is too fast for the airframe ({:.2} 1/s = {limit}): fly gains.time_scale = {:.2} or less (now {time_scale})",
+            b.fastest_mode_per_s, b.allowed_per_s, fits
         )
     }
 }

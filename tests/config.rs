@@ -351,3 +351,29 @@ fn timeouts_are_checked_against_the_rates() {
         == std::time::Duration::from_millis(300)
         && !l.retake_offboard));
 }
+
+/// Every shipped scenario flies gains its airframes can follow at its control rate (the
+/// bandwidth gate of docs/math.md), and the gate is what fixed hexagon-x500's time scale.
+#[test]
+fn shipped_scenarios_pass_the_bandwidth_gate() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+    let mut names: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    names.sort();
+    for path in names {
+        let config = Config::from_toml(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        let gate = config.bandwidth_check().unwrap();
+        eprintln!(
+            "{}: fastest {:.2} 1/s, allowed {:.2} ({}), scale that fits {:.3}",
+            path.display(),
+            gate.fastest_mode_per_s,
+            gate.allowed_per_s,
+            gate.limited_by,
+            gate.scale_that_fits
+        );
+        assert!(gate.fits, "{}: {gate:?}", path.display());
+    }
+}

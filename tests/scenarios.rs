@@ -140,10 +140,10 @@ fn hexagon_x500_conserve_reaches_the_prediction_and_clip_misses_it() {
             altitudes(&run).iter().all(|z| (z - 50.0).abs() < 0.5),
             "{mode:?}"
         );
-        // At 0.3 of the speed the formation is still closing after 60 s (from 52 m at the
-        // start to about 2 m).
+        // At 0.28 of the speed the formation is still closing after 60 s (from 52 m at the
+        // start to about 3 m: measured 2.93 m with conserve).
         let formation = formation_error_m(&run);
-        assert!(formation < 3.0, "{mode:?}: formation {formation} m");
+        assert!(formation < 3.5, "{mode:?}: formation {formation} m");
         assert!(
             seen.min_separation_m > 0.5,
             "{mode:?}: {}",
@@ -155,7 +155,7 @@ fn hexagon_x500_conserve_reaches_the_prediction_and_clip_misses_it() {
         errors[0], errors[1], errors[2], errors[3]
     );
     assert!(errors[0] <= 0.02, "conserve {:.4}", errors[0]);
-    // Measured: pure conserve 0.67 %, pure clip 40 %: clip breaks w·v.
+    // Measured: pure conserve 0.60 %, pure clip 39 %: clip breaks w·v.
     assert!(
         errors[1] > 0.10 && errors[1] > 5.0 * errors[0],
         "clip {:.4}",
@@ -319,4 +319,41 @@ fn big_ring_of_64_agrees_on_the_predicted_velocity() {
     assert!(seen.max_tilt_deg <= 45.0 + 1e-6);
     run.run_until(secs(61.5), |_| {});
     assert!(matches!(run.swarm().phase(), SwarmPhase::Ended(_)));
+}
+
+/// The bandwidth gate: hexagon-x500 flown at the time scale the gate recommends settles;
+/// the printed gains (time scale 1, a 34.8 1/s velocity pole for a 6.5 rad/s attitude
+/// loop), which the gate refuses, limit-cycle.
+#[test]
+fn the_gate_s_time_scale_settles_and_the_printed_gains_limit_cycle() {
+    let mut results = Vec::new();
+    for time_scale in [None, Some(1.0)] {
+        let mut config = load("hexagon-x500");
+        let gate = config.bandwidth_check().unwrap();
+        if let Some(c) = time_scale {
+            config.gains.time_scale = c;
+        }
+        let recommended =
+            config.gains.time_scale * config.bandwidth_check().unwrap().scale_that_fits;
+        assert!(
+            gate.fits && (recommended - 0.28).abs() < 0.005,
+            "{recommended}"
+        );
+        let mut run = Lockstep::from_config(&config).unwrap();
+        let mut max_rate: f64 = 0.0;
+        run.run_until(secs(61.2), |r| {
+            if r.now() > secs(40.0) {
+                for v in r.vehicles() {
+                    max_rate = max_rate.max(v.body().rate_frd_rps.xy().norm());
+                }
+            }
+        });
+        results.push(max_rate);
+    }
+    eprintln!(
+        "largest body rate after 40 s: gate {:.4}, printed {:.3} rad/s",
+        results[0], results[1]
+    );
+    assert!(results[0] < 0.05, "{results:?}");
+    assert!(results[1] > 1.0, "{results:?}");
 }

@@ -8,6 +8,7 @@
 //! east, y north, z up, metres) about the common reference point.
 
 mod emulator;
+mod gate;
 mod validate;
 
 use std::net::SocketAddr;
@@ -19,6 +20,7 @@ use ringswarm_sitl::time::SimTime;
 use crate::control::SaturationMode;
 use crate::swarm::{EndAction, LossPolicy};
 
+pub use gate::warn_if_too_fast;
 pub(crate) use validate::show;
 pub use validate::{MAX_DISTANCE_M, MAX_DURATION_S, MAX_GAIN, MAX_SPEED_MPS};
 
@@ -400,6 +402,9 @@ pub struct VehicleSection {
     /// The emulated airframe where it differs from the model above (the coordinator's
     /// model is never exactly right): `airframe = { hover_throttle = 0.55 }`.
     pub airframe: Option<AirframeSection>,
+    /// The vehicle's attitude bandwidth (rad/s, about its attitude P gain, PX4's
+    /// MC_ROLL_P) for the bandwidth gate; default the profile's (x500 6.5, ideal 40).
+    pub attitude_bandwidth_rps: Option<f64>,
 }
 
 /// `[[vehicle]] airframe`: the emulated airframe's true numbers, each defaulting to the

@@ -355,6 +355,9 @@ impl Config {
                 }
             }
             p.within(&key("drag_per_s"), v.drag_per_s, 0.0, 10.0, " 1/s");
+            if let Some(b) = v.attitude_bandwidth_rps {
+                p.positive(&key("attitude_bandwidth_rps"), b, 1000.0, " rad/s");
+            }
             p.vector(&key("start_enu_m"), &v.start_enu_m, MAX_DISTANCE_M, " m");
             p.vector(
                 &key("start_velocity_enu_mps"),

@@ -1,8 +1,9 @@
 //! The paper's mathematics, pure and synchronous: the ring digraph, Theorem 1 and Yu's
-//! bound, gain design, the consensus value, the achievable-velocity planner and the
+//! bound, gain design, the bandwidth gate, the consensus value, the achievable-velocity planner and the
 //! per-agent horizontal law. Nothing here does I/O, reads a clock, logs or imports
 //! tokio or mavlink.
 
+mod bandwidth;
 mod design;
 mod graph;
 mod law;
@@ -10,6 +11,9 @@ mod planner;
 mod stability;
 mod velocity;
 
+pub use bandwidth::{
+    ATTITUDE_RATIO, BandwidthCheck, SAMPLING_PRODUCT, check_bandwidth, fastest_mode_per_s,
+};
 pub use design::{GainDesign, recommend_gains};
 pub use graph::{Edge, Neighbours, RingDigraph};
 pub use law::{HorizontalState, consensus_acceleration, ring_accelerations};
