@@ -395,3 +395,58 @@ fn a_vehicle_never_heard_makes_demo_exit_3_naming_it_and_warnings_show_without_r
     assert!(summary["failure"].as_str().unwrap().contains("vehicle 4"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn analyze_with_an_airframe_runs_the_bandwidth_gate() {
+    // The paper's gains on an x500 (attitude P 6.5 rad/s) at 50 Hz: the velocity pole at
+    // −34.80 1/s against 1.5 × 6.5 = 9.75 1/s: time scale 9.75 / 34.80 = 0.28.
+    let args = [
+        "analyze",
+        "-m",
+        "3",
+        "-k",
+        "5",
+        "--alpha",
+        "1",
+        "--beta",
+        "5",
+        "--attitude-bandwidth",
+        "6.5",
+        "--control-rate",
+        "50",
+    ];
+    let out = ringswarm(&args);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("bandwidth: the law's fastest mode 34.80 1/s is too fast for the airframe (9.75 1/s = 1.5 × attitude bandwidth 6.5 rad/s): fly gains.time_scale = 0.28 or less (now 1)"),
+        "{text}"
+    );
+    let mut json_args = args.to_vec();
+    json_args.push("--json");
+    let v = json(&ringswarm(&json_args));
+    let b = &v["bandwidth"];
+    assert!((b["fastest_mode_per_s"].as_f64().unwrap() - 34.80).abs() < 0.01);
+    assert_eq!(b["limited_by"], "attitude");
+    assert_eq!(b["fits"], false);
+    let bad = ringswarm(&[
+        "analyze",
+        "-m",
+        "3",
+        "-k",
+        "5",
+        "--alpha",
+        "1",
+        "--beta",
+        "5",
+        "--attitude-bandwidth",
+        "nan",
+    ]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        stderr(&bad)
+            .contains("--attitude-bandwidth must be a finite number in (0, 1000] rad/s, got NaN"),
+        "{}",
+        stderr(&bad)
+    );
+}
