@@ -76,6 +76,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         handshake_timeout: Duration::from_secs(30),
         estimate_hover: true,
         mean_velocity_gain: 0.2,
+        setpoint: ringswarm::swarm::SetpointKind::Attitude,
         end_action: EndAction::Land,
         loss_policy: LossPolicy::Hold,
         target: None,

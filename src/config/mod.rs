@@ -18,7 +18,7 @@ use serde::Deserialize;
 use ringswarm_sitl::time::SimTime;
 
 use crate::control::SaturationMode;
-use crate::swarm::{EndAction, LossPolicy};
+use crate::swarm::{EndAction, LossPolicy, SetpointKind};
 
 pub use gate::warn_if_too_fast;
 pub(crate) use validate::show;
@@ -130,6 +130,9 @@ pub struct SwarmSection {
     /// Estimate each vehicle's hover thrust in flight (PX4's hover thrust EKF) and fly
     /// with it instead of the configured `hover_throttle` (default true).
     pub estimate_hover: bool,
+    /// What is streamed: `attitude` (SET_ATTITUDE_TARGET, the paper's outputs; default)
+    /// or `acceleration` (SET_POSITION_TARGET_LOCAL_NED: PX4 closes thrust itself).
+    pub setpoint: SetpointKind,
 }
 
 impl Default for SwarmSection {
@@ -146,6 +149,7 @@ impl Default for SwarmSection {
             state_timeout_ms: 300,
             retake_offboard: false,
             estimate_hover: true,
+            setpoint: SetpointKind::Attitude,
         }
     }
 }

@@ -230,6 +230,7 @@ impl Config {
             handshake_timeout: timing.handshake_timeout,
             estimate_hover: s.estimate_hover,
             mean_velocity_gain: g.k_vmean,
+            setpoint: s.setpoint,
             end_action: s.end,
             loss_policy: s.on_link_loss,
             target,

@@ -3,8 +3,9 @@
 //! `None`.
 
 use mavlink::dialects::common::{
-    AttitudeTargetTypemask, HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState,
-    MavType, SET_ATTITUDE_TARGET_DATA,
+    AttitudeTargetTypemask, HEARTBEAT_DATA, MavAutopilot, MavFrame, MavMessage, MavModeFlag,
+    MavState, MavType, PositionTargetTypemask, SET_ATTITUDE_TARGET_DATA,
+    SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
@@ -31,6 +32,41 @@ pub fn set_attitude_target(
             | AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
             | AttitudeTargetTypemask::ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE,
         thrust_body: [0.0; 3],
+    })
+}
+
+/// SET_POSITION_TARGET_LOCAL_NED with an acceleration only (m/s², NED) and yaw 0 (nose
+/// north, as the attitude setpoints): position, velocity and yaw rate ignored (type_mask
+/// 1|2|4 + 8|16|32 + 2048 = 0x083F). PX4 turns it into thrust and attitude with its own
+/// hover thrust.
+pub fn set_position_target_acceleration(
+    accel_ned_mps2: &Vector3<f64>,
+    target_system: u8,
+    time_boot_ms: u32,
+) -> MavMessage {
+    MavMessage::SET_POSITION_TARGET_LOCAL_NED(SET_POSITION_TARGET_LOCAL_NED_DATA {
+        time_boot_ms,
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+        vx: 0.0,
+        vy: 0.0,
+        vz: 0.0,
+        afx: accel_ned_mps2.x as f32,
+        afy: accel_ned_mps2.y as f32,
+        afz: accel_ned_mps2.z as f32,
+        yaw: 0.0,
+        yaw_rate: 0.0,
+        type_mask: PositionTargetTypemask::POSITION_TARGET_TYPEMASK_X_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Y_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_Z_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VX_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VY_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_VZ_IGNORE
+            | PositionTargetTypemask::POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE,
+        target_system,
+        target_component: 1,
+        coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
     })
 }
 
@@ -179,6 +215,26 @@ mod tests {
         assert_eq!(&bytes[10..10 + payload.len()], payload.as_slice());
         let crc = mavlink::calculate_crc(&bytes[1..10 + payload.len()], 49);
         assert_eq!(&bytes[10 + payload.len()..], &crc.to_le_bytes());
+    }
+
+    #[test]
+    fn an_acceleration_setpoint_says_what_px4_reads() {
+        let a = Vector3::new(1.5, -2.0, -0.25);
+        let bytes = Encoder::new(253, 190).encode(&set_position_target_acceleration(&a, 4, 77));
+        let frame = decode_datagram(&bytes).remove(0).unwrap();
+        let MavMessage::SET_POSITION_TARGET_LOCAL_NED(d) = frame.msg else {
+            panic!("wrong message")
+        };
+        // Position 1|2|4, velocity 8|16|32 and yaw rate 2048 ignored; acceleration and yaw
+        // used.
+        assert_eq!(d.type_mask.bits(), 0x083F);
+        assert_eq!((d.afx, d.afy, d.afz), (1.5, -2.0, -0.25));
+        assert_eq!(d.coordinate_frame, MavFrame::MAV_FRAME_LOCAL_NED);
+        assert_eq!(
+            (d.target_system, d.target_component, d.time_boot_ms),
+            (4, 1, 77)
+        );
+        assert_eq!(d.yaw, 0.0);
     }
 
     #[test]

@@ -6,5 +6,6 @@ mod convert;
 
 pub use convert::{
     AUTOPILOT_PX4, Inbound, autopilot_name, gcs_heartbeat, inbound, set_attitude_target,
+    set_position_target_acceleration,
 };
 pub use ringswarm_sitl::codec::{Encoder, Frame, FrameError, decode_datagram, raw_frames};

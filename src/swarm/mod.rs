@@ -41,14 +41,17 @@ use std::fmt;
 use std::time::Duration;
 
 use crate::consensus::{HorizontalState, predicted_final_velocity};
+use crate::control::enu_to_ned;
 use crate::control::{
     AttitudeThrust, VehicleModel, attitude_thrust_from_acceleration, saturate, tilt_rad,
 };
-use crate::vehicle::{Phase, VehicleLink};
+use crate::vehicle::{Phase, Setpoint, VehicleLink};
 use events::EventLog;
 pub use events::{MAX_KEPT_EVENTS, SwarmEvent};
 use model::FlownModel;
-pub use setup::{EndAction, LossPolicy, PlanDecision, Retargeted, SwarmSetup, TargetVelocity};
+pub use setup::{
+    EndAction, LossPolicy, PlanDecision, Retargeted, SetpointKind, SwarmSetup, TargetVelocity,
+};
 
 /// Where the swarm is.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -168,13 +171,20 @@ impl Swarm {
             .iter()
             .zip(&setup.models)
             .map(|(cfg, model)| {
-                VehicleLink::new(
-                    cfg.clone(),
-                    attitude_thrust_from_acceleration(Vector3::zeros(), 0.0, model),
-                )
+                let level = attitude_thrust_from_acceleration(Vector3::zeros(), 0.0, model);
+                match setup.setpoint {
+                    SetpointKind::Attitude => VehicleLink::new(cfg.clone(), level),
+                    SetpointKind::Acceleration => {
+                        VehicleLink::new(cfg.clone(), Setpoint::Acceleration(Vector3::zeros()))
+                    }
+                }
             })
             .collect();
-        let setpoints = links.iter().map(VehicleLink::setpoint).collect();
+        let setpoints = setup
+            .models
+            .iter()
+            .map(|m| attitude_thrust_from_acceleration(Vector3::zeros(), 0.0, m))
+            .collect();
         let (lo, hi) = (
             setup.envelope.min_thrust_norm().max(0.05),
             setup.envelope.max_thrust_norm().min(0.95),
@@ -183,7 +193,11 @@ impl Swarm {
             .models
             .iter()
             .zip(&setup.drag_per_s)
-            .map(|(m, d)| FlownModel::new(*m, *d, setup.estimate_hover, (lo, hi)))
+            .map(|(m, d)| {
+                // With acceleration setpoints PX4 estimates its hover thrust itself.
+                let estimate = setup.estimate_hover && setup.setpoint == SetpointKind::Attitude;
+                FlownModel::new(*m, *d, estimate, (lo, hi))
+            })
             .collect();
         let flown_models = setup.models.clone();
         Self {
@@ -632,7 +646,12 @@ impl Swarm {
             let sp = attitude_thrust_from_acceleration(command, 0.0, &self.flown_models[i]);
             self.setpoints[i] = sp;
             if self.states[i].is_some() || link.phase() == Phase::Flying {
-                link.set_setpoint(now, sp);
+                match self.setup.setpoint {
+                    SetpointKind::Attitude => link.set_setpoint(now, sp),
+                    SetpointKind::Acceleration => {
+                        link.set_setpoint(now, Setpoint::Acceleration(enu_to_ned(command)))
+                    }
+                }
             }
             if link.phase() == Phase::Flying
                 && let Some(q) = link.state().attitude

@@ -45,6 +45,8 @@ pub struct SwarmSetup {
     /// Rate (1/s) at which the w-weighted mean velocity is driven to the predicted final
     /// velocity during consensus; 0 flies the paper's law as printed.
     pub mean_velocity_gain: f64,
+    /// What the links stream.
+    pub setpoint: SetpointKind,
     /// What the swarm does when the duration is over.
     pub end_action: EndAction,
     /// What the swarm does when a vehicle is lost during consensus.
@@ -87,6 +89,18 @@ pub enum PlanDecision {
     },
     /// Not used: the configured `k` is flown. Why, in words.
     Rejected(String),
+}
+
+/// What the links stream to the vehicles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SetpointKind {
+    /// Attitude and normalised thrust (SET_ATTITUDE_TARGET), from the coordinator's model.
+    #[default]
+    Attitude,
+    /// Acceleration (SET_POSITION_TARGET_LOCAL_NED): PX4 turns it into thrust with its own
+    /// hover thrust estimate.
+    Acceleration,
 }
 
 /// What the swarm does at the end of the configured duration.

@@ -8,13 +8,12 @@ use ringswarm_sitl::time::SimTime;
 
 use super::telemetry::{OriginVerdict, PositionVerdict, TelemetryGate};
 use super::{
-    LinkConfig, LinkEvent, PX4_MAIN_AUTO, PX4_MAIN_OFFBOARD, PX4_SUB_AUTO_LOITER, Phase,
+    LinkConfig, LinkEvent, PX4_MAIN_AUTO, PX4_MAIN_OFFBOARD, PX4_SUB_AUTO_LOITER, Phase, Setpoint,
     VehicleState,
 };
-use crate::control::AttitudeThrust;
 use crate::link::{
     AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, decode_datagram, gcs_heartbeat, inbound,
-    set_attitude_target,
+    set_attitude_target, set_position_target_acceleration,
 };
 
 /// MAV_RESULT_ACCEPTED.
@@ -44,7 +43,7 @@ pub struct VehicleLink {
     cfg: LinkConfig,
     phase: Phase,
     state: VehicleState,
-    setpoint: AttitudeThrust,
+    setpoint: Setpoint,
     next_setpoint: SimTime,
     next_heartbeat: SimTime,
     pending: Option<Pending>,
@@ -71,14 +70,14 @@ pub struct VehicleLink {
 
 impl VehicleLink {
     /// A link that starts discovering, with `idle` as the setpoint to stream until the law
-    /// takes over (normally level at hover throttle).
-    pub fn new(cfg: LinkConfig, idle: AttitudeThrust) -> Self {
+    /// takes over (normally level at hover throttle, or zero acceleration).
+    pub fn new(cfg: LinkConfig, idle: impl Into<Setpoint>) -> Self {
         let encoder = Encoder::new(cfg.own_ids.0, cfg.own_ids.1);
         Self {
             cfg,
             phase: Phase::Discovering,
             state: VehicleState::default(),
-            setpoint: idle,
+            setpoint: idle.into(),
             next_setpoint: SimTime::ZERO,
             next_heartbeat: SimTime::ZERO,
             pending: None,
@@ -155,7 +154,7 @@ impl VehicleLink {
     }
 
     /// The setpoint being streamed.
-    pub fn setpoint(&self) -> AttitudeThrust {
+    pub fn setpoint(&self) -> Setpoint {
         self.setpoint
     }
 
@@ -167,8 +166,8 @@ impl VehicleLink {
     /// Replaces the setpoint. While streaming it is sent at once, so the stream follows
     /// the control ticks; the link's own timer only resends it if no new setpoint comes
     /// within one and a half periods (it never doubles the rate when the two timers drift).
-    pub fn set_setpoint(&mut self, now: SimTime, setpoint: AttitudeThrust) {
-        self.setpoint = setpoint;
+    pub fn set_setpoint(&mut self, now: SimTime, setpoint: impl Into<Setpoint>) {
+        self.setpoint = setpoint.into();
         if self.streams() {
             self.send_setpoint(now);
             self.next_setpoint = now + self.cfg.setpoint_interval.mul_f64(1.5);
@@ -176,7 +175,11 @@ impl VehicleLink {
     }
 
     fn send_setpoint(&mut self, now: SimTime) {
-        let msg = set_attitude_target(&self.setpoint, self.cfg.system_id, now.boot_ms());
+        let (id, boot_ms) = (self.cfg.system_id, now.boot_ms());
+        let msg = match &self.setpoint {
+            Setpoint::Attitude(sp) => set_attitude_target(sp, id, boot_ms),
+            Setpoint::Acceleration(a) => set_position_target_acceleration(a, id, boot_ms),
+        };
         self.outbox.push_back(self.encoder.encode(&msg));
     }
 

@@ -53,6 +53,7 @@ use std::time::Duration;
 use nalgebra::{UnitQuaternion, Vector3};
 use ringswarm_sitl::time::SimTime;
 
+use crate::control::AttitudeThrust;
 use crate::frame::Geodetic;
 
 /// PX4's OFFBOARD main mode.
@@ -61,6 +62,22 @@ const PX4_MAIN_OFFBOARD: u32 = 6;
 const PX4_MAIN_AUTO: u32 = 4;
 const PX4_SUB_AUTO_LOITER: u32 = 3;
 const PX4_SUB_AUTO_LAND: u32 = 6;
+
+/// What a link streams to keep OFFBOARD and fly the vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Setpoint {
+    /// SET_ATTITUDE_TARGET: attitude and normalised thrust (the paper's outputs).
+    Attitude(AttitudeThrust),
+    /// SET_POSITION_TARGET_LOCAL_NED with an acceleration (m/s², NED): PX4 closes thrust
+    /// with its own hover thrust estimate.
+    Acceleration(Vector3<f64>),
+}
+
+impl From<AttitudeThrust> for Setpoint {
+    fn from(sp: AttitudeThrust) -> Self {
+        Self::Attitude(sp)
+    }
+}
 
 /// Timing and identity of one vehicle link.
 #[derive(Debug, Clone, PartialEq)]
