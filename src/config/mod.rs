@@ -176,13 +176,13 @@ pub struct GainsSection {
     /// `k_pz·k_vz/40` (a fortieth of the Routh bound), 0 turns it off.
     pub k_iz: Option<f64>,
     /// Rate (1/s) at which a uniform correction drives the w-weighted mean velocity to
-    /// the predicted final velocity (default 0.2); 0 flies the paper's law as printed.
+    /// the predicted final velocity (default 0.5); 0 flies the paper's law as printed.
     #[serde(default = "default_k_vmean")]
     pub k_vmean: f64,
 }
 
 fn default_k_vmean() -> f64 {
-    0.2
+    0.5
 }
 
 fn default_time_scale() -> f64 {
