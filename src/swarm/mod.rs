@@ -3,36 +3,42 @@
 //!
 //! ```text
 //!  Handshake ──every vehicle Flying──► Consensus ──duration elapsed──► end action
-//!  (each Flying vehicle: altitude          │ a vehicle Lost
-//!   loop only, horizontal zero)            ├─ policy hold ─► Holding ──all Flying again──► Consensus
-//!                                          └─ policy land ─► Landing
+//!  (flying vehicles: altitude loop,        │ a vehicle lost (silent, stale position,
+//!   velocity kept by feedback)             │ left OFFBOARD, handed to its own Hold)
+//!   │                                      ├─ policy hold ─► Holding ──all Flying again──► Consensus
+//!   │ handshake_timeout, or a link Failed  └─ policy land ─► Landing
+//!   └─► Landing, the vehicles not flying named (failure(): `fly` exits 3)
 //!  end action: hold ─► Ended (hover in place) ;  land ─► Landing
 //!  land() (Ctrl-C) from anywhere ─► Landing ──every link Done──► finished
 //!
-//!  with a target velocity, Handshake ──every vehicle Flying──► plan (current velocities)
-//!     feasible, one agent re-targeted ─► Retargeting (that agent alone accelerates to its
-//!                                        planned velocity, the others keep theirs) ─► Consensus
+//!  with a target velocity, Handshake ──every vehicle Flying──► plan (current velocities,
+//!     never above 0.8 of the drag-limited top speed)
+//!     feasible, one agent re-targeted ─► Retargeting (that agent goes to its planned
+//!                                        velocity, the others hold theirs) ─► Consensus
+//!                                        (reached, or target.timeout_s with a warning)
 //!     feasible as is ─► Consensus with the planned k;  infeasible or unstable ─► Consensus
 //!     with the configured k (warned)
 //! ```
 //!
-//! Holding and Ended run the braking law `u = −k_v·v + k_p·(p_hold − p)`, each vehicle on
-//! its own (`clip` saturation), with `p_hold` taken once the vehicle is slower than
-//! 1 m/s, so it stops where its braking ends instead of flying back.
-//!
-//! Each control tick puts every vehicle in the common frame (its GPS origin projected at
-//! the common reference, plus its local position), computes the horizontal consensus law
-//! over the ring and the altitude PD (z up), adds the drag feed-forward of the vehicle
-//! model, saturates the swarm's commands together (`conserve` keeps `Σ wᵢuᵢ`), and turns
-//! each acceleration into an attitude and normalised thrust for its link to stream.
-//! Horizontal acceleration zero before consensus keeps `w·v`, so the predicted final
-//! velocity is computed from the velocities at the start of consensus.
+//! Each control tick (`tick.rs`) takes every vehicle's fresh state (a position older than
+//! the state timeout is not flown on) into the common frame (its GPS origin projected at
+//! the common reference, plus its local position), runs the phase's horizontal law
+//! (`laws.rs`: consensus over the ring with the mean-velocity correction, braking, velocity
+//! keeping) and the altitude PID (z up), adds the drag feed-forward, saturates the swarm's
+//! commands together (`conserve` keeps `Σ wᵢuᵢ`) and turns each acceleration into an
+//! attitude and normalised thrust with the vehicle's flown model (`model.rs`: the hover
+//! thrust estimated in flight), or streams the acceleration itself. A command that is not
+//! finite isolates its vehicle (level at hover thrust, handed to its own Hold) before the
+//! saturation sees it. Every link event and swarm decision goes to the event log
+//! (`events.rs`).
 
 mod events;
 mod laws;
 mod model;
+mod phases;
 mod plan;
 mod setup;
+mod tick;
 
 use nalgebra::{Vector2, Vector3};
 use ringswarm_sitl::time::SimTime;
@@ -40,11 +46,8 @@ use ringswarm_sitl::time::SimTime;
 use std::fmt;
 use std::time::Duration;
 
-use crate::consensus::{HorizontalState, predicted_final_velocity};
-use crate::control::enu_to_ned;
-use crate::control::{
-    AttitudeThrust, VehicleModel, attitude_thrust_from_acceleration, saturate, tilt_rad,
-};
+use crate::consensus::HorizontalState;
+use crate::control::{AttitudeThrust, VehicleModel, attitude_thrust_from_acceleration};
 use crate::vehicle::{Phase, Setpoint, VehicleLink};
 use events::EventLog;
 pub use events::{MAX_KEPT_EVENTS, SwarmEvent};
@@ -409,336 +412,6 @@ impl Swarm {
                 let id = self.setup.links[i].system_id;
                 self.log
                     .push(now, Some(id), event.is_warning(), event.to_string());
-            }
-        }
-    }
-
-    /// Moves between phases; runs at the start of every control tick.
-    fn transition(&mut self, now: SimTime) {
-        let all_flying = self.links.iter().all(|l| l.phase() == Phase::Flying)
-            && self.states.iter().all(Option::is_some);
-        // A vehicle taken out of OFFBOARD (pilot, its failsafe) counts as lost: it never
-        // comes back on its own, so the swarm holds (or lands) until told otherwise. So
-        // does one that flies on a position too old to use, or that was handed to its own
-        // Hold.
-        let any_lost = self.links.iter().zip(&self.states).any(|(l, s)| {
-            matches!(
-                l.phase(),
-                Phase::Lost | Phase::Overridden | Phase::VehicleHold
-            ) || (l.phase() == Phase::Flying && s.is_none())
-        });
-        if self.phase == SwarmPhase::Handshake && !all_flying && self.handshake_over(now) {
-            return;
-        }
-        let over = |start: Option<SimTime>| {
-            start
-                .zip(self.setup.duration)
-                .is_some_and(|(t0, d)| now >= t0 + d)
-        };
-        match self.phase {
-            SwarmPhase::Handshake
-                if all_flying && self.setup.target.is_some() && self.plan.is_none() =>
-            {
-                self.plan_target(now);
-            }
-            SwarmPhase::Retargeting(_) if !any_lost => {
-                let Some(PlanDecision::Planned {
-                    retarget: Some((agent, v)),
-                    ..
-                }) = self.plan
-                else {
-                    return;
-                };
-                let tolerance = self.setup.target.map_or(0.05, |t| t.tolerance_mps);
-                let reached =
-                    self.states[agent].is_some_and(|s| (s.vel_enu_mps.xy() - v).norm() < tolerance);
-                let SwarmPhase::Retargeting(since) = self.phase else {
-                    return;
-                };
-                let timeout = self
-                    .setup
-                    .target
-                    .map_or(Duration::from_secs(30), |t| t.timeout);
-                if reached {
-                    self.start_consensus(now);
-                } else if now - since >= timeout {
-                    let at = self.states[agent].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
-                    self.log.push(
-                        now,
-                        Some(self.setup.links[agent].system_id),
-                        true,
-                        format!(
-                            "re-target stage timed out after {:.1} s at ({:.2}, {:.2}) m/s, planned ({:.2}, {:.2}) m/s: consensus from the velocities now",
-                            timeout.as_secs_f64(),
-                            at.x,
-                            at.y,
-                            v.x,
-                            v.y
-                        ),
-                    );
-                    self.start_consensus(now);
-                }
-            }
-            SwarmPhase::Handshake | SwarmPhase::Holding(_) if all_flying => {
-                if over(self.first_consensus) {
-                    self.end(now);
-                    return;
-                }
-                self.start_consensus(now);
-            }
-            SwarmPhase::Consensus(_) | SwarmPhase::Retargeting(_) if any_lost => {
-                match self.setup.loss_policy {
-                    LossPolicy::Hold => {
-                        self.log.push(
-                            now,
-                            None,
-                            true,
-                            "a vehicle is lost: the others brake and hold".to_owned(),
-                        );
-                        self.hold_points.iter_mut().for_each(|p| *p = None);
-                        self.phase = SwarmPhase::Holding(now);
-                    }
-                    LossPolicy::Land => {
-                        self.log.push(
-                            now,
-                            None,
-                            true,
-                            "a vehicle is lost: landing (on_link_loss = land)".to_owned(),
-                        );
-                        self.land(now);
-                    }
-                }
-            }
-            SwarmPhase::Consensus(_) | SwarmPhase::Holding(_) if over(self.first_consensus) => {
-                self.end(now)
-            }
-            _ => {}
-        }
-    }
-
-    /// Gives up on the handshake when the timeout is over or a vehicle's handshake failed:
-    /// names the vehicles not flying and lands the others. Whether it gave up.
-    fn handshake_over(&mut self, now: SimTime) -> bool {
-        let failed = self.links.iter().any(|l| l.phase() == Phase::Failed);
-        let timed_out = now >= SimTime::ZERO + self.setup.handshake_timeout;
-        if !(failed || timed_out) {
-            return false;
-        }
-        let not_flying: Vec<(u8, &'static str)> = self
-            .links
-            .iter()
-            .zip(&self.states)
-            .zip(&self.setup.links)
-            .filter(|((l, s), _)| l.phase() != Phase::Flying || s.is_none())
-            .map(|((l, s), cfg)| {
-                let phase = if l.phase() == Phase::Flying && s.is_none() {
-                    "no usable position"
-                } else {
-                    l.phase().name()
-                };
-                (cfg.system_id, phase)
-            })
-            .collect();
-        let failure = SwarmFailure::Handshake {
-            not_flying,
-            after: now - SimTime::ZERO,
-        };
-        self.log.push(now, None, true, failure.to_string());
-        self.failure = Some(failure);
-        self.land(now);
-        true
-    }
-
-    fn start_consensus(&mut self, now: SimTime) {
-        self.phase = SwarmPhase::Consensus(now);
-        self.mean_velocity_integral = Vector2::zeros();
-        self.first_consensus.get_or_insert(now);
-        let v0: Vec<Vector2<f64>> = self
-            .states
-            .iter()
-            .flatten()
-            .map(|s| s.vel_enu_mps.xy())
-            .collect(); // once per (re)start
-        self.predicted_final_velocity = predicted_final_velocity(&self.setup.ring, &v0).ok();
-        let text = match self.predicted_final_velocity {
-            Some(v) => format!(
-                "consensus started: predicted final velocity ({:.3}, {:.3}) m/s",
-                v.x, v.y
-            ),
-            None => "consensus started".to_owned(),
-        };
-        self.log.push(now, None, false, text);
-    }
-
-    fn end(&mut self, now: SimTime) {
-        match self.setup.end_action {
-            EndAction::Land => self.land(now),
-            EndAction::Hold => {
-                self.log
-                    .push(now, None, false, "duration over: holding".to_owned());
-                self.hold_points.iter_mut().for_each(|p| *p = None);
-                self.phase = SwarmPhase::Ended(now);
-            }
-        }
-    }
-
-    /// One control tick. The law and the saturation allocate nothing in consensus (every
-    /// buffer was sized at construction); each link encodes its setpoint into a new frame.
-    ///
-    /// Only fresh states are flown on. A vehicle whose command comes out non-finite is
-    /// isolated before the swarm-wide saturation sees it: its command becomes level at
-    /// its hover thrust and it is handed to its own Hold; the swarm applies its loss
-    /// policy on the next tick.
-    fn control(&mut self, now: SimTime) {
-        self.control_ticks += 1;
-        for i in 0..self.links.len() {
-            self.states[i] = if self.links[i].state_fresh(now) {
-                self.common_state(i)
-            } else {
-                None
-            };
-        }
-        self.transition(now);
-        self.observe_models(now);
-        for (i, state) in self.states.iter().enumerate() {
-            let s = state.unwrap_or_default();
-            self.horizontal[i] = HorizontalState {
-                pos_m: s.pos_enu_m.xy(),
-                vel_mps: s.vel_enu_mps.xy(),
-                offset_m: self.setup.offsets_m[i],
-            };
-        }
-        let saturation = self.horizontal_law();
-        for (i, state) in self.states.iter().enumerate() {
-            let s = state.unwrap_or_default();
-            let u_z = self.setup.altitude_gains.acceleration_with(
-                s.pos_enu_m.z,
-                s.vel_enu_mps.z,
-                self.setup.altitude_m,
-                self.altitude_integral[i],
-            );
-            self.u_z[i] = u_z;
-            let drag = s.vel_enu_mps * self.setup.drag_per_s[i];
-            self.commands[i] = Vector3::new(self.accel[i].x, self.accel[i].y, u_z) + drag;
-        }
-        self.isolate_non_finite(now, "the law's command");
-        if let Ok(summary) = saturate(
-            saturation,
-            &self.setup.envelope,
-            &self.flown_models,
-            &self.w,
-            &mut self.commands,
-        ) && matches!(self.phase, SwarmPhase::Consensus(_))
-        {
-            self.consensus_ticks += 1;
-            self.saturated_ticks +=
-                u64::from(summary.horizontal_limited + summary.vertical_limited > 0);
-        }
-        self.isolate_non_finite(now, "the saturated command");
-        self.integrate_altitude();
-        for (i, link) in self.links.iter_mut().enumerate() {
-            // No usable state (or isolated): level at hover thrust, never a motor cut.
-            let command = if self.states[i].is_some() && !self.isolated[i] {
-                self.commands[i]
-            } else {
-                Vector3::zeros()
-            };
-            let sp = attitude_thrust_from_acceleration(command, 0.0, &self.flown_models[i]);
-            self.setpoints[i] = sp;
-            if self.states[i].is_some() || link.phase() == Phase::Flying {
-                match self.setup.setpoint {
-                    SetpointKind::Attitude => link.set_setpoint(now, sp),
-                    SetpointKind::Acceleration => {
-                        link.set_setpoint(now, Setpoint::Acceleration(enu_to_ned(command)))
-                    }
-                }
-            }
-            if link.phase() == Phase::Flying
-                && let Some(q) = link.state().attitude
-            {
-                // The thrust's vertical part on the reported tilt: the vehicle's attitude
-                // may lag the command, its motors hardly.
-                self.flown[i].commanded(sp.thrust_norm * tilt_rad(&q).cos());
-            }
-        }
-        self.drain_link_events(now);
-    }
-
-    /// Whether vehicle `i` flies on our commands in the air now.
-    pub(super) fn ours_in_air(&self, i: usize) -> bool {
-        let link = &self.links[i];
-        link.phase() == Phase::Flying && !link.state().landed && !self.isolated[i]
-    }
-
-    /// Feeds each vehicle's hover thrust estimator with its latest report and takes the
-    /// model to fly this tick.
-    fn observe_models(&mut self, now: SimTime) {
-        for i in 0..self.links.len() {
-            let ours = self.ours_in_air(i);
-            let trusted = self.flown[i].trusted();
-            if let (Some(s), Some(at)) = (self.states[i], self.links[i].state().last_position) {
-                self.flown[i].observe(at, s.vel_enu_mps.z, s.vel_enu_mps.xy().norm(), ours);
-            }
-            if !trusted && self.flown[i].trusted() {
-                let (hover, std) = self.flown[i].hover_estimate();
-                self.log.push(
-                    now,
-                    Some(self.setup.links[i].system_id),
-                    true,
-                    format!(
-                        "hover thrust estimated at {hover:.3} ± {std:.3}, not the configured {:.3}: flying the estimate",
-                        self.setup.models[i].hover_throttle()
-                    ),
-                );
-            }
-            self.flown_models[i] = self.flown[i].model();
-        }
-    }
-
-    /// The altitude integrals, for the vehicles flown on our commands in the air (not
-    /// while landing), frozen while a vertical command is saturated.
-    fn integrate_altitude(&mut self) {
-        if matches!(self.phase, SwarmPhase::Landing(_)) {
-            return;
-        }
-        let dt = self.setup.control_interval.as_secs_f64();
-        for i in 0..self.links.len() {
-            let Some(s) = self.states[i] else { continue };
-            if !self.ours_in_air(i) {
-                continue;
-            }
-            let saturated =
-                (self.commands[i].z - self.u_z[i] - s.vel_enu_mps.z * self.setup.drag_per_s[i])
-                    .abs()
-                    > 1e-9;
-            self.altitude_integral[i] = self.setup.altitude_gains.integrate(
-                self.altitude_integral[i],
-                s.pos_enu_m.z,
-                self.setup.altitude_m,
-                dt,
-                saturated,
-            );
-        }
-    }
-
-    /// Isolates every vehicle whose command is not finite: zero acceleration (level at
-    /// hover thrust) and its own Hold, for good.
-    fn isolate_non_finite(&mut self, now: SimTime, what: &str) {
-        for i in 0..self.commands.len() {
-            if self.commands[i].iter().all(|x| x.is_finite()) {
-                continue;
-            }
-            self.commands[i] = Vector3::zeros();
-            if !self.isolated[i] {
-                self.isolated[i] = true;
-                let reason = format!("{what} is not a finite number: isolated");
-                self.log.push(
-                    now,
-                    Some(self.setup.links[i].system_id),
-                    true,
-                    reason.clone(),
-                );
-                self.links[i].hold_on_own(now, &reason);
             }
         }
     }

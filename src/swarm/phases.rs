@@ -1,0 +1,182 @@
+//! Moving between the swarm's phases (drawn in the module above): the handshake and its
+//! timeout, the planner's stages, consensus, holding on a loss, the end of the flight.
+
+use std::time::Duration;
+
+use nalgebra::Vector2;
+use ringswarm_sitl::time::SimTime;
+
+use super::{EndAction, LossPolicy, PlanDecision, Swarm, SwarmFailure, SwarmPhase};
+use crate::consensus::predicted_final_velocity;
+use crate::vehicle::Phase;
+
+impl Swarm {
+    /// Moves between phases; runs at the start of every control tick.
+    pub(super) fn transition(&mut self, now: SimTime) {
+        let all_flying = self.links.iter().all(|l| l.phase() == Phase::Flying)
+            && self.states.iter().all(Option::is_some);
+        // A vehicle taken out of OFFBOARD (pilot, its failsafe) counts as lost: it never
+        // comes back on its own, so the swarm holds (or lands) until told otherwise. So
+        // does one that flies on a position too old to use, or that was handed to its own
+        // Hold.
+        let any_lost = self.links.iter().zip(&self.states).any(|(l, s)| {
+            matches!(
+                l.phase(),
+                Phase::Lost | Phase::Overridden | Phase::VehicleHold
+            ) || (l.phase() == Phase::Flying && s.is_none())
+        });
+        if self.phase == SwarmPhase::Handshake && !all_flying && self.handshake_over(now) {
+            return;
+        }
+        let over = |start: Option<SimTime>| {
+            start
+                .zip(self.setup.duration)
+                .is_some_and(|(t0, d)| now >= t0 + d)
+        };
+        match self.phase {
+            SwarmPhase::Handshake
+                if all_flying && self.setup.target.is_some() && self.plan.is_none() =>
+            {
+                self.plan_target(now);
+            }
+            SwarmPhase::Retargeting(_) if !any_lost => {
+                let Some(PlanDecision::Planned {
+                    retarget: Some((agent, v)),
+                    ..
+                }) = self.plan
+                else {
+                    return;
+                };
+                let tolerance = self.setup.target.map_or(0.05, |t| t.tolerance_mps);
+                let reached =
+                    self.states[agent].is_some_and(|s| (s.vel_enu_mps.xy() - v).norm() < tolerance);
+                let SwarmPhase::Retargeting(since) = self.phase else {
+                    return;
+                };
+                let timeout = self
+                    .setup
+                    .target
+                    .map_or(Duration::from_secs(30), |t| t.timeout);
+                if reached {
+                    self.start_consensus(now);
+                } else if now - since >= timeout {
+                    let at = self.states[agent].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
+                    self.log.push(
+                        now,
+                        Some(self.setup.links[agent].system_id),
+                        true,
+                        format!(
+                            "re-target stage timed out after {:.1} s at ({:.2}, {:.2}) m/s, planned ({:.2}, {:.2}) m/s: consensus from the velocities now",
+                            timeout.as_secs_f64(),
+                            at.x,
+                            at.y,
+                            v.x,
+                            v.y
+                        ),
+                    );
+                    self.start_consensus(now);
+                }
+            }
+            SwarmPhase::Handshake | SwarmPhase::Holding(_) if all_flying => {
+                if over(self.first_consensus) {
+                    self.end(now);
+                    return;
+                }
+                self.start_consensus(now);
+            }
+            SwarmPhase::Consensus(_) | SwarmPhase::Retargeting(_) if any_lost => {
+                match self.setup.loss_policy {
+                    LossPolicy::Hold => {
+                        self.log.push(
+                            now,
+                            None,
+                            true,
+                            "a vehicle is lost: the others brake and hold".to_owned(),
+                        );
+                        self.hold_points.iter_mut().for_each(|p| *p = None);
+                        self.phase = SwarmPhase::Holding(now);
+                    }
+                    LossPolicy::Land => {
+                        self.log.push(
+                            now,
+                            None,
+                            true,
+                            "a vehicle is lost: landing (on_link_loss = land)".to_owned(),
+                        );
+                        self.land(now);
+                    }
+                }
+            }
+            SwarmPhase::Consensus(_) | SwarmPhase::Holding(_) if over(self.first_consensus) => {
+                self.end(now)
+            }
+            _ => {}
+        }
+    }
+
+    /// Gives up on the handshake when the timeout is over or a vehicle's handshake failed:
+    /// names the vehicles not flying and lands the others. Whether it gave up.
+    fn handshake_over(&mut self, now: SimTime) -> bool {
+        let failed = self.links.iter().any(|l| l.phase() == Phase::Failed);
+        let timed_out = now >= SimTime::ZERO + self.setup.handshake_timeout;
+        if !(failed || timed_out) {
+            return false;
+        }
+        let not_flying: Vec<(u8, &'static str)> = self
+            .links
+            .iter()
+            .zip(&self.states)
+            .zip(&self.setup.links)
+            .filter(|((l, s), _)| l.phase() != Phase::Flying || s.is_none())
+            .map(|((l, s), cfg)| {
+                let phase = if l.phase() == Phase::Flying && s.is_none() {
+                    "no usable position"
+                } else {
+                    l.phase().name()
+                };
+                (cfg.system_id, phase)
+            })
+            .collect();
+        let failure = SwarmFailure::Handshake {
+            not_flying,
+            after: now - SimTime::ZERO,
+        };
+        self.log.push(now, None, true, failure.to_string());
+        self.failure = Some(failure);
+        self.land(now);
+        true
+    }
+
+    pub(super) fn start_consensus(&mut self, now: SimTime) {
+        self.phase = SwarmPhase::Consensus(now);
+        self.mean_velocity_integral = Vector2::zeros();
+        self.first_consensus.get_or_insert(now);
+        let v0: Vec<Vector2<f64>> = self
+            .states
+            .iter()
+            .flatten()
+            .map(|s| s.vel_enu_mps.xy())
+            .collect(); // once per (re)start
+        self.predicted_final_velocity = predicted_final_velocity(&self.setup.ring, &v0).ok();
+        let text = match self.predicted_final_velocity {
+            Some(v) => format!(
+                "consensus started: predicted final velocity ({:.3}, {:.3}) m/s",
+                v.x, v.y
+            ),
+            None => "consensus started".to_owned(),
+        };
+        self.log.push(now, None, false, text);
+    }
+
+    fn end(&mut self, now: SimTime) {
+        match self.setup.end_action {
+            EndAction::Land => self.land(now),
+            EndAction::Hold => {
+                self.log
+                    .push(now, None, false, "duration over: holding".to_owned());
+                self.hold_points.iter_mut().for_each(|p| *p = None);
+                self.phase = SwarmPhase::Ended(now);
+            }
+        }
+    }
+}

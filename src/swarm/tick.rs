@@ -1,0 +1,175 @@
+//! One control tick: fresh states into the common frame, the phase's law, the altitude
+//! loop, the flown models, isolation of what cannot be computed, the swarm-wide
+//! saturation, and a setpoint for each link.
+
+use nalgebra::Vector3;
+use ringswarm_sitl::time::SimTime;
+
+use super::{Swarm, SwarmPhase};
+use crate::consensus::HorizontalState;
+use crate::control::{attitude_thrust_from_acceleration, enu_to_ned, saturate, tilt_rad};
+use crate::swarm::SetpointKind;
+use crate::vehicle::{Phase, Setpoint};
+
+impl Swarm {
+    /// One control tick. The law and the saturation allocate nothing in consensus (every
+    /// buffer was sized at construction); each link encodes its setpoint into a new frame.
+    ///
+    /// Only fresh states are flown on. A vehicle whose command comes out non-finite is
+    /// isolated before the swarm-wide saturation sees it: its command becomes level at
+    /// its hover thrust and it is handed to its own Hold; the swarm applies its loss
+    /// policy on the next tick.
+    pub(super) fn control(&mut self, now: SimTime) {
+        self.control_ticks += 1;
+        for i in 0..self.links.len() {
+            self.states[i] = if self.links[i].state_fresh(now) {
+                self.common_state(i)
+            } else {
+                None
+            };
+        }
+        self.transition(now);
+        self.observe_models(now);
+        for (i, state) in self.states.iter().enumerate() {
+            let s = state.unwrap_or_default();
+            self.horizontal[i] = HorizontalState {
+                pos_m: s.pos_enu_m.xy(),
+                vel_mps: s.vel_enu_mps.xy(),
+                offset_m: self.setup.offsets_m[i],
+            };
+        }
+        let saturation = self.horizontal_law();
+        for (i, state) in self.states.iter().enumerate() {
+            let s = state.unwrap_or_default();
+            let u_z = self.setup.altitude_gains.acceleration_with(
+                s.pos_enu_m.z,
+                s.vel_enu_mps.z,
+                self.setup.altitude_m,
+                self.altitude_integral[i],
+            );
+            self.u_z[i] = u_z;
+            let drag = s.vel_enu_mps * self.setup.drag_per_s[i];
+            self.commands[i] = Vector3::new(self.accel[i].x, self.accel[i].y, u_z) + drag;
+        }
+        self.isolate_non_finite(now, "the law's command");
+        if let Ok(summary) = saturate(
+            saturation,
+            &self.setup.envelope,
+            &self.flown_models,
+            &self.w,
+            &mut self.commands,
+        ) && matches!(self.phase, SwarmPhase::Consensus(_))
+        {
+            self.consensus_ticks += 1;
+            self.saturated_ticks +=
+                u64::from(summary.horizontal_limited + summary.vertical_limited > 0);
+        }
+        self.isolate_non_finite(now, "the saturated command");
+        self.integrate_altitude();
+        for (i, link) in self.links.iter_mut().enumerate() {
+            // No usable state (or isolated): level at hover thrust, never a motor cut.
+            let command = if self.states[i].is_some() && !self.isolated[i] {
+                self.commands[i]
+            } else {
+                Vector3::zeros()
+            };
+            let sp = attitude_thrust_from_acceleration(command, 0.0, &self.flown_models[i]);
+            self.setpoints[i] = sp;
+            if self.states[i].is_some() || link.phase() == Phase::Flying {
+                match self.setup.setpoint {
+                    SetpointKind::Attitude => link.set_setpoint(now, sp),
+                    SetpointKind::Acceleration => {
+                        link.set_setpoint(now, Setpoint::Acceleration(enu_to_ned(command)))
+                    }
+                }
+            }
+            if link.phase() == Phase::Flying
+                && let Some(q) = link.state().attitude
+            {
+                // The thrust's vertical part on the reported tilt: the vehicle's attitude
+                // may lag the command, its motors hardly.
+                self.flown[i].commanded(sp.thrust_norm * tilt_rad(&q).cos());
+            }
+        }
+        self.drain_link_events(now);
+    }
+
+    /// Whether vehicle `i` flies on our commands in the air now.
+    pub(super) fn ours_in_air(&self, i: usize) -> bool {
+        let link = &self.links[i];
+        link.phase() == Phase::Flying && !link.state().landed && !self.isolated[i]
+    }
+
+    /// Feeds each vehicle's hover thrust estimator with its latest report and takes the
+    /// model to fly this tick.
+    fn observe_models(&mut self, now: SimTime) {
+        for i in 0..self.links.len() {
+            let ours = self.ours_in_air(i);
+            let trusted = self.flown[i].trusted();
+            if let (Some(s), Some(at)) = (self.states[i], self.links[i].state().last_position) {
+                self.flown[i].observe(at, s.vel_enu_mps.z, s.vel_enu_mps.xy().norm(), ours);
+            }
+            if !trusted && self.flown[i].trusted() {
+                let (hover, std) = self.flown[i].hover_estimate();
+                self.log.push(
+                    now,
+                    Some(self.setup.links[i].system_id),
+                    true,
+                    format!(
+                        "hover thrust estimated at {hover:.3} ± {std:.3}, not the configured {:.3}: flying the estimate",
+                        self.setup.models[i].hover_throttle()
+                    ),
+                );
+            }
+            self.flown_models[i] = self.flown[i].model();
+        }
+    }
+
+    /// The altitude integrals, for the vehicles flown on our commands in the air (not
+    /// while landing), frozen while a vertical command is saturated.
+    fn integrate_altitude(&mut self) {
+        if matches!(self.phase, SwarmPhase::Landing(_)) {
+            return;
+        }
+        let dt = self.setup.control_interval.as_secs_f64();
+        for i in 0..self.links.len() {
+            let Some(s) = self.states[i] else { continue };
+            if !self.ours_in_air(i) {
+                continue;
+            }
+            let saturated =
+                (self.commands[i].z - self.u_z[i] - s.vel_enu_mps.z * self.setup.drag_per_s[i])
+                    .abs()
+                    > 1e-9;
+            self.altitude_integral[i] = self.setup.altitude_gains.integrate(
+                self.altitude_integral[i],
+                s.pos_enu_m.z,
+                self.setup.altitude_m,
+                dt,
+                saturated,
+            );
+        }
+    }
+
+    /// Isolates every vehicle whose command is not finite: zero acceleration (level at
+    /// hover thrust) and its own Hold, for good.
+    fn isolate_non_finite(&mut self, now: SimTime, what: &str) {
+        for i in 0..self.commands.len() {
+            if self.commands[i].iter().all(|x| x.is_finite()) {
+                continue;
+            }
+            self.commands[i] = Vector3::zeros();
+            if !self.isolated[i] {
+                self.isolated[i] = true;
+                let reason = format!("{what} is not a finite number: isolated");
+                self.log.push(
+                    now,
+                    Some(self.setup.links[i].system_id),
+                    true,
+                    reason.clone(),
+                );
+                self.links[i].hold_on_own(now, &reason);
+            }
+        }
+    }
+}

@@ -1,0 +1,250 @@
+//! What the link sends and what answers mean: the handshake (stream, arm, OFFBOARD), the
+//! landing and disarm, the hand-over to the vehicle's own Hold, the vehicle's own
+//! decisions after a loss, and each command's acknowledgement, retries included.
+
+use std::time::Duration;
+
+use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd, MavMessage};
+use ringswarm_sitl::time::SimTime;
+
+use super::super::{LinkEvent, PX4_MAIN_AUTO, PX4_MAIN_OFFBOARD, PX4_SUB_AUTO_LOITER, Phase};
+use super::{Pending, VehicleLink};
+
+/// MAV_RESULT_ACCEPTED.
+const ACCEPTED: u8 = 0;
+/// How long an ACCEPTED for DO_SET_MODE waits for a second, real answer (PX4 main sends
+/// it a few milliseconds after its early ACCEPTED).
+pub(super) const MODE_ACK_SETTLE: Duration = Duration::from_millis(100);
+/// Message ids the coordinator asks to be streamed, and GPS_GLOBAL_ORIGIN asked once.
+const LOCAL_POSITION_NED: f32 = 32.0;
+const ATTITUDE_QUATERNION: f32 = 31.0;
+const GPS_GLOBAL_ORIGIN: f32 = 49.0;
+
+impl VehicleLink {
+    pub(super) fn hand_to_hold(&mut self, now: SimTime, reason: String, resume_when_fresh: bool) {
+        self.phase = Phase::VehicleHold;
+        self.held = Some(resume_when_fresh);
+        self.hold_confirmed = false;
+        self.heartbeats_out_of_offboard = 0;
+        self.events.push_back(LinkEvent::HandedToHold(reason));
+        let params = [
+            1.0,
+            PX4_MAIN_AUTO as f32,
+            PX4_SUB_AUTO_LOITER as f32,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+        ];
+        self.send_pending(now, MavCmd::MAV_CMD_DO_SET_MODE, params, 1);
+    }
+
+    pub(super) fn request_land(&mut self, now: SimTime) {
+        self.phase = Phase::Landing;
+        let nan = f32::NAN; // PX4: NaN lat/lon/alt/yaw = here, current heading
+        let params = [0.0, 0.0, 0.0, nan, nan, nan, nan];
+        self.send_pending(now, MavCmd::MAV_CMD_NAV_LAND, params, 1);
+    }
+
+    pub(super) fn request_disarm(&mut self, now: SimTime) {
+        self.phase = Phase::Disarming;
+        self.events.push_back(LinkEvent::Landed);
+        let params = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        self.send_pending(now, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, params, 1);
+    }
+
+    pub(super) fn finish(&mut self) {
+        self.pending = None;
+        self.phase = Phase::Done;
+        self.events.push_back(LinkEvent::Disarmed);
+    }
+
+    /// Heard again after a loss. Before it first flew, the handshake starts over. After,
+    /// the vehicle's own decisions win: still armed in OFFBOARD, it is taken on; anything
+    /// else it chose (its failsafe's Hold, Return or Land, a disarm) is left alone unless
+    /// `retake_offboard`. A vehicle we had handed to its Hold and that is in it without a
+    /// failsafe (PX4 says CRITICAL while one acts) stays ours.
+    pub(super) fn recover(&mut self, now: SimTime) {
+        self.events.push_back(LinkEvent::Recovered);
+        // In the Hold we asked for, and not because its own failsafe chose it.
+        let ours = self.held.is_some() && self.state.in_hold() && !self.state.failsafe;
+        if !ours {
+            self.held = None;
+        }
+        if self.land_requested {
+            self.request_land(now);
+        } else if ours {
+            self.phase = Phase::VehicleHold;
+        } else if !self.has_flown
+            || self.cfg.retake_offboard
+            || (self.state.armed && self.state.in_offboard())
+        {
+            // Still armed in OFFBOARD (a loss shorter than its COM_OF_LOSS_T): the usual
+            // stream then DO_SET_MODE, which it already is in; no arming.
+            self.start_streaming(now);
+        } else {
+            self.left_offboard(now);
+        }
+    }
+
+    /// The vehicle left OFFBOARD (or disarmed) by itself.
+    pub(super) fn left_offboard(&mut self, now: SimTime) {
+        self.pending = None;
+        self.events.push_back(LinkEvent::LeftOffboard {
+            custom_mode: self.state.custom_mode,
+            armed: self.state.armed,
+        });
+        if self.cfg.retake_offboard {
+            self.start_streaming(now);
+        } else {
+            self.phase = Phase::Overridden;
+        }
+    }
+
+    pub(super) fn start_streaming(&mut self, now: SimTime) {
+        self.phase = Phase::Streaming(now);
+        self.pending = None;
+        self.next_setpoint = now;
+        let interval_us = self.cfg.telemetry_interval.as_micros() as f32;
+        for id in [LOCAL_POSITION_NED, ATTITUDE_QUATERNION] {
+            self.send_command(
+                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+                [id, interval_us, 0.0, 0.0, 0.0, 0.0, 0.0],
+                0,
+            );
+        }
+        self.send_command(
+            MavCmd::MAV_CMD_REQUEST_MESSAGE,
+            [GPS_GLOBAL_ORIGIN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            0,
+        );
+    }
+
+    /// A heartbeat may show that a command took effect even if its ack was lost.
+    pub(super) fn advance_on_state(&mut self, now: SimTime) {
+        if self.phase == Phase::Arming && self.state.armed {
+            self.request_offboard(now);
+        }
+        if self.phase == Phase::Offboarding && self.state.armed && self.state.in_offboard() {
+            self.enter_flying();
+        }
+        if self.phase == Phase::Landing {
+            if self
+                .pending
+                .is_some_and(|p| p.command == MavCmd::MAV_CMD_NAV_LAND)
+                && self.state.in_land()
+            {
+                self.pending = None;
+                self.events.push_back(LinkEvent::Landing);
+            }
+            if self.state.landed {
+                if self.state.armed {
+                    self.request_disarm(now);
+                } else {
+                    self.events.push_back(LinkEvent::Landed);
+                    self.finish();
+                }
+            }
+        }
+        if self.phase == Phase::Disarming && !self.state.armed {
+            self.finish();
+        }
+    }
+
+    pub(super) fn enter_flying(&mut self) {
+        self.pending = None;
+        self.phase = Phase::Flying;
+        self.has_flown = true;
+        self.held = None;
+        self.heartbeats_out_of_offboard = 0;
+        self.events.push_back(LinkEvent::Flying);
+    }
+
+    pub(super) fn on_ack(&mut self, now: SimTime, command: u16, result: u8) {
+        let Some(pending) = self.pending else { return };
+        if pending.command as u16 != command {
+            return;
+        }
+        if result != ACCEPTED {
+            self.events
+                .push_back(LinkEvent::Refused { command, result });
+            if let Some(p) = &mut self.pending
+                && p.accepted
+            {
+                // The real answer after an early ACCEPTED: refused after all.
+                p.accepted = false;
+                p.deadline = now + self.cfg.ack_timeout;
+            }
+            return; // resent at the deadline
+        }
+        match self.phase {
+            Phase::Arming => self.request_offboard(now),
+            Phase::Offboarding => {
+                if let Some(p) = &mut self.pending {
+                    p.accepted = true;
+                    p.deadline = now + MODE_ACK_SETTLE;
+                }
+            }
+            Phase::Landing => {
+                self.pending = None;
+                self.events.push_back(LinkEvent::Landing);
+            }
+            Phase::Disarming => self.finish(),
+            Phase::VehicleHold => {
+                self.pending = None;
+                self.hold_confirmed = true;
+            }
+            _ => {}
+        }
+    }
+
+    pub(super) fn request_arm(&mut self, now: SimTime) {
+        self.phase = Phase::Arming;
+        self.send_pending(
+            now,
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            1,
+        );
+    }
+
+    pub(super) fn request_offboard(&mut self, now: SimTime) {
+        self.phase = Phase::Offboarding;
+        let params = [1.0, PX4_MAIN_OFFBOARD as f32, 0.0, 0.0, 0.0, 0.0, 0.0];
+        self.send_pending(now, MavCmd::MAV_CMD_DO_SET_MODE, params, 1);
+    }
+
+    pub(super) fn send_pending(
+        &mut self,
+        now: SimTime,
+        command: MavCmd,
+        params: [f32; 7],
+        attempt: u8,
+    ) {
+        self.send_command(command, params, attempt - 1);
+        self.pending = Some(Pending {
+            command,
+            params,
+            attempt,
+            deadline: now + self.cfg.ack_timeout,
+            accepted: false,
+        });
+    }
+
+    pub(super) fn send_command(&mut self, command: MavCmd, params: [f32; 7], confirmation: u8) {
+        let msg = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            target_system: self.cfg.system_id,
+            target_component: 1,
+            command,
+            confirmation,
+            param1: params[0],
+            param2: params[1],
+            param3: params[2],
+            param4: params[3],
+            param5: params[4],
+            param6: params[5],
+            param7: params[6],
+        });
+        self.outbox.push_back(self.encoder.encode(&msg));
+    }
+}
