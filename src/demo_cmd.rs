@@ -344,8 +344,10 @@ fn table(name: &str, saturation: SaturationMode, s: &Summary) -> String {
         (
             "scenario",
             format!(
-                "{name} ({} vehicles, {:.0} Hz control, {saturation:?} saturation)",
-                s.vehicles, s.control_rate_hz
+                "{name} ({} vehicles, {:.0} Hz control, {} saturation)",
+                s.vehicles,
+                s.control_rate_hz,
+                saturation.name()
             ),
         ),
         ("predicted final velocity", pair(s.predicted_final_velocity)),

@@ -262,16 +262,15 @@ fn link_loss_failsafe_hold_and_resume() {
     assert!(speed < 0.5, "others at {speed} m/s");
     let resumed = resumed_at.unwrap().as_secs_f64();
     assert!((24.2..24.6).contains(&resumed), "resumed at {resumed} s");
-    // The new consensus (from a hovering swarm) converges near its own prediction.
-    // Quadrotor 3 rejoins after braking to a stop in its own Position failsafe, off its
-    // formation place; the law's 30 1/s velocity coupling then saturates and chatters on
-    // it for about a second, and w·v drifts by ~0.07 m/s (measured 0.069). Before the
-    // emulator braked like PX4 (it flew back to the failsafe point), the rejoin was a
-    // smooth saturated arc and the drift 0.015 m/s.
+    // The new consensus (from a hovering swarm) converges to its own prediction.
+    // Quadrotor 3 rejoins after braking to a stop in its own failsafe, off its formation
+    // place; the law's 30 1/s velocity coupling then saturates and chatters on it for
+    // about a second, which moved w·v by 0.069 m/s with the paper's law; the
+    // mean-velocity correction takes that out (measured 0.0001 m/s).
     run.run_until(secs(61.0), |_| {});
     let predicted = run.swarm().predicted_final_velocity().unwrap();
     for v in velocities(&run) {
-        assert!((v - predicted).norm() < 0.1, "{v:?} vs {predicted:?}");
+        assert!((v - predicted).norm() < 0.01, "{v:?} vs {predicted:?}");
     }
     assert!(formation_error_m(&run) < 0.5, "{}", formation_error_m(&run));
 }

@@ -39,6 +39,16 @@ pub enum SaturationMode {
     Clip,
 }
 
+impl SaturationMode {
+    /// The name used in configuration files (`conserve`, `clip`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Conserve => "conserve",
+            Self::Clip => "clip",
+        }
+    }
+}
+
 /// Tilt and thrust limits shared by the swarm.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Envelope {
