@@ -190,3 +190,36 @@ fn acceleration_setpoints_fly_the_scenarios_as_attitude_setpoints_do() {
         assert!(r.altitude_m < 0.1, "{name}: {r:?}");
     }
 }
+
+/// Each of the emulator's reality knobs alone, on hexagon-x500. The 40 ms estimate delay
+/// is the hardest: the w-weighted mean velocity stays within 0.01 m/s of the prediction,
+/// but the delay, added to a law flown at the bandwidth gate's edge, leaves the six
+/// velocities swinging against each other, and their plain mean at 61.2 s is 1.9 % off
+/// (the gate does not count estimator delay yet).
+#[test]
+fn each_reality_knob_alone_keeps_the_flight_within_bounds() {
+    let matched = fly(&load("hexagon-x500"));
+    let knobs: [(&str, fn(&mut Config)); 5] = [
+        ("position noise", |c| c.emulator.position_noise_m = 0.1),
+        ("velocity noise", |c| c.emulator.velocity_noise_mps = 0.05),
+        ("drift", |c| c.emulator.drift_std_m = 0.5),
+        ("latency", |c| c.emulator.estimator_latency_ms = 40.0),
+        ("battery sag", |c| {
+            c.emulator.battery_sag = 0.2;
+            c.emulator.battery_capacity_mah = Some(1000.0);
+        }),
+    ];
+    for (name, knob) in knobs {
+        let mut config = load("hexagon-x500");
+        knob(&mut config);
+        let r = fly(&config);
+        eprintln!("{name}: {r:?}");
+        let tolerance = if name == "latency" { 0.025 } else { 0.015 };
+        assert!(r.velocity_error < tolerance, "{name}: {r:?}");
+        assert!(r.altitude_m < 0.3, "{name}: {r:?}");
+        assert!(
+            (r.formation_m - matched.formation_m).abs() < 0.5,
+            "{name}: {r:?} vs {matched:?}"
+        );
+    }
+}
