@@ -196,10 +196,13 @@ fn acceleration_setpoints_fly_the_scenarios_as_attitude_setpoints_do() {
 /// but the delay, added to a law flown at the bandwidth gate's edge, leaves the six
 /// velocities swinging against each other, and their plain mean at 61.2 s is 1.9 % off
 /// (the gate does not count estimator delay yet).
+/// A knob's name and how it changes a configuration.
+type Knob = (&'static str, fn(&mut Config));
+
 #[test]
 fn each_reality_knob_alone_keeps_the_flight_within_bounds() {
     let matched = fly(&load("hexagon-x500"));
-    let knobs: [(&str, fn(&mut Config)); 5] = [
+    let knobs: [Knob; 5] = [
         ("position noise", |c| c.emulator.position_noise_m = 0.1),
         ("velocity noise", |c| c.emulator.velocity_noise_mps = 0.05),
         ("drift", |c| c.emulator.drift_std_m = 0.5),
