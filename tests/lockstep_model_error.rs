@@ -191,14 +191,14 @@ fn acceleration_setpoints_fly_the_scenarios_as_attitude_setpoints_do() {
     }
 }
 
+/// A knob's name and how it changes a configuration.
+type Knob = (&'static str, fn(&mut Config));
+
 /// Each of the emulator's reality knobs alone, on hexagon-x500. The 40 ms estimate delay
 /// is the hardest: the w-weighted mean velocity stays within 0.01 m/s of the prediction,
 /// but the delay, added to a law flown at the bandwidth gate's edge, leaves the six
 /// velocities swinging against each other, and their plain mean at 61.2 s is 1.9 % off
 /// (the gate does not count estimator delay yet).
-/// A knob's name and how it changes a configuration.
-type Knob = (&'static str, fn(&mut Config));
-
 #[test]
 fn each_reality_knob_alone_keeps_the_flight_within_bounds() {
     let matched = fly(&load("hexagon-x500"));
