@@ -176,3 +176,24 @@ fn a_retarget_stage_that_cannot_finish_times_out_into_consensus() {
         "{mean:?} vs {predicted:?}"
     );
 }
+
+#[test]
+fn the_planner_keeps_k_where_the_airframes_can_fly_the_law() {
+    // ground-start at time scale 2 (α 0.8, β 2.4): with k = 3 the fastest mode is 11.66
+    // 1/s, above the x500's 1.5 × 6.5 = 9.75 1/s; k = 2 gives 9.25. The planner's k_max
+    // is lowered to where the mode is exactly 9.75 (between 2 and 3), and the plan keeps
+    // within it.
+    let mut run = ground_start(|c| c.gains.time_scale = 2.0);
+    run.run_until(SimTime::from_millis(20_000), |_| {});
+    let Some(PlanDecision::Planned { k, .. }) = run.swarm().plan_decision().cloned() else {
+        panic!("{:?}", run.swarm().plan_decision())
+    };
+    assert!(k > 2.0 && k < 3.0, "k = {k}");
+    let ring = ringswarm::consensus::RingDigraph::new(3, k).unwrap();
+    let mu = ringswarm::consensus::nonzero_eigenvalues(
+        &ringswarm::consensus::eigenvalues(ring.laplacian()).unwrap(),
+    );
+    let gains = ringswarm::consensus::CouplingGains::new(0.8, 2.4).unwrap();
+    let fastest = ringswarm::consensus::fastest_mode_per_s(&mu, gains);
+    assert!(fastest <= 9.75 + 1e-6, "{fastest}");
+}

@@ -74,6 +74,12 @@ pub struct TargetSection {
     /// from the velocities reached, with a warning.
     #[serde(default = "default_retarget_timeout")]
     pub timeout_s: f64,
+    /// Plan once every vehicle flies level at the commanded altitude (default true): a
+    /// plan made from velocities on the ground is spoilt by the climb. False plans as soon
+    /// as every vehicle flies (the paper's second simulation plans from its initial
+    /// velocities).
+    #[serde(default = "default_true")]
+    pub wait_for_altitude: bool,
 }
 
 fn default_retarget_timeout() -> f64 {

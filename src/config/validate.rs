@@ -231,6 +231,7 @@ impl Config {
             estimate_hover: s.estimate_hover,
             mean_velocity_gain: g.k_vmean,
             setpoint: s.setpoint,
+            max_mode_per_s: self.bandwidth_check().ok().map(|b| b.allowed_per_s),
             end_action: s.end,
             loss_policy: s.on_link_loss,
             target,
@@ -312,6 +313,7 @@ impl Config {
             max_speed_mps: t.max_speed_mps,
             tolerance_mps: t.tolerance_mps,
             timeout: Duration::from_secs_f64(t.timeout_s),
+            wait_for_altitude: t.wait_for_altitude,
         })
     }
 

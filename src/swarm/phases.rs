@@ -10,7 +10,26 @@ use super::{EndAction, LossPolicy, PlanDecision, Swarm, SwarmFailure, SwarmPhase
 use crate::consensus::predicted_final_velocity;
 use crate::vehicle::Phase;
 
+/// How close to the commanded altitude (m) and how slow vertically (m/s) every vehicle must
+/// be before the planner plans.
+pub const PLAN_ALTITUDE_M: f64 = 1.0;
+/// The same, vertical speed.
+pub const PLAN_CLIMB_MPS: f64 = 0.5;
+/// The planner plans anyway after this long with every vehicle flying.
+pub const PLAN_ALTITUDE_WAIT: Duration = Duration::from_secs(30);
+
 impl Swarm {
+    /// Every vehicle within [`PLAN_ALTITUDE_M`] of the commanded altitude and slower than
+    /// [`PLAN_CLIMB_MPS`] vertically.
+    fn level_at_altitude(&self) -> bool {
+        self.states.iter().all(|s| {
+            s.is_some_and(|s| {
+                (s.pos_enu_m.z - self.setup.altitude_m).abs() < PLAN_ALTITUDE_M
+                    && s.vel_enu_mps.z.abs() < PLAN_CLIMB_MPS
+            })
+        })
+    }
+
     /// Moves between phases; runs at the start of every control tick.
     pub(super) fn transition(&mut self, now: SimTime) {
         let all_flying = self.links.iter().all(|l| l.phase() == Phase::Flying)
@@ -37,7 +56,25 @@ impl Swarm {
             SwarmPhase::Handshake
                 if all_flying && self.setup.target.is_some() && self.plan.is_none() =>
             {
-                self.plan_target(now);
+                // Plan from the velocities of a swarm that flies level at its altitude: a
+                // plan made on the ground is spoilt by the climb that follows.
+                let since = *self.all_flying_since.get_or_insert(now);
+                let wait = self.setup.target.is_some_and(|t| t.wait_for_altitude);
+                if !wait || self.level_at_altitude() {
+                    self.plan_target(now);
+                } else if now - since >= PLAN_ALTITUDE_WAIT {
+                    self.log.push(
+                        now,
+                        None,
+                        true,
+                        format!(
+                            "not level at {} m after {} s: planning anyway",
+                            self.setup.altitude_m,
+                            PLAN_ALTITUDE_WAIT.as_secs()
+                        ),
+                    );
+                    self.plan_target(now);
+                }
             }
             SwarmPhase::Retargeting(_) if !any_lost => {
                 let Some(PlanDecision::Planned {

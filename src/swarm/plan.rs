@@ -5,7 +5,10 @@ use nalgebra::Vector2;
 use ringswarm_sitl::time::SimTime;
 
 use super::{PlanDecision, Retargeted, Swarm, SwarmPhase, TargetVelocity};
-use crate::consensus::{PlanOutcome, PlanRequest, RingDigraph, analyze};
+use crate::consensus::{
+    PlanOutcome, PlanRequest, RingDigraph, analyze, eigenvalues, fastest_mode_per_s, k_lower_bound,
+    nonzero_eigenvalues,
+};
 
 impl Swarm {
     /// Planner stage 0: choose `k` (and an agent to re-target) from the velocities now.
@@ -77,11 +80,12 @@ impl Swarm {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         };
+        let k_max = self.k_max_the_airframes_fly(target)?;
         let plan = crate::consensus::plan(&PlanRequest {
             velocities_mps: velocities,
             target_mps: target.velocity_mps,
             k_margin: target.k_margin,
-            k_max: target.k_max,
+            k_max,
             max_speed_mps,
         })
         .map_err(|e| e.to_string())?;
@@ -99,6 +103,41 @@ impl Swarm {
             ));
         }
         Ok((ring, retarget.map(|r| (r.agent, r.new_velocity_mps))))
+    }
+
+    /// `target.k_max`, lowered if needed so that the law's fastest mode stays within what
+    /// the bandwidth gate allows (`setup.max_mode_per_s`): the largest `k` that fits, by
+    /// bisection (the fastest mode grows with `k`, through `βμ_max ≈ β(2 + k)`).
+    fn k_max_the_airframes_fly(&self, target: &TargetVelocity) -> Result<f64, String> {
+        let Some(allowed) = self.setup.max_mode_per_s else {
+            return Ok(target.k_max);
+        };
+        let m = self.setup.ring.macro_vertices();
+        let fastest = |k: f64| -> Result<f64, String> {
+            let ring = RingDigraph::new(m, k).map_err(|e| e.to_string())?;
+            let mu =
+                nonzero_eigenvalues(&eigenvalues(ring.laplacian()).map_err(|e| e.to_string())?);
+            Ok(fastest_mode_per_s(&mu, self.setup.gains))
+        };
+        if fastest(target.k_max)? <= allowed {
+            return Ok(target.k_max);
+        }
+        let lo_k = k_lower_bound(m).map_err(|e| e.to_string())? + target.k_margin;
+        if fastest(lo_k)? > allowed {
+            return Err(format!(
+                "no admissible k keeps the law's fastest mode within {allowed:.2} 1/s (the bandwidth gate)"
+            ));
+        }
+        let (mut lo, mut hi) = (lo_k, target.k_max);
+        for _ in 0..50 {
+            let mid = 0.5 * (lo + hi);
+            if fastest(mid)? <= allowed {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        Ok(lo)
     }
 
     /// The fastest any vehicle can fly level against its drag, with a margin:

@@ -47,6 +47,9 @@ pub struct SwarmSetup {
     pub mean_velocity_gain: f64,
     /// What the links stream.
     pub setpoint: SetpointKind,
+    /// The fastest closed-loop mode the airframes and the control rate allow (1/s, the
+    /// bandwidth gate); the planner keeps its `k` within it. `None`: unchecked.
+    pub max_mode_per_s: Option<f64>,
     /// What the swarm does when the duration is over.
     pub end_action: EndAction,
     /// What the swarm does when a vehicle is lost during consensus.
@@ -72,6 +75,9 @@ pub struct TargetVelocity {
     /// Stage 1 ends at the latest after this long; consensus then starts from the
     /// velocities reached (with a warning).
     pub timeout: Duration,
+    /// Plan only once every vehicle flies level at the commanded altitude (within 1 m,
+    /// under 0.5 m/s vertically; at most 30 s of waiting).
+    pub wait_for_altitude: bool,
 }
 
 /// A re-targeted agent (0-based) and its planned velocity (m/s, ENU).
