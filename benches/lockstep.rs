@@ -9,7 +9,7 @@ use ringswarm::config::Config;
 use ringswarm::driver::lockstep::Lockstep;
 use ringswarm::record::Recorder;
 use ringswarm::swarm::Swarm;
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 fn lockstep(toml: &str) -> Lockstep {
     Lockstep::from_config(&Config::from_toml(toml).expect("scenario parses")).expect("scenario")

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context, bail};
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use crate::cli::DemoArgs;
 use crate::config::Config;

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context, bail};
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 use tokio::net::UdpSocket;
 use tokio::sync::watch;
 

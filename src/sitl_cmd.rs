@@ -247,7 +247,7 @@ async fn apply_control(
 }
 
 fn status_line(s: &VehicleStatus, now_s: f64) -> String {
-    let link = |heard: Option<ringswarm_sitl::time::SimTime>| match heard {
+    let link = |heard: Option<ringswarm_wire::time::SimTime>| match heard {
         Some(t) if now_s - t.as_secs_f64() < 2.0 => "up".to_owned(),
         Some(t) => format!("silent {:.0}s", now_s - t.as_secs_f64()),
         None => "none".to_owned(),

@@ -145,7 +145,7 @@ fn lockstep_faults_are_checked_and_converted() {
     );
     assert!((faults.conditions.loss - 0.2).abs() < 1e-12);
     assert_eq!(faults.conditions.seed, 7);
-    use ringswarm_sitl::time::SimTime;
+    use ringswarm_wire::time::SimTime;
     assert_eq!(
         faults.silences,
         vec![(

@@ -9,7 +9,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use ringswarm::config::Config;
 use ringswarm::driver::lockstep::Lockstep;
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 use toml::{Table, Value};
 
 /// Every leaf of a TOML table, as a path of keys and array indices.

@@ -9,7 +9,7 @@ use ringswarm::driver::lockstep::Lockstep;
 use ringswarm::swarm::{SwarmFailure, SwarmPhase};
 use ringswarm::vehicle::Phase;
 use ringswarm_sitl::autopilot::{FlightMode, Vehicle};
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 /// paper-sim1 with extra `[swarm]` lines and extra tables before the vehicles.
 fn build(swarm_lines: &str, tables: &str) -> Lockstep {

@@ -11,7 +11,7 @@ use nalgebra::Vector2;
 use ringswarm::config::{AirframeSection, Config};
 use ringswarm::control::ned_to_enu;
 use ringswarm::driver::lockstep::Lockstep;
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 fn load(name: &str) -> Config {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))

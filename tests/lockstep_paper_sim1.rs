@@ -8,7 +8,7 @@ use ringswarm::config::Config;
 use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
 use ringswarm::swarm::{Swarm, SwarmPhase};
 use ringswarm_sitl::autopilot::Vehicle;
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 fn build(conditions: LinkConditions) -> Lockstep {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml");

@@ -7,7 +7,7 @@ use nalgebra::Vector2;
 use ringswarm::config::Config;
 use ringswarm::driver::lockstep::Lockstep;
 use ringswarm::swarm::{PlanDecision, SwarmPhase};
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 fn build() -> Lockstep {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim2.toml");

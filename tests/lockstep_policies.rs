@@ -6,7 +6,7 @@ use ringswarm::driver::lockstep::Lockstep;
 use ringswarm::swarm::SwarmPhase;
 use ringswarm::vehicle::Phase;
 use ringswarm_sitl::autopilot::{FlightMode, Vehicle};
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 /// paper-sim1 with `[swarm]` and `[emulator]` lines replaced.
 fn build(swarm_lines: &str, ground_below_m: f64) -> Lockstep {

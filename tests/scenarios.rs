@@ -14,7 +14,7 @@ use ringswarm::config::Config;
 use ringswarm::control::{SaturationMode, ned_to_enu};
 use ringswarm::driver::lockstep::Lockstep;
 use ringswarm::swarm::{PlanDecision, SwarmPhase};
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 fn load(name: &str) -> Config {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))

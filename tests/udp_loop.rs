@@ -11,9 +11,9 @@ use ringswarm::swarm::{EndAction, LossPolicy, Swarm, SwarmSetup};
 use ringswarm::vehicle::{LinkConfig, Phase};
 use ringswarm_sitl::autopilot::{Vehicle, VehicleConfig};
 use ringswarm_sitl::profile::Profile;
-use ringswarm_sitl::time::SimTime;
 use ringswarm_sitl::udp::{LinkFaults, SimClock, VehicleTask, run_vehicle};
 use ringswarm_sitl::world::World;
+use ringswarm_wire::time::SimTime;
 use tokio::net::UdpSocket;
 use tokio::sync::{mpsc, watch};
 

@@ -10,8 +10,8 @@ use ringswarm::link::decode_datagram;
 use ringswarm::vehicle::{LinkConfig, LinkEvent, Phase, VehicleLink};
 use ringswarm_sitl::autopilot::{FlightMode, LinkId, Vehicle, VehicleConfig};
 use ringswarm_sitl::profile::Profile;
-use ringswarm_sitl::time::SimTime;
 use ringswarm_sitl::world::World;
+use ringswarm_wire::time::SimTime;
 
 struct Harness {
     link: VehicleLink,

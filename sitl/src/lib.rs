@@ -11,25 +11,25 @@
 //!   PID → thrust vector → attitude), which flies every mode but raw offboard attitude.
 //! - [`trajectory`]: the limited-speed, limited-acceleration reference of auto modes.
 //! - [`profile`]: vehicle profiles (`ideal`, `x500`) with documented numbers.
-//! - [`codec`]: MAVLink framing of datagrams with the `mavlink` crate as payload codec.
+//! - [`codec`], [`time`]: MAVLink framing and simulated time, from `ringswarm-wire`.
 //! - [`autopilot`]: the sans-IO vehicle machine with PX4's wire behaviour.
 //! - [`config_file`]: the TOML configuration of `ringswarm sitl --config`.
 //! - [`udp`]: the tokio driver, one socket per link on PX4's ports, with fault injection.
-//! - [`params`], [`world`], [`time`]: parameter table, geodetic world, simulated time.
+//! - [`params`], [`world`]: parameter table, geodetic world.
 //!
 //! It never depends on `ringswarm`.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod autopilot;
-pub mod codec;
 pub mod config_file;
 pub mod control;
 pub mod params;
 pub mod physics;
 pub mod position_control;
 pub mod profile;
-pub mod time;
 pub mod trajectory;
 pub mod udp;
 pub mod world;
+
+pub use ringswarm_wire::{codec, time};

@@ -9,8 +9,8 @@ use nalgebra::Vector3;
 use ringswarm_sitl::autopilot::estimator::{EstimatorConfig, FaultKind, TelemetryFault};
 use ringswarm_sitl::autopilot::{BatteryConfig, StartState, VehicleConfig};
 use ringswarm_sitl::profile::Profile;
-use ringswarm_sitl::time::SimTime;
 use ringswarm_sitl::world::World;
+use ringswarm_wire::time::SimTime;
 
 use super::validate::Problems;
 use super::{Config, FaultKindName, LockstepFaults};

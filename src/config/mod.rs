@@ -15,7 +15,7 @@ use std::net::SocketAddr;
 
 use serde::Deserialize;
 
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use crate::control::SaturationMode;
 use crate::swarm::{EndAction, LossPolicy, SetpointKind};

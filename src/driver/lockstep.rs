@@ -8,7 +8,7 @@ use std::time::Duration;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use ringswarm_sitl::autopilot::{LinkId, PHYSICS_STEP, Vehicle};
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use super::Observer;
 use crate::swarm::Swarm;

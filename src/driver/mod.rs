@@ -7,7 +7,7 @@
 pub mod lockstep;
 pub mod udp;
 
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use crate::swarm::Swarm;
 

@@ -2,7 +2,7 @@
 //! ENU, metres): pure functions and a tracker fed once per control tick.
 
 use nalgebra::{Vector2, Vector3};
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 use serde::Serialize;
 
 use crate::swarm::{Swarm, SwarmPhase};

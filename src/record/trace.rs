@@ -2,7 +2,7 @@
 //! sampled at a fixed period (the coordinator's view: common frame, ENU, z up).
 
 use nalgebra::{Vector2, Vector3};
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use crate::swarm::{Swarm, SwarmPhase};
 

@@ -3,7 +3,7 @@
 //! changes, isolation) are also logged at `warn`, the rest at `info`; the run directory
 //! writes the log as `events.csv`.
 
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 /// Events kept in memory; later ones are counted, logged, and not kept.
 pub const MAX_KEPT_EVENTS: usize = 100_000;

@@ -41,7 +41,7 @@ mod setup;
 mod tick;
 
 use nalgebra::{Vector2, Vector3};
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use std::fmt;
 use std::time::Duration;

@@ -15,7 +15,7 @@
 //! is flown. A vehicle whose model is right is never flown on an estimate's transient
 //! error; one whose model is 10 % off is corrected within seconds.
 
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use crate::control::{HoverThrustEkf, VehicleModel};
 

@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use nalgebra::Vector2;
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use super::{EndAction, LossPolicy, PlanDecision, Swarm, SwarmFailure, SwarmPhase};
 use crate::consensus::predicted_final_velocity;

@@ -2,7 +2,7 @@
 //! (and an agent to re-target) from the velocities now, and check the planned ring.
 
 use nalgebra::Vector2;
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use super::{PlanDecision, Retargeted, Swarm, SwarmPhase, TargetVelocity};
 use crate::consensus::{

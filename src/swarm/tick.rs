@@ -3,7 +3,7 @@
 //! saturation, and a setpoint for each link.
 
 use nalgebra::Vector3;
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use super::{Swarm, SwarmPhase};
 use crate::consensus::HorizontalState;

@@ -51,7 +51,7 @@ use std::fmt;
 use std::time::Duration;
 
 use nalgebra::{UnitQuaternion, Vector3};
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use crate::control::AttitudeThrust;
 use crate::frame::Geodetic;

@@ -19,7 +19,7 @@
 use std::time::Duration;
 
 use nalgebra::Vector3;
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use crate::frame::{CommonFrame, Geodetic};
 

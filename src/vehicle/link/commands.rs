@@ -5,7 +5,7 @@
 use std::time::Duration;
 
 use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd, MavMessage};
-use ringswarm_sitl::time::SimTime;
+use ringswarm_wire::time::SimTime;
 
 use super::super::{LinkEvent, PX4_MAIN_AUTO, PX4_MAIN_OFFBOARD, PX4_SUB_AUTO_LOITER, Phase};
 use super::{Pending, VehicleLink};
