@@ -12,30 +12,8 @@ use nalgebra::Vector3;
 
 use crate::control::ned_to_enu;
 
-/// PX4's Earth radius for its local projection (m).
-pub const PX4_EARTH_RADIUS_M: f64 = 6_371_000.0;
-
-/// A geodetic position.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Geodetic {
-    /// Latitude (deg).
-    pub lat_deg: f64,
-    /// Longitude (deg).
-    pub lon_deg: f64,
-    /// Altitude above mean sea level (m).
-    pub alt_amsl_m: f64,
-}
-
-impl Geodetic {
-    /// From MAVLink's integer fields: degE7 and millimetres.
-    pub fn from_mavlink(lat_e7: i32, lon_e7: i32, alt_mm: i32) -> Self {
-        Self {
-            lat_deg: f64::from(lat_e7) * 1e-7,
-            lon_deg: f64::from(lon_e7) * 1e-7,
-            alt_amsl_m: f64::from(alt_mm) * 1e-3,
-        }
-    }
-}
+use ringswarm_wire::geo::MapProjection;
+pub use ringswarm_wire::geo::{EARTH_RADIUS_M as PX4_EARTH_RADIUS_M, Geodetic};
 
 /// The common frame: a tangent plane at `reference`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,24 +35,7 @@ impl CommonFrame {
     /// The NED offset (m) of a geodetic point from the reference (PX4's azimuthal
     /// equidistant projection; altitude as the negative height difference).
     pub fn offset_ned_m(&self, point: &Geodetic) -> Vector3<f64> {
-        let (lat0, lon0) = (
-            self.reference.lat_deg.to_radians(),
-            self.reference.lon_deg.to_radians(),
-        );
-        let (lat, lon) = (point.lat_deg.to_radians(), point.lon_deg.to_radians());
-        let cos_c =
-            (lat0.sin() * lat.sin() + lat0.cos() * lat.cos() * (lon - lon0).cos()).clamp(-1.0, 1.0);
-        let c = cos_c.acos();
-        let k = if c.abs() < f64::EPSILON {
-            1.0
-        } else {
-            c / c.sin()
-        };
-        let north = k
-            * (lat0.cos() * lat.sin() - lat0.sin() * lat.cos() * (lon - lon0).cos())
-            * PX4_EARTH_RADIUS_M;
-        let east = k * lat.cos() * (lon - lon0).sin() * PX4_EARTH_RADIUS_M;
-        Vector3::new(north, east, self.reference.alt_amsl_m - point.alt_amsl_m)
+        MapProjection::new(self.reference).project(point)
     }
 
     /// A vehicle's position in the common frame (NED, m) from its origin and its local
@@ -139,11 +100,5 @@ mod tests {
         assert!((a - b).norm() < 1e-3, "{a:?} vs {b:?}");
         let enu = frame.to_common_enu(&origin_a, &Vector3::new(30.0, 40.0, -12.0));
         assert!((enu - Vector3::new(40.0, 30.0, 12.0)).norm() < 1e-9);
-    }
-
-    #[test]
-    fn mavlink_integer_fields_convert_with_their_units() {
-        let g = Geodetic::from_mavlink(473_977_420, 85_455_940, 488_000);
-        assert!((g.lat_deg - 47.397742).abs() < 1e-12 && (g.alt_amsl_m - 488.0).abs() < 1e-12);
     }
 }

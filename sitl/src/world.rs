@@ -3,42 +3,13 @@
 //! Positions in the world are NED offsets from the reference point (m). Each vehicle's
 //! LOCAL_POSITION_NED is relative to its own origin, its start point, as with PX4, so two
 //! vehicles' local positions are not comparable; GLOBAL_POSITION_INT, GPS_GLOBAL_ORIGIN
-//! and HOME_POSITION place everything around the one reference. The projection is the
-//! local tangent plane (equirectangular about the reference), accurate to millimetres
-//! over a few kilometres, and exactly inverted by [`World::to_offset_ned`].
+//! and HOME_POSITION place everything around the one reference, with PX4's own projection
+//! (`ringswarm_wire::geo`, azimuthal equidistant), the one the coordinator uses too.
 
 use nalgebra::Vector3;
 
-/// Mean Earth radius used by the tangent-plane projection (m).
-pub const EARTH_RADIUS_M: f64 = 6_371_000.0;
-
-/// A geodetic position.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Geodetic {
-    /// Latitude (deg).
-    pub lat_deg: f64,
-    /// Longitude (deg).
-    pub lon_deg: f64,
-    /// Altitude above mean sea level (m).
-    pub alt_amsl_m: f64,
-}
-
-impl Geodetic {
-    /// MAVLink's `degE7` latitude.
-    pub fn lat_e7(&self) -> i32 {
-        (self.lat_deg * 1e7).round() as i32
-    }
-
-    /// MAVLink's `degE7` longitude.
-    pub fn lon_e7(&self) -> i32 {
-        (self.lon_deg * 1e7).round() as i32
-    }
-
-    /// Altitude in millimetres.
-    pub fn alt_mm(&self) -> i32 {
-        (self.alt_amsl_m * 1000.0).round() as i32
-    }
-}
+use ringswarm_wire::geo::MapProjection;
+pub use ringswarm_wire::geo::{EARTH_RADIUS_M, Geodetic};
 
 /// The world every emulated vehicle shares.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -66,23 +37,12 @@ impl Default for World {
 impl World {
     /// The geodetic position of a NED offset from the reference.
     pub fn to_geodetic(&self, offset_ned_m: &Vector3<f64>) -> Geodetic {
-        let lat0 = self.reference.lat_deg.to_radians();
-        Geodetic {
-            lat_deg: self.reference.lat_deg + (offset_ned_m.x / EARTH_RADIUS_M).to_degrees(),
-            lon_deg: self.reference.lon_deg
-                + (offset_ned_m.y / (EARTH_RADIUS_M * lat0.cos())).to_degrees(),
-            alt_amsl_m: self.reference.alt_amsl_m - offset_ned_m.z,
-        }
+        MapProjection::new(self.reference).reproject(offset_ned_m)
     }
 
     /// The NED offset from the reference of a geodetic position.
     pub fn to_offset_ned(&self, position: &Geodetic) -> Vector3<f64> {
-        let lat0 = self.reference.lat_deg.to_radians();
-        Vector3::new(
-            (position.lat_deg - self.reference.lat_deg).to_radians() * EARTH_RADIUS_M,
-            (position.lon_deg - self.reference.lon_deg).to_radians() * EARTH_RADIUS_M * lat0.cos(),
-            self.reference.alt_amsl_m - position.alt_amsl_m,
-        )
+        MapProjection::new(self.reference).project(position)
     }
 }
 

@@ -110,7 +110,7 @@ impl Config {
     /// An unknown profile or a start state the emulator refuses, naming the vehicle.
     pub fn emulator(&self) -> Result<(World, Vec<VehicleConfig>), String> {
         let world = World {
-            reference: ringswarm_sitl::world::Geodetic {
+            reference: crate::frame::Geodetic {
                 lat_deg: self.frame.latitude_deg,
                 lon_deg: self.frame.longitude_deg,
                 alt_amsl_m: self.frame.altitude_amsl_m,
