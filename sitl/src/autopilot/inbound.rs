@@ -37,8 +37,22 @@ impl Vehicle {
         }
     }
 
-    fn for_us(&mut self, target_system: u8) -> bool {
-        let ours = target_system == 0 || target_system == self.cfg.system_id;
+    /// PX4's rule for commands and offboard setpoints (`evaluate_target_ok`, the setpoint
+    /// handlers): this system or broadcast (0), the autopilot component (1) or all (0).
+    /// Anything else is ignored, counted, and never answered.
+    fn for_us(&mut self, target_system: u8, target_component: u8) -> bool {
+        let ours = (target_system == 0 || target_system == self.cfg.system_id)
+            && matches!(target_component, 0 | 1);
+        if !ours {
+            self.counters.foreign_target += 1;
+        }
+        ours
+    }
+
+    /// PX4's rule for the parameter protocol (`mavlink_parameters.cpp`): this system
+    /// exactly (no broadcast), the autopilot component or all.
+    fn params_for_us(&mut self, target_system: u8, target_component: u8) -> bool {
+        let ours = target_system == self.cfg.system_id && matches!(target_component, 0 | 1);
         if !ours {
             self.counters.foreign_target += 1;
         }
@@ -100,7 +114,7 @@ impl Vehicle {
             MavMessage::COMMAND_INT(m) => self.on_command_int(now, link, sender, &m),
             MavMessage::SET_MODE(m) => self.on_set_mode(now, link, sender, &m),
             MavMessage::PARAM_REQUEST_LIST(m) => {
-                let ours = self.for_us(m.target_system);
+                let ours = self.params_for_us(m.target_system, m.target_component);
                 if ours {
                     self.send_all_params(link);
                 }
@@ -142,7 +156,7 @@ impl Vehicle {
     }
 
     fn on_set_attitude_target(&mut self, now: SimTime, m: &SET_ATTITUDE_TARGET_DATA) -> bool {
-        if !self.for_us(m.target_system) {
+        if !self.for_us(m.target_system, m.target_component) {
             return false;
         }
         let target = offboard::attitude_target(&AttitudeTarget {
@@ -160,7 +174,7 @@ impl Vehicle {
         now: SimTime,
         m: &SET_POSITION_TARGET_LOCAL_NED_DATA,
     ) -> bool {
-        if !self.for_us(m.target_system) {
+        if !self.for_us(m.target_system, m.target_component) {
             return false;
         }
         let t = PositionTarget {
@@ -181,7 +195,7 @@ impl Vehicle {
         now: SimTime,
         m: &SET_POSITION_TARGET_GLOBAL_INT_DATA,
     ) -> bool {
-        if !self.for_us(m.target_system) {
+        if !self.for_us(m.target_system, m.target_component) {
             return false;
         }
         let t = PositionTarget {
@@ -208,7 +222,7 @@ impl Vehicle {
         sender: (u8, u8),
         m: &COMMAND_LONG_DATA,
     ) -> bool {
-        if !self.for_us(m.target_system) {
+        if !self.for_us(m.target_system, m.target_component) {
             return false;
         }
         let params = [
@@ -225,7 +239,7 @@ impl Vehicle {
         sender: (u8, u8),
         m: &COMMAND_INT_DATA,
     ) -> bool {
-        if !self.for_us(m.target_system) {
+        if !self.for_us(m.target_system, m.target_component) {
             return false;
         }
         let global = matches!(
@@ -250,7 +264,7 @@ impl Vehicle {
         sender: (u8, u8),
         m: &SET_MODE_DATA,
     ) -> bool {
-        if !self.for_us(m.target_system) {
+        if !self.for_us(m.target_system, 0) {
             return false;
         }
         let main = (m.custom_mode >> 16) & 0xFF;
@@ -273,7 +287,7 @@ impl Vehicle {
     }
 
     fn on_param_request_read(&mut self, link: LinkId, m: &PARAM_REQUEST_READ_DATA) -> bool {
-        if !self.for_us(m.target_system) {
+        if !self.params_for_us(m.target_system, m.target_component) {
             return false;
         }
         let index = if m.param_index >= 0 {
@@ -293,7 +307,7 @@ impl Vehicle {
     }
 
     fn on_param_set(&mut self, link: LinkId, m: &PARAM_SET_DATA) -> bool {
-        if !self.for_us(m.target_system) {
+        if !self.params_for_us(m.target_system, m.target_component) {
             return false;
         }
         let name = m
@@ -319,7 +333,7 @@ impl Vehicle {
     }
 
     fn on_timesync(&mut self, now: SimTime, link: LinkId, m: &TIMESYNC_DATA) -> bool {
-        if m.target_system != 0 && !self.for_us(m.target_system) {
+        if m.target_system != 0 && !self.for_us(m.target_system, 0) {
             return false;
         }
         if m.tc1 == 0 {

@@ -4,7 +4,7 @@ use std::time::Duration;
 
 use mavlink::dialects::common::{
     AttitudeTargetTypemask, COMMAND_LONG_DATA, MavCmd, MavMessage, MavResult,
-    PARAM_REQUEST_LIST_DATA, SET_ATTITUDE_TARGET_DATA,
+    PARAM_REQUEST_LIST_DATA, PARAM_REQUEST_READ_DATA, SET_ATTITUDE_TARGET_DATA,
 };
 use nalgebra::Vector3;
 
@@ -415,4 +415,62 @@ fn timesync_request_is_answered_with_our_time() {
     let reply = reply.expect("timesync reply");
     assert_eq!(reply.ts1, 42);
     assert_eq!(reply.tc1, 1_234_000_000);
+}
+
+/// PX4's target rules (mavlink_receiver.cpp `evaluate_target_ok`, the setpoint handlers,
+/// mavlink_parameters.cpp): commands and setpoints for this system or broadcast and for
+/// component 1 or all; parameters for this system exactly. Anything else is ignored,
+/// counted, and never answered.
+#[test]
+fn messages_for_another_system_or_component_are_ignored_as_px4_ignores_them() {
+    let mut rig = Rig::on_ground();
+    let long = |sys: u8, comp: u8| {
+        MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            target_system: sys,
+            target_component: comp,
+            command: MavCmd::MAV_CMD_REQUEST_MESSAGE,
+            confirmation: 0,
+            param1: 148.0, // AUTOPILOT_VERSION
+            ..COMMAND_LONG_DATA::default()
+        })
+    };
+    let answered = |rig: &mut Rig, msg: MavMessage| {
+        rig.received.clear();
+        rig.send(msg);
+        rig.received
+            .iter()
+            .any(|(_, _, m)| matches!(m, MavMessage::COMMAND_ACK(_) | MavMessage::PARAM_VALUE(_)))
+    };
+    assert!(answered(&mut rig, long(1, 1)));
+    assert!(
+        answered(&mut rig, long(0, 0)),
+        "broadcast, as PX4 main accepts"
+    );
+    assert!(answered(&mut rig, long(1, 0)));
+    let before = rig.vehicle.status().counters.foreign_target;
+    assert!(!answered(&mut rig, long(2, 1)), "another system");
+    assert!(
+        !answered(&mut rig, long(1, 190)),
+        "another component of ours"
+    );
+    assert!(
+        !answered(&mut rig, long(0, 100)),
+        "broadcast to another component"
+    );
+    let read = |sys: u8, comp: u8| {
+        MavMessage::PARAM_REQUEST_READ(PARAM_REQUEST_READ_DATA {
+            param_index: 0,
+            target_system: sys,
+            target_component: comp,
+            param_id: "".into(),
+        })
+    };
+    assert!(answered(&mut rig, read(1, 1)));
+    assert!(answered(&mut rig, read(1, 0)));
+    assert!(
+        !answered(&mut rig, read(0, 1)),
+        "parameters are never broadcast"
+    );
+    assert!(!answered(&mut rig, read(1, 50)));
+    assert_eq!(rig.vehicle.status().counters.foreign_target - before, 5);
 }
