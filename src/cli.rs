@@ -31,6 +31,16 @@ pub enum Command {
     /// Fly a built-in scenario in lockstep with the emulator (virtual time), print the
     /// summary and write a run directory.
     Demo(DemoArgs),
+    /// Write a new MAVLink 2 signing key (64 hex characters, mode 0600) to FILE; an
+    /// existing file is never overwritten.
+    Keygen(KeygenArgs),
+}
+
+/// Arguments of `ringswarm keygen`.
+#[derive(Debug, Args)]
+pub struct KeygenArgs {
+    /// Where to write the key (must not exist).
+    pub file: std::path::PathBuf,
 }
 
 /// Arguments of `ringswarm demo`.

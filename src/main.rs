@@ -35,6 +35,7 @@ fn main() -> ExitCode {
         Command::Sitl(args) => ringswarm::sitl_cmd::run(&args).map(|()| true),
         Command::Fly(args) => ringswarm::fly_cmd::run(&args).map(|()| true),
         Command::Demo(args) => ringswarm::demo_cmd::run(&args).map(|()| true),
+        Command::Keygen(args) => keygen(&args.file).map(|()| true),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,
@@ -48,6 +49,17 @@ fn main() -> ExitCode {
             }
         }
     }
+}
+
+/// Writes a new signing key and says where.
+fn keygen(path: &std::path::Path) -> anyhow::Result<()> {
+    let key = ringswarm::security::SigningKey::generate().map_err(anyhow::Error::msg)?;
+    key.write_new(path).map_err(anyhow::Error::msg)?;
+    eprintln!(
+        "signing key written to {} (mode 0600); keep it secret",
+        path.display()
+    );
+    Ok(())
 }
 
 /// Prints the analysis; `Ok(stable)`.

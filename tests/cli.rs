@@ -450,3 +450,39 @@ fn analyze_with_an_airframe_runs_the_bandwidth_gate() {
         stderr(&bad)
     );
 }
+
+#[test]
+fn keygen_writes_a_private_key_once_and_never_overwrites_it() {
+    let dir = std::env::temp_dir().join(format!("ringswarm-cli-keygen-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("swarm.key");
+    let out = ringswarm(&["keygen", path.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert_eq!(text.len(), 65, "{text:?}");
+    assert!(text.ends_with('\n') && text.trim().chars().all(|c| c.is_ascii_hexdigit()));
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o600, "{mode:o}");
+    }
+    let again = ringswarm(&["keygen", path.to_str().unwrap()]);
+    assert_eq!(again.status.code(), Some(2));
+    assert!(
+        stderr(&again).contains("exists: a key is never overwritten"),
+        "{}",
+        stderr(&again)
+    );
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), text);
+    let other = dir.join("other.key");
+    assert_eq!(
+        ringswarm(&["keygen", other.to_str().unwrap()])
+            .status
+            .code(),
+        Some(0)
+    );
+    assert_ne!(std::fs::read_to_string(&other).unwrap(), text);
+    let _ = std::fs::remove_dir_all(&dir);
+}
