@@ -10,6 +10,7 @@
 //! Time: the task keeps a simulated clock running at `speed` times real time and calls the
 //! machine's `handle_timeout` on a 1 ms tick; datagrams are handed over as they arrive.
 
+use ringswarm_wire::px4;
 use std::collections::VecDeque;
 use std::io;
 use std::net::{IpAddr, SocketAddr};
@@ -40,10 +41,10 @@ pub struct PortPlan {
 /// PX4's SITL ports for vehicle `instance` (0-based) on `host`.
 pub fn px4_ports(instance: u16, host: IpAddr) -> PortPlan {
     PortPlan {
-        offboard_bind: SocketAddr::new(host, 14580 + instance),
-        offboard_peer: SocketAddr::new(host, 14540 + instance),
-        gcs_bind: SocketAddr::new(host, 18570 + instance),
-        gcs_peer: SocketAddr::new(host, 14550),
+        offboard_bind: SocketAddr::new(host, px4::OFFBOARD_LISTEN_PORT + instance),
+        offboard_peer: SocketAddr::new(host, px4::OFFBOARD_PEER_PORT + instance),
+        gcs_bind: SocketAddr::new(host, px4::GCS_LISTEN_PORT + instance),
+        gcs_peer: SocketAddr::new(host, px4::GCS_PEER_PORT),
     }
 }
 

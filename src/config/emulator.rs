@@ -12,6 +12,8 @@ use ringswarm_sitl::profile::Profile;
 use ringswarm_sitl::world::World;
 use ringswarm_wire::time::SimTime;
 
+use ringswarm_wire::px4;
+
 use super::validate::Problems;
 use super::{Config, FaultKindName, LockstepFaults};
 use crate::control::enu_to_ned;
@@ -93,11 +95,11 @@ impl Config {
         let port = |base: u16| u16::try_from(i).ok().and_then(|i| base.checked_add(i));
         let peer = match v.address {
             Some(a) => a,
-            None => SocketAddr::from(([127, 0, 0, 1], port(14580)?)),
+            None => SocketAddr::from(([127, 0, 0, 1], port(px4::OFFBOARD_LISTEN_PORT)?)),
         };
         let bind = match v.bind {
             Some(a) => a,
-            None => SocketAddr::from(([0, 0, 0, 0], port(14540)?)),
+            None => SocketAddr::from(([0, 0, 0, 0], port(px4::OFFBOARD_PEER_PORT)?)),
         };
         Some((peer, bind))
     }

@@ -56,12 +56,10 @@ use ringswarm_wire::time::SimTime;
 use crate::control::AttitudeThrust;
 use crate::frame::Geodetic;
 
-/// PX4's OFFBOARD main mode.
-const PX4_MAIN_OFFBOARD: u32 = 6;
-/// PX4's AUTO main mode and its LOITER (Hold) and LAND sub modes.
-const PX4_MAIN_AUTO: u32 = 4;
-const PX4_SUB_AUTO_LOITER: u32 = 3;
-const PX4_SUB_AUTO_LAND: u32 = 6;
+use ringswarm_wire::px4::{
+    MAIN_AUTO as PX4_MAIN_AUTO, MAIN_OFFBOARD as PX4_MAIN_OFFBOARD,
+    SUB_AUTO_LAND as PX4_SUB_AUTO_LAND, SUB_AUTO_LOITER as PX4_SUB_AUTO_LOITER,
+};
 
 /// What a link streams to keep OFFBOARD and fly the vehicle.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -344,35 +342,7 @@ pub fn result_name(result: u8) -> String {
 
 /// PX4's name for a custom mode (main mode in bits 16–23, sub mode in 24–31).
 pub fn px4_mode_name(custom_mode: u32) -> String {
-    let main = (custom_mode >> 16) & 0xFF;
-    let sub = (custom_mode >> 24) & 0xFF;
-    let auto = [
-        "AUTO",
-        "AUTO.READY",
-        "AUTO.TAKEOFF",
-        "AUTO.LOITER",
-        "AUTO.MISSION",
-        "AUTO.RTL",
-        "AUTO.LAND",
-        "AUTO.RTGS",
-        "AUTO.FOLLOW_TARGET",
-        "AUTO.PRECLAND",
-        "AUTO.VTOL_TAKEOFF",
-    ];
-    match main {
-        1 => "MANUAL".to_owned(),
-        2 => "ALTCTL".to_owned(),
-        3 if sub == 1 => "POSCTL.ORBIT".to_owned(),
-        3 => "POSCTL".to_owned(),
-        4 => auto
-            .get(sub as usize)
-            .map_or_else(|| format!("AUTO.{sub}"), |s| (*s).to_owned()),
-        5 => "ACRO".to_owned(),
-        6 => "OFFBOARD".to_owned(),
-        7 => "STABILIZED".to_owned(),
-        8 => "RATTITUDE".to_owned(),
-        other => format!("PX4 main mode {other}"),
-    }
+    ringswarm_wire::px4::mode_name(custom_mode)
 }
 
 /// What the coordinator knows of the vehicle (its own frames: local NED, body FRD).

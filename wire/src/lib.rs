@@ -3,11 +3,13 @@
 //! What the coordinator (`ringswarm`) and the emulator (`ringswarm-sitl`) share on the
 //! wire, in one crate that depends on neither: MAVLink framing ([`codec`]: datagrams ↔
 //! frames with the `mavlink` crate as the payload codec), the time type both machines
-//! are driven with ([`time`]) and PX4's geodetic projection ([`geo`]). The coordinator takes its codec from here, not from the
+//! are driven with ([`time`]), PX4's geodetic projection ([`geo`]) and PX4's mode and port
+//! numbers ([`px4`]). The coordinator takes its codec from here, not from the
 //! emulator it is tested against.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod codec;
 pub mod geo;
+pub mod px4;
 pub mod time;

@@ -2,18 +2,11 @@
 //! in bits 24–31), as pymavlink's `mode_string_v10`, MAVSDK and QGC decode them when the
 //! heartbeat says `autopilot = PX4`.
 
-/// PX4 main modes.
-const MAIN_POSCTL: u32 = 3;
-/// PX4's POSCTL sub mode of an orbit (PX4_CUSTOM_SUB_MODE_POSCTL_ORBIT).
-const SUB_ORBIT: u32 = 1;
-const MAIN_AUTO: u32 = 4;
-const MAIN_OFFBOARD: u32 = 6;
-/// PX4 AUTO sub modes.
-const SUB_TAKEOFF: u32 = 2;
-const SUB_LOITER: u32 = 3;
-const SUB_MISSION: u32 = 4;
-const SUB_RTL: u32 = 5;
-const SUB_LAND: u32 = 6;
+use ringswarm_wire::px4::{
+    MAIN_AUTO, MAIN_OFFBOARD, MAIN_POSCTL, SUB_AUTO_LAND as SUB_LAND,
+    SUB_AUTO_LOITER as SUB_LOITER, SUB_AUTO_MISSION as SUB_MISSION, SUB_AUTO_RTL as SUB_RTL,
+    SUB_AUTO_TAKEOFF as SUB_TAKEOFF, SUB_POSCTL_ORBIT as SUB_ORBIT,
+};
 
 /// The modes the emulator flies.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -49,7 +42,7 @@ impl FlightMode {
             Self::Orbit => (MAIN_POSCTL, SUB_ORBIT),
             Self::Offboard => (MAIN_OFFBOARD, 0),
         };
-        (main << 16) | (sub << 24)
+        ringswarm_wire::px4::custom_mode(main, sub)
     }
 
     /// The mode a DO_SET_MODE / SET_MODE asks for (`main`, `sub` as PX4 numbers); `None`
