@@ -14,8 +14,8 @@ use std::str::FromStr;
 
 use nalgebra::Vector3;
 
-/// Standard gravity (m/s²).
-pub const GRAVITY_MPS2: f64 = 9.806_65;
+/// Standard gravity (m/s²), shared with the other side through `ringswarm-wire`.
+pub use ringswarm_wire::geo::GRAVITY_MPS2;
 
 /// Gains of the PX4-like attitude and rate controllers.
 #[derive(Debug, Clone, Copy, PartialEq)]

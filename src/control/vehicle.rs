@@ -5,8 +5,8 @@
 
 use crate::error::ControlError;
 
-/// Standard gravity (m/s²).
-pub const GRAVITY_MPS2: f64 = 9.806_65;
+/// Standard gravity (m/s²), shared with the other side through `ringswarm-wire`.
+pub use ringswarm_wire::geo::GRAVITY_MPS2;
 
 /// Mass and thrust authority of one vehicle.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -6,6 +6,9 @@
 
 use nalgebra::Vector3;
 
+/// Standard gravity (m/s², PX4's CONSTANTS_ONE_G), the one value both sides use.
+pub const GRAVITY_MPS2: f64 = 9.806_65;
+
 /// PX4's Earth radius for its local projection (m).
 pub const EARTH_RADIUS_M: f64 = 6_371_000.0;
 
