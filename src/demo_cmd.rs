@@ -99,14 +99,12 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     if let Some(mode) = args.saturation {
         config.envelope.saturation = mode;
     }
-    if config.validate().is_ok() {
-        crate::config::warn_if_too_fast(&config);
-    }
     if args.realtime {
         return realtime(&name, &config, args);
     }
     let mut run =
         Lockstep::from_config(&config).map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
+    crate::config::warn_if_too_fast(run.swarm().setup(), config.gains.time_scale);
     let limit = SimTime::ZERO
         + run
             .swarm()
@@ -241,6 +239,7 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
     let setup = config
         .validate()
         .map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
+    crate::config::warn_if_too_fast(&setup, config.gains.time_scale);
     let (world, vehicle_configs) = config
         .emulator()
         .map_err(|e| anyhow::anyhow!("scenario {name}: {e}"))?;

@@ -46,7 +46,7 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         }
         setup.duration = Some(Duration::from_secs_f64(d));
     }
-    crate::config::warn_if_too_fast(&config);
+    crate::config::warn_if_too_fast(&setup, config.gains.time_scale);
     let endpoints = config.all_udp_endpoints().map_err(anyhow::Error::msg)?;
     let out = args
         .out

@@ -77,7 +77,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         estimate_hover: true,
         mean_velocity_gain: 0.2,
         setpoint: ringswarm::swarm::SetpointKind::Attitude,
-        max_mode_per_s: None,
+        bandwidth: None,
         end_action: EndAction::Land,
         loss_policy: LossPolicy::Hold,
         target: None,

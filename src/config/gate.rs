@@ -1,6 +1,7 @@
 //! The bandwidth gate of a configuration: can its vehicles fly its gains at its control
 //! rate? ([`crate::consensus::check_bandwidth`] has the rule and its calibration.)
 
+use nalgebra::Complex;
 use ringswarm_sitl::profile::Profile;
 
 use super::Config;
@@ -8,10 +9,13 @@ use crate::consensus::{
     BandwidthCheck, CouplingGains, RingDigraph, check_bandwidth, eigenvalues, fastest_mode_per_s,
     nonzero_eigenvalues,
 };
+use crate::swarm::SwarmSetup;
 
 impl Config {
     /// The gate for the gains as flown (time scale applied), against the slowest
-    /// vehicle's attitude bandwidth and the control rate. Call it on a validated config.
+    /// vehicle's attitude bandwidth and the control rate. Call it on a validated config;
+    /// [`Config::validate`] runs the same gate on the eigenvalues it already has and puts
+    /// it in the setup.
     ///
     /// # Errors
     /// A vehicle without a bandwidth (an unknown profile and no
@@ -21,7 +25,30 @@ impl Config {
         let c = g.time_scale;
         let ring = RingDigraph::for_agents(self.vehicle.len(), g.k).map_err(|e| e.to_string())?;
         let gains = CouplingGains::new(g.alpha * c * c, g.beta * c).map_err(|e| e.to_string())?;
-        let mu = nonzero_eigenvalues(&eigenvalues(ring.laplacian()).map_err(|e| e.to_string())?);
+        let eigs = eigenvalues(ring.laplacian()).map_err(|e| e.to_string())?;
+        self.bandwidth_from(&eigs, gains)
+    }
+
+    /// The gate from the Laplacian's eigenvalues and the gains as flown.
+    ///
+    /// # Errors
+    /// A vehicle without a bandwidth, named.
+    pub(super) fn bandwidth_from(
+        &self,
+        laplacian_eigenvalues: &[Complex<f64>],
+        gains: CouplingGains,
+    ) -> Result<BandwidthCheck, String> {
+        let mu = nonzero_eigenvalues(laplacian_eigenvalues);
+        Ok(check_bandwidth(
+            fastest_mode_per_s(&mu, gains),
+            self.slowest_attitude_bandwidth_rps()?,
+            self.swarm.control_rate_hz,
+        ))
+    }
+
+    /// The slowest vehicle's attitude bandwidth: `attitude_bandwidth_rps`, or its
+    /// profile's attitude P gain.
+    fn slowest_attitude_bandwidth_rps(&self) -> Result<f64, String> {
         let mut slowest = f64::INFINITY;
         for (i, v) in self.vehicle.iter().enumerate() {
             let bandwidth = match v.attitude_bandwidth_rps {
@@ -39,23 +66,19 @@ impl Config {
             };
             slowest = slowest.min(bandwidth);
         }
-        Ok(check_bandwidth(
-            fastest_mode_per_s(&mu, gains),
-            slowest,
-            self.swarm.control_rate_hz,
-        ))
+        Ok(slowest)
     }
 }
 
-/// Warns (at `warn`, which is printed by default) when the gains are too fast for the
-/// airframe, naming the time scale that fits; a gate that cannot run is said too.
-pub fn warn_if_too_fast(config: &Config) {
-    match config.bandwidth_check() {
-        Ok(b) if !b.fits => tracing::warn!(
-            "{}",
-            crate::report::bandwidth_text(&b, config.gains.time_scale)
-        ),
-        Ok(_) => {}
-        Err(e) => tracing::warn!("bandwidth gate not run: {e}"),
+/// Warns (at `warn`, which is printed by default) when the gains of a validated setup are
+/// too fast for the airframe, naming the time scale that fits (`time_scale` is the one
+/// flown); a gate that could not run is said too.
+pub fn warn_if_too_fast(setup: &SwarmSetup, time_scale: f64) {
+    match &setup.bandwidth {
+        Some(b) if !b.fits => {
+            tracing::warn!("{}", crate::report::bandwidth_text(b, time_scale));
+        }
+        Some(_) => {}
+        None => tracing::warn!("bandwidth gate not run: a vehicle has no attitude bandwidth"),
     }
 }

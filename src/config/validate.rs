@@ -112,8 +112,15 @@ impl Config {
                     .ok()
             })
             .flatten();
+        let mut bandwidth = None;
         if let (Some(ring), Some(gains)) = (&ring, gains) {
-            match analyze(ring, Some(gains)) {
+            let analysis = analyze(ring, Some(gains));
+            if let Ok(report) = &analysis {
+                bandwidth = self
+                    .bandwidth_from(&report.laplacian_eigenvalues, gains)
+                    .ok();
+            }
+            match analysis {
                 Ok(report) if !report.stable => p.push(format!(
                     "gains are unstable: k = {} (bound k > {:.6}, margin {:+.6}), beta^2/alpha = {:.6} vs Yu's bound {}",
                     g.k,
@@ -231,7 +238,7 @@ impl Config {
             estimate_hover: s.estimate_hover,
             mean_velocity_gain: g.k_vmean,
             setpoint: s.setpoint,
-            max_mode_per_s: self.bandwidth_check().ok().map(|b| b.allowed_per_s),
+            bandwidth,
             end_action: s.end,
             loss_policy: s.on_link_loss,
             target,

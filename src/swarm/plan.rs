@@ -106,10 +106,10 @@ impl Swarm {
     }
 
     /// `target.k_max`, lowered if needed so that the law's fastest mode stays within what
-    /// the bandwidth gate allows (`setup.max_mode_per_s`): the largest `k` that fits, by
+    /// the bandwidth gate allows (`setup.bandwidth`): the largest `k` that fits, by
     /// bisection (the fastest mode grows with `k`, through `βμ_max ≈ β(2 + k)`).
     fn k_max_the_airframes_fly(&self, target: &TargetVelocity) -> Result<f64, String> {
-        let Some(allowed) = self.setup.max_mode_per_s else {
+        let Some(allowed) = self.setup.bandwidth.map(|b| b.allowed_per_s) else {
             return Ok(target.k_max);
         };
         let m = self.setup.ring.macro_vertices();

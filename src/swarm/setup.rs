@@ -4,7 +4,7 @@ use std::time::Duration;
 
 use nalgebra::Vector2;
 
-use crate::consensus::{CouplingGains, RingDigraph};
+use crate::consensus::{BandwidthCheck, CouplingGains, RingDigraph};
 use crate::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel};
 use crate::frame::CommonFrame;
 use crate::vehicle::LinkConfig;
@@ -47,9 +47,9 @@ pub struct SwarmSetup {
     pub mean_velocity_gain: f64,
     /// What the links stream.
     pub setpoint: SetpointKind,
-    /// The fastest closed-loop mode the airframes and the control rate allow (1/s, the
-    /// bandwidth gate); the planner keeps its `k` within it. `None`: unchecked.
-    pub max_mode_per_s: Option<f64>,
+    /// The bandwidth gate of the gains as configured (`None`: not run); the planner keeps
+    /// its `k` within the fastest mode it allows.
+    pub bandwidth: Option<BandwidthCheck>,
     /// What the swarm does when the duration is over.
     pub end_action: EndAction,
     /// What the swarm does when a vehicle is lost during consensus.
