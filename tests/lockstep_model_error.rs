@@ -80,9 +80,15 @@ fn fly_run(config: &Config) -> (Reached, Lockstep) {
     (reached, run)
 }
 
+/// The matched model's flight, flown once for the tests that compare with it.
+fn matched() -> &'static Reached {
+    static MATCHED: std::sync::OnceLock<Reached> = std::sync::OnceLock::new();
+    MATCHED.get_or_init(|| fly(&load("hexagon-x500")))
+}
+
 #[test]
 fn a_ten_percent_hover_error_flies_like_the_matched_model() {
-    let matched = fly(&load("hexagon-x500"));
+    let matched = matched();
     let wrong = fly(&load("hexagon-x500-wrong-model"));
     eprintln!("matched {matched:?}\nwrong {wrong:?}");
     // Measured: matched 0.22 %, 2.93 m, 0.006 m; wrong 0.25 %, 3.07 m, 0.006 m.
@@ -141,7 +147,7 @@ fn drag_the_model_does_not_know_does_not_make_the_velocity_drift() {
 
 #[test]
 fn noise_drift_latency_and_battery_sag_still_fly_the_prediction() {
-    let matched = fly(&load("hexagon-x500"));
+    let matched = matched();
     let noisy = fly(&load("hexagon-x500-noisy"));
     eprintln!("noisy {noisy:?}");
     // Measured: velocity 1.2 %, formation 2.82 m, altitude 0.20 m.
@@ -201,7 +207,7 @@ type Knob = (&'static str, fn(&mut Config));
 /// (the gate does not count estimator delay yet).
 #[test]
 fn each_reality_knob_alone_keeps_the_flight_within_bounds() {
-    let matched = fly(&load("hexagon-x500"));
+    let matched = matched();
     let knobs: [Knob; 5] = [
         ("position noise", |c| c.emulator.position_noise_m = 0.1),
         ("velocity noise", |c| c.emulator.velocity_noise_mps = 0.05),
