@@ -53,7 +53,7 @@ fn main() -> ExitCode {
 
 /// Writes a new signing key and says where.
 fn keygen(path: &std::path::Path) -> anyhow::Result<()> {
-    let key = ringswarm::security::SigningKey::generate().map_err(anyhow::Error::msg)?;
+    let key = ringswarm_wire::signing::SigningKey::generate().map_err(anyhow::Error::msg)?;
     key.write_new(path).map_err(anyhow::Error::msg)?;
     eprintln!(
         "signing key written to {} (mode 0600); keep it secret",

@@ -10,6 +10,8 @@
 use mavlink::dialects::common::MavMessage;
 use mavlink::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message, calculate_crc};
 
+use crate::signing::{Signing, SigningKey, Trailer};
+
 /// MAVLink 1 start byte.
 const STX_V1: u8 = 0xFE;
 /// MAVLink 2 start byte.
@@ -28,6 +30,8 @@ pub struct Frame {
     pub msg: MavMessage,
     /// MAVLink 1 or 2.
     pub version: MavlinkVersion,
+    /// The signature trailer of a signed MAVLink 2 frame.
+    pub signature: Option<Trailer>,
 }
 
 /// Why a frame could not be decoded.
@@ -69,8 +73,17 @@ impl std::fmt::Display for FrameError {
     }
 }
 
-/// Decodes every frame in one datagram.
+/// Decodes every frame in one datagram, without a key (signed frames come out with
+/// [`Trailer::authentic`] false).
 pub fn decode_datagram(bytes: &[u8]) -> Vec<Result<Frame, FrameError>> {
+    decode_datagram_with(bytes, None)
+}
+
+/// Decodes every frame in one datagram, checking signatures against `key`.
+pub fn decode_datagram_with(
+    bytes: &[u8],
+    key: Option<&SigningKey>,
+) -> Vec<Result<Frame, FrameError>> {
     let mut out = Vec::new();
     let mut at = 0;
     while at < bytes.len() {
@@ -90,7 +103,7 @@ pub fn decode_datagram(bytes: &[u8]) -> Vec<Result<Frame, FrameError>> {
                 at += skipped;
             }
         }
-        let (result, consumed) = decode_frame(&bytes[at..]);
+        let (result, consumed) = decode_frame(&bytes[at..], key);
         out.push(result);
         match consumed {
             Some(n) => at += n,
@@ -135,7 +148,10 @@ fn frame_len(bytes: &[u8]) -> Option<usize> {
 }
 
 /// Decodes one frame at the start of `bytes`; returns its length when it is known.
-fn decode_frame(bytes: &[u8]) -> (Result<Frame, FrameError>, Option<usize>) {
+fn decode_frame(
+    bytes: &[u8],
+    key: Option<&SigningKey>,
+) -> (Result<Frame, FrameError>, Option<usize>) {
     let v2 = bytes[0] == STX_V2;
     let header_len = if v2 { 10 } else { 6 };
     let Some(total) = frame_len(bytes) else {
@@ -169,6 +185,7 @@ fn decode_frame(bytes: &[u8]) -> (Result<Frame, FrameError>, Option<usize>) {
         MavlinkVersion::V1
     };
     let payload = &bytes[header_len..crc_at];
+    let signature = (v2 && bytes[2] & INCOMPAT_SIGNED != 0).then(|| trailer(&bytes[..total], key));
     let result = MavMessage::parse(version, msgid, payload)
         .map(|msg| Frame {
             header: MavHeader {
@@ -178,9 +195,29 @@ fn decode_frame(bytes: &[u8]) -> (Result<Frame, FrameError>, Option<usize>) {
             },
             msg,
             version,
+            signature,
         })
         .map_err(|_| FrameError::BadPayload { msgid });
     (result, Some(total))
+}
+
+/// The trailer of the complete signed MAVLink 2 frame `frame`, checked against `key`.
+fn trailer(frame: &[u8], key: Option<&SigningKey>) -> Trailer {
+    let sig = &frame[frame.len() - SIGNATURE_LEN..];
+    let mut timestamp = [0u8; 8];
+    timestamp[..6].copy_from_slice(&sig[1..7]);
+    let authentic = key.is_some_and(|key| {
+        let mut raw = MAVLinkV2MessageRaw::new();
+        raw.as_mut_slice()[..frame.len()].copy_from_slice(frame);
+        let mut value = [0u8; 6];
+        raw.calculate_signature(key.bytes(), &mut value);
+        value == sig[7..]
+    });
+    Trailer {
+        link_id: sig[0],
+        timestamp: u64::from_le_bytes(timestamp),
+        authentic,
+    }
 }
 
 /// Encodes messages from one system and component as MAVLink 2, counting sequence numbers.
@@ -203,15 +240,53 @@ impl Encoder {
 
     /// One unsigned MAVLink 2 frame.
     pub fn encode(&mut self, msg: &MavMessage) -> Vec<u8> {
+        let header = self.next_header();
+        let mut raw = MAVLinkV2MessageRaw::new();
+        raw.serialize_message(header, msg);
+        raw.raw_bytes().to_vec()
+    }
+
+    /// One MAVLink 2 frame signed with `signing`'s key and next timestamp, from link
+    /// `link_id`.
+    pub fn encode_signed(
+        &mut self,
+        msg: &MavMessage,
+        signing: &mut Signing,
+        link_id: u8,
+    ) -> Vec<u8> {
+        let header = self.next_header();
+        let mut raw = MAVLinkV2MessageRaw::new();
+        raw.serialize_message_for_signing(header, msg);
+        *raw.signature_link_id_mut() = link_id;
+        let timestamp = signing.take_timestamp().to_le_bytes();
+        raw.signature_timestamp_bytes_mut()
+            .copy_from_slice(&timestamp[..6]);
+        let mut value = [0u8; 6];
+        raw.calculate_signature(signing.key().bytes(), &mut value);
+        raw.signature_value_mut().copy_from_slice(&value);
+        raw.raw_bytes().to_vec()
+    }
+
+    /// One frame, signed when `signing` is given.
+    pub fn encode_maybe_signed(
+        &mut self,
+        msg: &MavMessage,
+        signing: Option<(&mut Signing, u8)>,
+    ) -> Vec<u8> {
+        match signing {
+            Some((signing, link_id)) => self.encode_signed(msg, signing, link_id),
+            None => self.encode(msg),
+        }
+    }
+
+    fn next_header(&mut self) -> MavHeader {
         let header = MavHeader {
             system_id: u32::from(self.system_id),
             component_id: self.component_id,
             sequence: self.sequence,
         };
         self.sequence = self.sequence.wrapping_add(1);
-        let mut raw = MAVLinkV2MessageRaw::new();
-        raw.serialize_message(header, msg);
-        raw.raw_bytes().to_vec()
+        header
     }
 }
 

@@ -2,7 +2,8 @@
 //!
 //! What the coordinator (`ringswarm`) and the emulator (`ringswarm-sitl`) share on the
 //! wire, in one crate that depends on neither: MAVLink framing ([`codec`]: datagrams ↔
-//! frames with the `mavlink` crate as the payload codec), the time type both machines
+//! frames with the `mavlink` crate as the payload codec), MAVLink 2 signing ([`signing`]:
+//! keys, signatures, replay protection), the time type both machines
 //! are driven with ([`time`]), PX4's geodetic projection ([`geo`]) and PX4's mode and port
 //! numbers ([`px4`]). The coordinator takes its codec from here, not from the
 //! emulator it is tested against.
@@ -12,4 +13,5 @@
 pub mod codec;
 pub mod geo;
 pub mod px4;
+pub mod signing;
 pub mod time;

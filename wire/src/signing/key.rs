@@ -1,5 +1,4 @@
-//! MAVLink 2 signing keys: `ringswarm keygen FILE` writes one, and a key file is read back
-//! here for the links that sign.
+//! MAVLink 2 signing keys and key files.
 //!
 //! A key file holds the 32-byte secret as 64 hexadecimal characters and a newline. It is
 //! created with mode 0600 (owner read/write only) and never overwritten: losing a key
@@ -34,6 +33,16 @@ impl SigningKey {
             .try_fill_bytes(&mut key)
             .map_err(|e| format!("the system's random source failed: {e}"))?;
         Ok(Self(key))
+    }
+
+    /// A key from its 32 bytes.
+    pub fn from_bytes(bytes: [u8; 32]) -> Self {
+        Self(bytes)
+    }
+
+    /// Whether every byte is zero (PX4's "no key").
+    pub fn is_blank(&self) -> bool {
+        self.0 == [0; 32]
     }
 
     /// The key's bytes.
