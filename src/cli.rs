@@ -119,6 +119,17 @@ pub struct SitlArgs {
     /// Seed of the fault injection.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Give every vehicle this MAVLink 2 signing key (a `ringswarm keygen` file): unsigned
+    /// frames are then refused but for HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE and
+    /// COLLISION, and everything sent is signed. A coordinator file's
+    /// `[security] signing_key_file` does the same.
+    #[arg(long)]
+    pub signing_key: Option<std::path::PathBuf>,
+    /// Where each vehicle keeps what survives a restart, as PX4 keeps it under its
+    /// instance directory: `vehicle-<id>/mavlink/mavlink-signing-key.bin` (a key set with
+    /// SETUP_SIGNING or --signing-key, and its clock).
+    #[arg(long, default_value = "sitl-state")]
+    pub state_dir: std::path::PathBuf,
 }
 
 /// Arguments of `ringswarm analyze`.

@@ -282,13 +282,14 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
                     faults: [faults, faults],
                     seed: e.seed.wrapping_add(i as u64),
                     control,
+                    key_file: None,
                 },
                 clock,
                 status_tx,
                 stop_rx.clone(),
             )));
         }
-        let summary = crate::fly_cmd::fly(Swarm::new(setup), endpoints, &out).await;
+        let summary = crate::fly_cmd::fly(Swarm::new(setup), endpoints, &out, None).await;
         stop_tx.send_replace(true);
         drop(controls);
         for task in tasks {

@@ -19,6 +19,7 @@ use crate::driver::Observer;
 use crate::driver::udp::{DriverCommand, run_swarm};
 use crate::record::Recorder;
 use crate::record::metrics::Summary;
+use crate::security::FlightSigning;
 use crate::swarm::{Swarm, SwarmPhase};
 use crate::vehicle::Phase;
 
@@ -47,6 +48,19 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         setup.duration = Some(Duration::from_secs_f64(d));
     }
     crate::config::warn_if_too_fast(&setup, config.gains.time_scale);
+    let signing = match &config.security.signing_key_file {
+        Some(path) => {
+            let signing = FlightSigning::open(path).map_err(anyhow::Error::msg)?;
+            signing.apply(&mut setup.links);
+            eprintln!(
+                "signing every frame with {} (clock kept in {})",
+                path.display(),
+                signing.store.path().display()
+            );
+            Some(signing)
+        }
+        None => None,
+    };
     let endpoints = config.all_udp_endpoints().map_err(anyhow::Error::msg)?;
     let out = args
         .out
@@ -56,7 +70,7 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("start the tokio runtime")?;
-    let summary = runtime.block_on(fly(Swarm::new(setup), endpoints, &out))?;
+    let summary = runtime.block_on(fly(Swarm::new(setup), endpoints, &out, signing))?;
     runtime.shutdown_background();
     println!("{}", serde_json::to_string_pretty(&summary)?);
     println!("run directory: {}", out.display());
@@ -86,6 +100,7 @@ pub(crate) async fn fly(
     swarm: Swarm,
     endpoints: Vec<(std::net::SocketAddr, std::net::SocketAddr)>,
     out: &Path,
+    signing: Option<FlightSigning>,
 ) -> anyhow::Result<Summary> {
     let mut sockets = Vec::new();
     let mut peers = Vec::new();
@@ -130,9 +145,11 @@ pub(crate) async fn fly(
         recorder,
         next_status: SimTime::ZERO,
         last: SimTime::ZERO,
+        signing,
     };
     let wall = Instant::now();
-    let (swarm, observer) = run_swarm(swarm, sockets, peers, command_rx, observer).await?;
+    let (swarm, mut observer) = run_swarm(swarm, sockets, peers, command_rx, observer).await?;
+    observer.keep_signing_clock(&swarm);
     let now = observer.last;
     let (summary, trace) = observer
         .recorder
@@ -149,6 +166,25 @@ struct FlyObserver {
     recorder: Recorder,
     next_status: SimTime,
     last: SimTime,
+    signing: Option<FlightSigning>,
+}
+
+impl FlyObserver {
+    /// Keeps the stored signing clock ahead of the newest stamp any link used.
+    fn keep_signing_clock(&mut self, swarm: &Swarm) {
+        let Some(signing) = self.signing.as_mut() else {
+            return;
+        };
+        let newest = swarm
+            .links()
+            .iter()
+            .filter_map(crate::vehicle::VehicleLink::signing_timestamp)
+            .max()
+            .unwrap_or(signing.start);
+        if let Err(e) = signing.store.keep_ahead(newest) {
+            eprintln!("signing clock not stored: {e}");
+        }
+    }
 }
 
 impl Observer for FlyObserver {
@@ -161,6 +197,7 @@ impl Observer for FlyObserver {
         self.recorder.sample(swarm, now);
         if now >= self.next_status {
             self.next_status = now + Duration::from_secs(1);
+            self.keep_signing_clock(swarm);
             eprintln!("{}", status_line(swarm, &self.recorder, now));
         }
     }

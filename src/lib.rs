@@ -45,6 +45,7 @@ pub mod link;
 pub mod plot;
 pub mod record;
 pub mod report;
+pub mod security;
 pub mod sitl_cmd;
 pub mod swarm;
 pub mod vehicle;

@@ -3,17 +3,20 @@
 //! the sockets, stdin and the terminal.
 
 use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::{Context, bail};
 use nalgebra::Vector3;
 use ringswarm_sitl::autopilot::{Vehicle, VehicleConfig, VehicleStatus};
 use ringswarm_sitl::config_file::SitlConfig;
+use ringswarm_sitl::keystore::{self, StoredKey};
 use ringswarm_sitl::profile::Profile;
 use ringswarm_sitl::udp::{
     LinkFaults, SimClock, VehicleControl, VehicleTask, bind, px4_ports, run_vehicle,
 };
 use ringswarm_sitl::world::World;
+use ringswarm_wire::signing::{SigningKey, timestamp_now};
 use tokio::io::AsyncBufReadExt;
 use tokio::sync::{mpsc, watch};
 
@@ -25,12 +28,14 @@ use crate::cli::SitlArgs;
 /// Bad arguments or configuration (vehicle count, speed, profile, faults), a port
 /// already in use.
 pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
-    let setup = match &args.config {
+    let mut key_file = args.signing_key.clone();
+    let mut setup = match &args.config {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("read {}", path.display()))?;
-            let config =
+            let (config, security_key) =
                 sitl_config(&text).map_err(|e| anyhow::anyhow!("{}:\n{e}", path.display()))?;
+            key_file = key_file.or(security_key);
             if let Some(n) = args
                 .vehicles
                 .filter(|n| usize::from(*n) != config.vehicles.len())
@@ -48,6 +53,14 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
     if !(args.speed.is_finite() && args.speed > 0.0 && args.speed <= 100.0) {
         bail!("--speed must be a number in (0, 100], got {}", args.speed);
     }
+    let key = key_file
+        .as_deref()
+        .map(SigningKey::read)
+        .transpose()
+        .map_err(anyhow::Error::msg)?;
+    for cfg in &mut setup.vehicles {
+        cfg.signing = boot_key(&args.state_dir, cfg.system_id, key.as_ref())?;
+    }
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -59,24 +72,48 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
     result
 }
 
+/// The key vehicle `system_id` boots with: `key` when given (stored, with a clock that
+/// starts at the later of the wall clock and the stored one), else whatever its store
+/// holds from an earlier SETUP_SIGNING or `--signing-key`.
+fn boot_key(
+    state_dir: &Path,
+    system_id: u8,
+    key: Option<&SigningKey>,
+) -> anyhow::Result<Option<StoredKey>> {
+    let path = keystore::key_path(state_dir, system_id);
+    let stored = keystore::load(&path).map_err(anyhow::Error::msg)?;
+    let Some(key) = key else {
+        return Ok(stored);
+    };
+    let stored_clock = stored.filter(|s| &s.key == key).map_or(0, |s| s.timestamp);
+    let fresh = StoredKey {
+        key: key.clone(),
+        timestamp: stored_clock.max(timestamp_now()),
+    };
+    keystore::save(&path, Some(&fresh)).map_err(anyhow::Error::msg)?;
+    Ok(Some(fresh))
+}
+
 /// An emulator file, or a coordinator file (it has `[gains]`): then the emulator flies its
 /// `[[vehicle]]` start states in its `[emulator]` world, without faults, so that
-/// `ringswarm sitl --config F` and `ringswarm fly --config F` go together.
-fn sitl_config(text: &str) -> Result<SitlConfig, String> {
+/// `ringswarm sitl --config F` and `ringswarm fly --config F` go together; a coordinator
+/// file's `[security] signing_key_file` comes back with it.
+fn sitl_config(text: &str) -> Result<(SitlConfig, Option<PathBuf>), String> {
     let is_coordinator = text
         .parse::<toml::Table>()
         .is_ok_and(|t| t.contains_key("gains"));
     if !is_coordinator {
-        return SitlConfig::from_toml(text);
+        return SitlConfig::from_toml(text).map(|c| (c, None));
     }
     let config = crate::config::Config::from_toml(text)?;
     let (world, vehicles) = config.emulator()?;
-    Ok(SitlConfig {
+    let sitl = SitlConfig {
         world,
         faults: LinkFaults::default(),
         fault_seed: 1,
         vehicles,
-    })
+    };
+    Ok((sitl, config.security.signing_key_file))
 }
 
 /// The configuration the flags describe: N vehicles of one profile on the ground, 5 m
@@ -143,6 +180,13 @@ async fn serve(args: &SitlArgs, setup: SitlConfig) -> anyhow::Result<()> {
     for (i, cfg) in setup.vehicles.into_iter().enumerate() {
         let system_id = cfg.system_id;
         let profile = cfg.profile.name;
+        let key_file = keystore::key_path(&args.state_dir, system_id);
+        if cfg.signing.is_some() {
+            println!(
+                "  vehicle {system_id}: MAVLink 2 signing on (key stored in {}): unsigned frames refused but HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION",
+                key_file.display()
+            );
+        }
         let vehicle = Vehicle::new(cfg, setup.world).map_err(anyhow::Error::msg)?;
         let plan = px4_ports(i as u16, args.host);
         let sockets = bind(&plan).await?;
@@ -165,6 +209,7 @@ async fn serve(args: &SitlArgs, setup: SitlConfig) -> anyhow::Result<()> {
             faults: [setup.faults, setup.faults],
             seed: setup.fault_seed.wrapping_add(i as u64),
             control,
+            key_file: Some(key_file),
         };
         tasks.push(tokio::spawn(run_vehicle(
             task,

@@ -45,6 +45,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
             faults: [LinkFaults::default(); 2],
             seed: i as u64,
             control,
+            key_file: None,
         };
         vehicles.push(tokio::spawn(run_vehicle(
             task,

@@ -288,6 +288,7 @@ impl SitlConfig {
                     capacity_mah: v.battery_capacity_mah,
                     sag: v.battery_sag,
                 },
+                signing: None,
             };
             if let Err(e) = cfg.validate() {
                 problems.push(format!("vehicle[{i}]: {e}"));

@@ -24,6 +24,7 @@
 pub mod autopilot;
 pub mod config_file;
 pub mod control;
+pub mod keystore;
 pub mod params;
 pub mod physics;
 pub mod position_control;

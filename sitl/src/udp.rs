@@ -4,7 +4,9 @@
 //! `14540+i`, and binds its GCS link on `18570+i` and sends to `14550`. Which peer a link
 //! answers follows PX4's `mavlink_receiver.cpp` ([`Partner`]): the default address until
 //! the first datagram arrives, then that datagram's sender for good (until a restart);
-//! datagrams from anyone are still read. Faults are injected per link, in both
+//! datagrams from anyone are still read. Unlike PX4, which latches before parsing, only
+//! a datagram with a frame the vehicle admitted (decoded, and signed when a key is set)
+//! latches: garbage or a forged frame never chooses whom a link answers. Faults are injected per link, in both
 //! directions, from a seeded RNG: loss, latency with jitter, duplication.
 //!
 //! Time: the task keeps a simulated clock running at `speed` times real time and calls the
@@ -22,7 +24,8 @@ use tokio::net::UdpSocket;
 use tokio::sync::watch;
 use tokio::time::{Instant, MissedTickBehavior};
 
-use crate::autopilot::{LinkId, Vehicle, VehicleStatus};
+use crate::autopilot::{LinkId, Vehicle, VehicleEvent, VehicleStatus};
+use crate::keystore::{self, StoredKey};
 use crate::time::SimTime;
 
 /// The four addresses of one vehicle.
@@ -141,7 +144,8 @@ impl SimClock {
 struct Delayed {
     due: SimTime,
     link: usize,
-    inbound: bool,
+    /// The sender of an inbound datagram; `None` for an outbound one.
+    from: Option<SocketAddr>,
     bytes: Vec<u8>,
 }
 
@@ -168,6 +172,9 @@ pub struct VehicleTask {
     pub seed: u64,
     /// Kill and restart requests.
     pub control: tokio::sync::mpsc::Receiver<VehicleControl>,
+    /// Where the vehicle's signing key is stored (see [`crate::keystore`]); `None` keeps
+    /// a key set over the wire only until the process ends.
+    pub key_file: Option<std::path::PathBuf>,
 }
 
 /// Runs one vehicle until `shutdown` turns true. Publishes its status about ten times a
@@ -188,6 +195,7 @@ pub async fn run_vehicle(
         faults,
         seed,
         mut control,
+        key_file,
     } = task;
     let mut alive = true;
     let mut partners = default_peers.map(Partner::new);
@@ -208,6 +216,7 @@ pub async fn run_vehicle(
                 match request {
                     VehicleControl::Kill => {
                         alive = false;
+                        store_key(key_file.as_deref(), &vehicle);
                         delayed.clear();
                         while vehicle.poll_transmit().is_some() {}
                         tracing::info!(sysid, "vehicle killed");
@@ -223,26 +232,30 @@ pub async fn run_vehicle(
             received = sockets[0].recv_from(buf0) => {
                 let (n, from) = received?;
                 if alive {
-                    partners[0].on_datagram(from);
-                    inbound(&mut vehicle, &clock, 0, &buf0[..n], &faults[0], &mut rng, &mut delayed);
+                    let datagram = Datagram { link: 0, from, bytes: &buf0[..n] };
+                    inbound(&mut vehicle, &clock, datagram, &faults[0], &mut rng, &mut delayed, &mut partners);
                 }
             }
             received = sockets[1].recv_from(buf1) => {
                 let (n, from) = received?;
                 if alive {
-                    partners[1].on_datagram(from);
-                    inbound(&mut vehicle, &clock, 1, &buf1[..n], &faults[1], &mut rng, &mut delayed);
+                    let datagram = Datagram { link: 1, from, bytes: &buf1[..n] };
+                    inbound(&mut vehicle, &clock, datagram, &faults[1], &mut rng, &mut delayed, &mut partners);
                 }
             }
             _ = tick.tick(), if alive => {
                 let now = clock.now();
-                let peers = partners.map(|p| p.addr());
                 vehicle.handle_timeout(now);
-                deliver_delayed(&mut vehicle, now, &mut delayed, &sockets, &peers).await;
+                deliver_delayed(&mut vehicle, now, &mut delayed, &sockets, &mut partners).await;
                 if now - last_status >= Duration::from_millis(100) {
                     last_status = now;
                     status.send_replace(vehicle.status());
                 }
+            }
+        }
+        while let Some(event) = vehicle.poll_event() {
+            if let VehicleEvent::SigningChanged(stored) = event {
+                save_key(key_file.as_deref(), sysid, stored.as_ref());
             }
         }
         let now = clock.now();
@@ -255,14 +268,33 @@ pub async fn run_vehicle(
                     delayed.push_back(Delayed {
                         due: now + copy,
                         link,
-                        inbound: false,
+                        from: None,
                         bytes: tx.bytes.clone(),
                     });
                 }
             }
         }
     }
+    if alive {
+        store_key(key_file.as_deref(), &vehicle);
+    }
     Ok(())
+}
+
+/// Stores the vehicle's key with its clock as it is now, so that a restart goes on with
+/// newer timestamps (PX4 stores the clock only when a key is set).
+fn store_key(key_file: Option<&std::path::Path>, vehicle: &Vehicle) {
+    if let Some(stored) = vehicle.signing_key() {
+        save_key(key_file, vehicle.system_id(), Some(&stored));
+    }
+}
+
+fn save_key(key_file: Option<&std::path::Path>, sysid: u8, stored: Option<&StoredKey>) {
+    let Some(path) = key_file else { return };
+    match keystore::save(path, stored) {
+        Ok(()) => tracing::info!(sysid, path = %path.display(), "signing key stored"),
+        Err(err) => tracing::error!(sysid, %err, "signing key not stored"),
+    }
 }
 
 /// The delays of the copies of one datagram that survive the faults (empty: lost).
@@ -290,24 +322,36 @@ fn fault_copies(faults: &LinkFaults, rng: &mut ChaCha8Rng) -> Vec<Duration> {
         .collect()
 }
 
+/// A datagram received on link `link` from `from`.
+struct Datagram<'a> {
+    link: usize,
+    from: SocketAddr,
+    bytes: &'a [u8],
+}
+
+/// Hands a datagram to the vehicle (or holds its copies back, under a latency fault);
+/// one the vehicle admits latches the link's partner.
 fn inbound(
     vehicle: &mut Vehicle,
     clock: &SimClock,
-    link: usize,
-    bytes: &[u8],
+    datagram: Datagram<'_>,
     faults: &LinkFaults,
     rng: &mut ChaCha8Rng,
     delayed: &mut VecDeque<Delayed>,
+    partners: &mut [Partner; 2],
 ) {
     let now = clock.now();
+    let Datagram { link, from, bytes } = datagram;
     for delay in fault_copies(faults, rng) {
         if delay.is_zero() {
-            vehicle.handle_datagram(now, link_id(link), bytes);
+            if vehicle.handle_datagram(now, link_id(link), bytes) {
+                partners[link].on_datagram(from);
+            }
         } else {
             delayed.push_back(Delayed {
                 due: now + delay,
                 link,
-                inbound: true,
+                from: Some(from),
                 bytes: bytes.to_vec(),
             });
         }
@@ -319,7 +363,7 @@ async fn deliver_delayed(
     now: SimTime,
     delayed: &mut VecDeque<Delayed>,
     sockets: &[UdpSocket; 2],
-    peers: &[SocketAddr; 2],
+    partners: &mut [Partner; 2],
 ) {
     let mut i = 0;
     while i < delayed.len() {
@@ -328,16 +372,16 @@ async fn deliver_delayed(
             continue;
         }
         let Some(d) = delayed.remove(i) else { break };
-        if d.inbound {
-            vehicle.handle_datagram(now, link_id(d.link), &d.bytes);
-        } else {
-            send(
-                &sockets[d.link],
-                &d.bytes,
-                peers[d.link],
-                vehicle.system_id(),
-            )
-            .await;
+        match d.from {
+            Some(from) => {
+                if vehicle.handle_datagram(now, link_id(d.link), &d.bytes) {
+                    partners[d.link].on_datagram(from);
+                }
+            }
+            None => {
+                let to = partners[d.link].addr();
+                send(&sockets[d.link], &d.bytes, to, vehicle.system_id()).await;
+            }
         }
     }
 }

@@ -49,6 +49,19 @@ pub struct Config {
     pub vehicle: Vec<VehicleSection>,
     /// A final velocity to reach with the planner (optional).
     pub target: Option<TargetSection>,
+    /// MAVLink 2 signing.
+    #[serde(default)]
+    pub security: SecuritySection,
+}
+
+/// `[security]`: MAVLink 2 signing of every link.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SecuritySection {
+    /// The key file (`ringswarm keygen FILE` writes one), relative to the current
+    /// directory. Every frame sent is signed, and only authentic, fresh signed frames
+    /// from the vehicles are taken; the signing clock is kept in `<file>.timestamp`.
+    pub signing_key_file: Option<std::path::PathBuf>,
 }
 
 /// `[target]`: the planner chooses `k` (and re-targets one agent if needed) so that the

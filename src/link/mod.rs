@@ -9,4 +9,6 @@ pub use convert::{
     AUTOPILOT_PX4, Inbound, autopilot_name, gcs_heartbeat, inbound, set_attitude_target,
     set_position_target_acceleration,
 };
-pub use ringswarm_wire::codec::{Encoder, Frame, FrameError, decode_datagram, raw_frames};
+pub use ringswarm_wire::codec::{
+    Encoder, Frame, FrameError, decode_datagram, decode_datagram_with, raw_frames,
+};

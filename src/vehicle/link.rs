@@ -6,12 +6,13 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use mavlink::dialects::common::{MavCmd, MavMessage};
+use ringswarm_wire::signing::Signing;
 use ringswarm_wire::time::SimTime;
 
 use super::telemetry::{OriginVerdict, PositionVerdict, TelemetryGate};
 use super::{LinkConfig, LinkEvent, Phase, Setpoint, VehicleState};
 use crate::link::{
-    AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, decode_datagram, gcs_heartbeat, inbound,
+    AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, decode_datagram_with, gcs_heartbeat, inbound,
     set_attitude_target, set_position_target_acceleration,
 };
 
@@ -39,6 +40,9 @@ pub struct VehicleLink {
     next_heartbeat: SimTime,
     pending: Option<Pending>,
     encoder: Encoder,
+    signing: Option<Signing>,
+    refused_frames: u64,
+    signing_warned: bool,
     outbox: VecDeque<Vec<u8>>,
     events: VecDeque<LinkEvent>,
     ignored_frames: u64,
@@ -64,7 +68,14 @@ impl VehicleLink {
     /// takes over (normally level at hover throttle, or zero acceleration).
     pub fn new(cfg: LinkConfig, idle: impl Into<Setpoint>) -> Self {
         let encoder = Encoder::new(cfg.own_ids.0, cfg.own_ids.1);
+        let signing = cfg
+            .signing
+            .as_ref()
+            .map(|s| Signing::new(s.key.clone(), s.timestamp_at_zero));
         Self {
+            signing,
+            refused_frames: 0,
+            signing_warned: false,
             cfg,
             phase: Phase::Discovering,
             state: VehicleState::default(),
@@ -90,6 +101,34 @@ impl VehicleLink {
         }
     }
 
+    /// Frames from the vehicle refused by the signing rules.
+    pub fn refused_frames(&self) -> u64 {
+        self.refused_frames
+    }
+
+    /// The timestamp the next signed frame gets, if the link signs (what a restart must
+    /// stay above).
+    pub fn signing_timestamp(&self) -> Option<u64> {
+        self.signing.as_ref().map(Signing::timestamp)
+    }
+
+    /// Moves the signing clock to `now`.
+    fn clock(&mut self, now: SimTime) {
+        if let (Some(signing), Some(cfg)) = (self.signing.as_mut(), self.cfg.signing.as_ref()) {
+            signing.advance_to(cfg.timestamp_at_zero + now.as_micros() / 10);
+        }
+    }
+
+    /// Encodes `msg` (signed when the link signs) and queues it.
+    fn queue(&mut self, msg: &MavMessage) {
+        let signing = match (self.signing.as_mut(), self.cfg.signing.as_ref()) {
+            (Some(signing), Some(cfg)) => Some((signing, cfg.link_id)),
+            _ => None,
+        };
+        let bytes = self.encoder.encode_maybe_signed(msg, signing);
+        self.outbox.push_back(bytes);
+    }
+
     /// Position reports and origins refused by the telemetry gate.
     pub fn refused_reports(&self) -> u64 {
         self.refused_reports
@@ -108,6 +147,7 @@ impl VehicleLink {
     /// Hands a flying vehicle to its own Hold mode (AUTO.LOITER) for good: the swarm could
     /// not compute its command. Nothing more is streamed to it; it can still be landed.
     pub fn hold_on_own(&mut self, now: SimTime, reason: &str) {
+        self.clock(now);
         if matches!(
             self.phase,
             Phase::Flying | Phase::Streaming(_) | Phase::Arming | Phase::Offboarding
@@ -140,6 +180,7 @@ impl VehicleLink {
     /// the control ticks; the link's own timer only resends it if no new setpoint comes
     /// within one and a half periods (it never doubles the rate when the two timers drift).
     pub fn set_setpoint(&mut self, now: SimTime, setpoint: impl Into<Setpoint>) {
+        self.clock(now);
         self.setpoint = setpoint.into();
         if self.streams() {
             self.send_setpoint(now);
@@ -153,7 +194,7 @@ impl VehicleLink {
             Setpoint::Attitude(sp) => set_attitude_target(sp, id, boot_ms),
             Setpoint::Acceleration(a) => set_position_target_acceleration(a, id, boot_ms),
         };
-        self.outbox.push_back(self.encoder.encode(&msg));
+        self.queue(&msg);
     }
 
     /// The next datagram to send to the vehicle.
@@ -213,6 +254,7 @@ impl VehicleLink {
     /// Tells the vehicle to land where it is and to disarm on the ground. Idempotent. A
     /// vehicle never heard from, or heard but never armed, is done at once.
     pub fn land(&mut self, now: SimTime) {
+        self.clock(now);
         if self.land_requested {
             return;
         }
@@ -236,11 +278,24 @@ impl VehicleLink {
 
     /// Handles one datagram from the vehicle's address.
     pub fn handle_datagram(&mut self, now: SimTime, bytes: &[u8]) {
-        for frame in decode_datagram(bytes) {
+        self.clock(now);
+        let key = self.signing.as_ref().map(|s| s.key().clone());
+        for frame in decode_datagram_with(bytes, key.as_ref()) {
             let Ok(frame) = frame else {
                 self.ignored_frames += 1;
                 continue;
             };
+            if let Some(signing) = self.signing.as_mut()
+                && let Err(why) = signing.accept(&frame, &[])
+            {
+                self.refused_frames += 1;
+                if !self.signing_warned {
+                    self.signing_warned = true;
+                    self.events
+                        .push_back(LinkEvent::SigningRefused(why.to_string()));
+                }
+                continue;
+            }
             let system_id = frame.header.system_id as u8;
             if system_id != self.cfg.system_id {
                 self.ignored_frames += 1;
@@ -393,8 +448,9 @@ impl VehicleLink {
     /// Runs the timers due at `now`: the setpoint stream, the pre-stream, command
     /// deadlines and link loss.
     pub fn handle_timeout(&mut self, now: SimTime) {
+        self.clock(now);
         if now >= self.next_heartbeat {
-            self.outbox.push_back(self.encoder.encode(&gcs_heartbeat()));
+            self.queue(&gcs_heartbeat());
             let next = self.next_heartbeat + self.cfg.heartbeat_interval;
             self.next_heartbeat = if next <= now {
                 now + self.cfg.heartbeat_interval

@@ -105,6 +105,21 @@ pub struct LinkConfig {
     pub state_timeout: Duration,
     /// Re-arm and take back a vehicle that left OFFBOARD by itself (default false).
     pub retake_offboard: bool,
+    /// MAVLink 2 signing of this link (default none: unsigned frames both ways).
+    pub signing: Option<LinkSigning>,
+}
+
+/// How one link signs: every frame it sends is signed, and only authentic, fresh signed
+/// frames from the vehicle are taken.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkSigning {
+    /// The key.
+    pub key: ringswarm_wire::signing::SigningKey,
+    /// Our link id in the signatures.
+    pub link_id: u8,
+    /// The signing timestamp at time zero of the link's clock (10 µs units since 2015):
+    /// frames are stamped with this plus the time since, and never the same stamp twice.
+    pub timestamp_at_zero: u64,
 }
 
 impl LinkConfig {
@@ -125,6 +140,7 @@ impl LinkConfig {
             discovery_warning: Duration::from_secs(10),
             state_timeout: Duration::from_millis(300),
             retake_offboard: false,
+            signing: None,
         }
     }
 }
@@ -246,6 +262,9 @@ pub enum LinkEvent {
     },
     /// Handed to its own Hold mode, and why.
     HandedToHold(String),
+    /// A frame from the vehicle failed the signing rules (reported once per link; the
+    /// count is in [`crate::vehicle::VehicleLink::refused_frames`]).
+    SigningRefused(String),
 }
 
 impl LinkEvent {
@@ -309,6 +328,10 @@ impl fmt::Display for LinkEvent {
                 "position jump of {jump_m:.2} m taken after it was followed consistently"
             ),
             Self::HandedToHold(why) => write!(f, "handed to its own Hold: {why}"),
+            Self::SigningRefused(why) => write!(
+                f,
+                "frames refused by signing ({why}); is the vehicle provisioned with this key?"
+            ),
         }
     }
 }

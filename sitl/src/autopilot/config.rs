@@ -62,6 +62,9 @@ pub struct VehicleConfig {
     pub estimator: EstimatorConfig,
     /// The battery.
     pub battery: BatteryConfig,
+    /// The MAVLink 2 signing key it boots with (from its key store or the command line);
+    /// `None` accepts everything unsigned, as PX4 without a key does.
+    pub signing: Option<crate::keystore::StoredKey>,
 }
 
 /// The battery: its capacity and how much thrust its voltage sag costs.
@@ -92,6 +95,7 @@ impl VehicleConfig {
             seed: u64::from(system_id),
             estimator: EstimatorConfig::default(),
             battery: BatteryConfig::default(),
+            signing: None,
         }
     }
 

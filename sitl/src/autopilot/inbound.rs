@@ -16,17 +16,29 @@ use mavlink::dialects::common::{
 use super::commands::Command;
 use super::offboard::{self, AttitudeTarget, OffboardTarget, PositionTarget, Refusal};
 use super::{LinkId, Vehicle};
-use crate::codec::decode_datagram;
+use crate::codec::decode_datagram_with;
 use crate::time::SimTime;
 
 impl Vehicle {
-    /// Handles one datagram received on `link` at `now`. Bad frames are counted and
-    /// skipped; messages for other systems are counted and ignored.
-    pub fn handle_datagram(&mut self, now: SimTime, link: LinkId, bytes: &[u8]) {
-        for frame in decode_datagram(bytes) {
+    /// Handles one datagram received on `link` at `now`; returns whether any frame in it
+    /// was admitted (a driver lets only such a datagram choose whom the link answers).
+    /// Bad frames and frames the signing rules refuse are counted and skipped; messages
+    /// for other systems are counted and ignored.
+    pub fn handle_datagram(&mut self, now: SimTime, link: LinkId, bytes: &[u8]) -> bool {
+        let key = self.signing.as_ref().map(|s| s.key().clone());
+        let mut admitted = false;
+        for frame in decode_datagram_with(bytes, key.as_ref()) {
             match frame {
                 Ok(frame) => {
+                    if !self.admit(&frame) {
+                        continue;
+                    }
+                    admitted = true;
                     let sender = (frame.header.system_id as u8, frame.header.component_id);
+                    if let MavMessage::SETUP_SIGNING(m) = &frame.msg {
+                        self.on_setup_signing(m, frame.signature.is_some());
+                        continue;
+                    }
                     self.handle_message(now, link, sender, frame.msg);
                 }
                 Err(err) => {
@@ -35,6 +47,7 @@ impl Vehicle {
                 }
             }
         }
+        admitted
     }
 
     /// PX4's rule for commands and offboard setpoints (`evaluate_target_ok`, the setpoint

@@ -36,6 +36,7 @@ mod mission_run;
 mod mission_transfer;
 mod mode;
 pub mod offboard;
+mod signing;
 mod steer;
 mod telemetry;
 mod tuning;
@@ -101,6 +102,9 @@ pub enum VehicleEvent {
         /// The last setpoint.
         last_setpoint: SimTime,
     },
+    /// SETUP_SIGNING set a key (or removed it): the driver stores it where the vehicle
+    /// finds it after a restart.
+    SigningChanged(Option<crate::keystore::StoredKey>),
 }
 
 /// Counters of what was refused or ignored.
@@ -117,6 +121,10 @@ pub struct Counters {
     pub unsupported_commands: u64,
     /// Offboard setpoints accepted.
     pub setpoints: u64,
+    /// Unsigned frames refused while a signing key is set.
+    pub unsigned_refused: u64,
+    /// Signed frames refused: a wrong signature, a replay, a stale new stream.
+    pub signature_refused: u64,
 }
 
 /// A snapshot for status lines and tests.
@@ -205,6 +213,8 @@ pub struct Vehicle {
     /// The origin shift last reported in GPS_GLOBAL_ORIGIN (m, NED).
     origin_shift_sent_ned_m: Vector3<f64>,
     links: [Link; 2],
+    /// MAVLink 2 signing, once a key is set.
+    signing: Option<ringswarm_wire::signing::Signing>,
     outbox: VecDeque<Transmit>,
     events: VecDeque<VehicleEvent>,
     last_step: SimTime,
@@ -299,6 +309,10 @@ impl Vehicle {
             estimator: estimator::Estimator::new(cfg.estimator.clone(), cfg.seed),
             origin_shift_sent_ned_m: Vector3::zeros(),
             links,
+            signing: cfg
+                .signing
+                .as_ref()
+                .map(|s| ringswarm_wire::signing::Signing::new(s.key.clone(), s.timestamp)),
             outbox: VecDeque::new(),
             events: VecDeque::new(),
             last_step: SimTime::ZERO,
@@ -315,7 +329,11 @@ impl Vehicle {
     pub fn reboot(&mut self, now: SimTime) {
         let fresh = Vehicle::new(self.cfg.clone(), self.world)
             .expect("the configuration was valid at the first boot");
+        // The key and its clock are stored, not configured: they survive; the stream
+        // table is memory and does not.
+        let signing = self.signing_key();
         *self = fresh;
+        self.signing = signing.map(|s| ringswarm_wire::signing::Signing::new(s.key, s.timestamp));
         self.last_step = now;
         self.boot_at = now;
         for link in &mut self.links {

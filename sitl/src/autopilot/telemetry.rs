@@ -8,9 +8,9 @@ use mavlink::dialects::common::{
     EXTENDED_SYS_STATE_DATA, GLOBAL_POSITION_INT_DATA, GPS_GLOBAL_ORIGIN_DATA, GPS_RAW_INT_DATA,
     GpsFixType, HEARTBEAT_DATA, HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot,
     MavBatteryChargeState, MavBatteryFault, MavBatteryFunction, MavBatteryMode, MavBatteryType,
-    MavLandedState, MavMessage, MavModeFlag, MavParamType, MavProtocolCapability, MavState,
-    MavSysStatusSensor, MavSysStatusSensorExtended, MavType, MavVtolState, PARAM_VALUE_DATA,
-    SYS_STATUS_DATA,
+    MavLandedState, MavMessage, MavModeFlag, MavParamType, MavProtocolCapability, MavSeverity,
+    MavState, MavSysStatusSensor, MavSysStatusSensorExtended, MavType, MavVtolState,
+    PARAM_VALUE_DATA, STATUSTEXT_DATA, SYS_STATUS_DATA,
 };
 use nalgebra::Vector3;
 
@@ -82,8 +82,27 @@ fn is_known(msg_id: u32) -> bool {
 impl Vehicle {
     /// Encodes `msg` for `link` and queues it.
     pub(super) fn send(&mut self, link: LinkId, msg: &MavMessage) {
-        let bytes = self.links[link as usize].encoder.encode(msg);
+        let signing = self
+            .signing
+            .as_mut()
+            .map(|s| (s, Self::signing_link_id(link)));
+        let bytes = self.links[link as usize]
+            .encoder
+            .encode_maybe_signed(msg, signing);
         self.outbox.push_back(Transmit { link, bytes });
+    }
+
+    /// A STATUSTEXT on both links, as PX4's `mavlink_log` reaches every ground station.
+    pub(super) fn send_statustext(&mut self, severity: MavSeverity, text: &str) {
+        let msg = MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+            severity,
+            text: text.into(),
+            id: 0,
+            chunk_seq: 0,
+        });
+        for link in [LinkId::Offboard, LinkId::Gcs] {
+            self.send(link, &msg);
+        }
     }
 
     pub(super) fn emit_due_telemetry(&mut self, now: SimTime) {

@@ -245,6 +245,6 @@ impl VehicleLink {
             param6: params[5],
             param7: params[6],
         });
-        self.outbox.push_back(self.encoder.encode(&msg));
+        self.queue(&msg);
     }
 }
