@@ -116,16 +116,22 @@ impl FlightSigning {
         Ok(Self { key, store, start })
     }
 
-    /// Signs every link: link `i` gets link id `i mod 256` (each vehicle keeps its own
-    /// streams, so ids need only differ on one vehicle's links).
+    /// Signs every link with this key and clock (see [`sign_links`]).
     pub fn apply(&self, links: &mut [LinkConfig]) {
-        for (i, link) in links.iter_mut().enumerate() {
-            link.signing = Some(LinkSigning {
-                key: self.key.clone(),
-                link_id: (i % 256) as u8,
-                timestamp_at_zero: self.start,
-            });
-        }
+        sign_links(links, &self.key, self.start);
+    }
+}
+
+/// Signs every link with `key`, stamping from `timestamp_at_zero` at time zero: link `i`
+/// gets link id `i mod 256` (each vehicle keeps its own streams, so ids need only differ
+/// among one vehicle's peers).
+pub fn sign_links(links: &mut [LinkConfig], key: &SigningKey, timestamp_at_zero: u64) {
+    for (i, link) in links.iter_mut().enumerate() {
+        link.signing = Some(LinkSigning {
+            key: key.clone(),
+            link_id: (i % 256) as u8,
+            timestamp_at_zero,
+        });
     }
 }
 

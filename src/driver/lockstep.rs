@@ -140,6 +140,9 @@ impl Lockstep {
                     self.send(false, i, tx.bytes);
                 }
             }
+            // Nothing here stores keys or shows mode changes: drop the events, so that
+            // a long run (or a flood of commands) keeps no backlog.
+            while self.vehicles[i].poll_event().is_some() {}
         }
         self.deliver(now, observer);
         if now >= self.swarm.poll_timeout() {
