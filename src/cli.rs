@@ -34,6 +34,17 @@ pub enum Command {
     /// Write a new MAVLink 2 signing key (64 hex characters, mode 0600) to FILE; an
     /// existing file is never overwritten.
     Keygen(KeygenArgs),
+    /// Give every vehicle of a config the key of its `[security] signing_key_file`, with
+    /// SETUP_SIGNING over its link (vehicles must be disarmed); says which took it.
+    SignSetup(SignSetupArgs),
+}
+
+/// Arguments of `ringswarm sign-setup`.
+#[derive(Debug, Args)]
+pub struct SignSetupArgs {
+    /// The coordinator's TOML file, with `[security] signing_key_file`.
+    #[arg(long)]
+    pub config: std::path::PathBuf,
 }
 
 /// Arguments of `ringswarm keygen`.

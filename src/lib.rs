@@ -46,6 +46,7 @@ pub mod plot;
 pub mod record;
 pub mod report;
 pub mod security;
+pub mod sign_setup_cmd;
 pub mod sitl_cmd;
 pub mod swarm;
 pub mod vehicle;

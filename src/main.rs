@@ -36,6 +36,7 @@ fn main() -> ExitCode {
         Command::Fly(args) => ringswarm::fly_cmd::run(&args).map(|()| true),
         Command::Demo(args) => ringswarm::demo_cmd::run(&args).map(|()| true),
         Command::Keygen(args) => keygen(&args.file).map(|()| true),
+        Command::SignSetup(args) => ringswarm::sign_setup_cmd::run(&args).map(|()| true),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,

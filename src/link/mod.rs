@@ -4,6 +4,7 @@
 //! MAVLink identifiers appear only here and in the emulator.
 
 mod convert;
+pub mod provision;
 
 pub use convert::{
     AUTOPILOT_PX4, Inbound, autopilot_name, gcs_heartbeat, inbound, set_attitude_target,
