@@ -155,6 +155,18 @@ impl Lockstep {
         self.deliver(now, observer);
     }
 
+    /// Puts a datagram from a third party on vehicle `index`'s link, delivered with the
+    /// link's conditions: to the vehicle's offboard link (`to_vehicle`) or to the
+    /// coordinator as if from the vehicle's address.
+    pub fn inject(&mut self, to_vehicle: bool, index: usize, bytes: Vec<u8>) {
+        self.send(to_vehicle, index, bytes);
+    }
+
+    /// Datagrams sent and not delivered yet.
+    pub fn in_flight(&self) -> usize {
+        self.in_flight.len()
+    }
+
     /// Runs until virtual time `end`, calling `observe` after every step.
     pub fn run_until(&mut self, end: SimTime, mut observe: impl FnMut(&Self)) {
         while self.now < end {
