@@ -171,7 +171,7 @@ fn attacked(key: Option<&SigningKey>, seconds: u64) -> (Lockstep, u64) {
         let next = run.now() + Duration::from_millis(1);
         run.run_observed(next, &mut capture);
         // 500 frames/s per link and direction: one every 2 ms.
-        if run.now().as_micros() % 2000 != 0 || run.now() < SimTime::from_millis(500) {
+        if !run.now().as_micros().is_multiple_of(2000) || run.now() < SimTime::from_millis(500) {
             continue;
         }
         for i in 0..N {
