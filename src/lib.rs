@@ -41,6 +41,7 @@ pub mod driver;
 pub mod error;
 pub mod fly_cmd;
 pub mod frame;
+pub mod fuzzing;
 pub mod link;
 pub mod plot;
 pub mod record;
