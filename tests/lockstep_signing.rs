@@ -168,3 +168,36 @@ fn a_vehicle_with_another_key_or_none_never_obeys_and_is_named() {
         "vehicle 4's unsigned telemetry is the reason given"
     );
 }
+
+#[test]
+fn the_vehicles_authentic_frames_from_another_link_id_are_refused() {
+    // Vehicle 1 talks to us on PX4's offboard instance (link id 1). Its frames to another
+    // station (the GCS instance, link id 0), replayed to us, are authentic and fresh, but
+    // refused: they are not addressed to us and could feed us old state.
+    let key = SigningKey::from_bytes([0x77; 32]);
+    let mut run = build(Some(&key), &vec![Some(key.clone()); 6]);
+    run.run_until(SimTime::from_millis(2_000), |_| {});
+    let before = run.swarm().links()[0].refused_frames();
+    assert_eq!(before, 0);
+    let mut gcs_clock = ringswarm_wire::signing::Signing::new(key.clone(), START + 500_000_000);
+    let position = mavlink::dialects::common::MavMessage::LOCAL_POSITION_NED(
+        mavlink::dialects::common::LOCAL_POSITION_NED_DATA {
+            time_boot_ms: 1_000,
+            x: 400.0,
+            ..Default::default()
+        },
+    );
+    let mut enc = ringswarm_wire::codec::Encoder::new(1, 1);
+    for _ in 0..10 {
+        let bytes = enc.encode_signed(&position, &mut gcs_clock, 0);
+        run.inject(false, 0, bytes);
+    }
+    run.run_until(SimTime::from_millis(2_100), |_| {});
+    assert_eq!(run.swarm().links()[0].refused_frames(), 10);
+    assert!(run.swarm().events().iter().any(|e| {
+        e.system_id == Some(1)
+            && e.text
+                .contains("signed on link id 0, but the vehicle talks to us on link id 1")
+    }));
+    assert_eq!(run.swarm().links()[0].phase(), Phase::Flying);
+}

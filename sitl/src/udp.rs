@@ -5,8 +5,9 @@
 //! answers follows PX4's `mavlink_receiver.cpp` ([`Partner`]): the default address until
 //! the first datagram arrives, then that datagram's sender for good (until a restart);
 //! datagrams from anyone are still read. Unlike PX4, which latches before parsing, only
-//! a datagram with a frame the vehicle admitted (decoded, and signed when a key is set)
-//! latches: garbage or a forged frame never chooses whom a link answers. Faults are injected per link, in both
+//! a datagram with a frame the vehicle admitted (decoded, and signed with the key when one
+//! is set) latches: garbage, a forged frame or an unsigned HEARTBEAT never chooses whom a
+//! link answers. Faults are injected per link, in both
 //! directions, from a seeded RNG: loss, latency with jitter, duplication.
 //!
 //! Time: the task keeps a simulated clock running at `speed` times real time and calls the

@@ -12,8 +12,8 @@ use ringswarm_wire::time::SimTime;
 use super::telemetry::{OriginVerdict, PositionVerdict, TelemetryGate};
 use super::{LinkConfig, LinkEvent, Phase, Setpoint, VehicleState};
 use crate::link::{
-    AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, decode_datagram_with, gcs_heartbeat, inbound,
-    set_attitude_target, set_position_target_acceleration,
+    AUTOPILOT_PX4, Encoder, Frame, Inbound, autopilot_name, decode_datagram_with, gcs_heartbeat,
+    inbound, set_attitude_target, set_position_target_acceleration,
 };
 
 mod commands;
@@ -43,6 +43,8 @@ pub struct VehicleLink {
     signing: Option<Signing>,
     refused_frames: u64,
     signing_warned: bool,
+    /// The link id the vehicle signs its frames to us with (its first authentic one).
+    vehicle_link_id: Option<u8>,
     outbox: VecDeque<Vec<u8>>,
     events: VecDeque<LinkEvent>,
     ignored_frames: u64,
@@ -76,6 +78,7 @@ impl VehicleLink {
             signing,
             refused_frames: 0,
             signing_warned: false,
+            vehicle_link_id: None,
             cfg,
             phase: Phase::Discovering,
             state: VehicleState::default(),
@@ -117,6 +120,31 @@ impl VehicleLink {
         if let (Some(signing), Some(cfg)) = (self.signing.as_mut(), self.cfg.signing.as_ref()) {
             signing.advance_to(cfg.timestamp_at_zero + now.as_micros() / 10);
         }
+    }
+
+    /// Whether `frame` passes the signing rules (always, when the link does not sign).
+    /// The vehicle talks to us over one of its MAVLink instances: the link id of its first
+    /// authentic frame is taken as that instance's, and an authentic frame of the vehicle
+    /// from another link id (its telemetry to another station, replayed to us) is refused.
+    fn check_signature(&mut self, frame: &Frame) -> Result<(), String> {
+        let Some(signing) = self.signing.as_mut() else {
+            return Ok(());
+        };
+        let ours = frame.header.system_id == u32::from(self.cfg.system_id);
+        if let (Some(t), Some(expected), true) = (frame.signature, self.vehicle_link_id, ours)
+            && t.authentic
+            && t.link_id != expected
+        {
+            return Err(format!(
+                "signed on link id {}, but the vehicle talks to us on link id {expected}",
+                t.link_id
+            ));
+        }
+        signing.accept(frame, &[]).map_err(|why| why.to_string())?;
+        if let (Some(t), true) = (frame.signature, ours) {
+            self.vehicle_link_id.get_or_insert(t.link_id);
+        }
+        Ok(())
     }
 
     /// Encodes `msg` (signed when the link signs) and queues it.
@@ -285,14 +313,11 @@ impl VehicleLink {
                 self.ignored_frames += 1;
                 continue;
             };
-            if let Some(signing) = self.signing.as_mut()
-                && let Err(why) = signing.accept(&frame, &[])
-            {
+            if let Err(why) = self.check_signature(&frame) {
                 self.refused_frames += 1;
                 if !self.signing_warned {
                     self.signing_warned = true;
-                    self.events
-                        .push_back(LinkEvent::SigningRefused(why.to_string()));
+                    self.events.push_back(LinkEvent::SigningRefused(why));
                 }
                 continue;
             }

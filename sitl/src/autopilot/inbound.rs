@@ -20,20 +20,22 @@ use crate::codec::decode_datagram_with;
 use crate::time::SimTime;
 
 impl Vehicle {
-    /// Handles one datagram received on `link` at `now`; returns whether any frame in it
-    /// was admitted (a driver lets only such a datagram choose whom the link answers).
-    /// Bad frames and frames the signing rules refuse are counted and skipped; messages
-    /// for other systems are counted and ignored.
+    /// Handles one datagram received on `link` at `now`; returns whether it vouches for
+    /// its sender: a frame in it was admitted and, once a key is set, signed with it (a
+    /// driver lets only such a datagram choose whom the link answers: an unsigned
+    /// HEARTBEAT is admitted but proves nothing). Bad frames and frames the signing rules
+    /// refuse are counted and skipped; messages for other systems are counted and
+    /// ignored.
     pub fn handle_datagram(&mut self, now: SimTime, link: LinkId, bytes: &[u8]) -> bool {
         let key = self.signing.as_ref().map(|s| s.key().clone());
-        let mut admitted = false;
+        let mut vouched = false;
         for frame in decode_datagram_with(bytes, key.as_ref()) {
             match frame {
                 Ok(frame) => {
                     if !self.admit(&frame) {
                         continue;
                     }
-                    admitted = true;
+                    vouched |= self.signing.is_none() || frame.signature.is_some();
                     let sender = (frame.header.system_id as u8, frame.header.component_id);
                     if let MavMessage::SETUP_SIGNING(m) = &frame.msg {
                         self.on_setup_signing(m, frame.signature.is_some());
@@ -47,7 +49,7 @@ impl Vehicle {
                 }
             }
         }
-        admitted
+        vouched
     }
 
     /// PX4's rule for commands and offboard setpoints (`evaluate_target_ok`, the setpoint

@@ -474,3 +474,37 @@ fn messages_for_another_system_or_component_are_ignored_as_px4_ignores_them() {
     assert!(!answered(&mut rig, read(1, 50)));
     assert_eq!(rig.vehicle.status().counters.foreign_target - before, 5);
 }
+
+#[test]
+fn only_a_datagram_that_vouches_for_its_sender_may_latch_the_link() {
+    use ringswarm_wire::signing::{Signing, SigningKey};
+    let key = SigningKey::from_bytes([3; 32]);
+    let mut cfg = VehicleConfig::new(1, Profile::x500());
+    cfg.signing = Some(crate::keystore::StoredKey {
+        key: key.clone(),
+        timestamp: 1_000,
+    });
+    let mut signed = Vehicle::new(cfg, World::default()).unwrap();
+    let mut plain = Vehicle::new(VehicleConfig::new(1, Profile::x500()), World::default()).unwrap();
+    let mut gcs = Encoder::new(GCS.0, GCS.1);
+    let heartbeat = crate::autopilot::tests_modes::gcs_heartbeat();
+    let unsigned = gcs.encode(&heartbeat);
+    let now = SimTime::ZERO;
+    // Without a key anything decoded vouches, as in PX4.
+    assert!(plain.handle_datagram(now, LinkId::Offboard, &unsigned));
+    // With a key an unsigned HEARTBEAT is admitted (PX4 lets it through) but proves
+    // nothing; garbage and another key's frames neither.
+    assert!(!signed.handle_datagram(now, LinkId::Offboard, &unsigned));
+    assert!(!signed.handle_datagram(now, LinkId::Offboard, &[0xFD, 1, 2, 3]));
+    let mut theirs = Signing::new(SigningKey::from_bytes([4; 32]), 2_000);
+    let forged = gcs.encode_signed(&heartbeat, &mut theirs, 0);
+    assert!(!signed.handle_datagram(now, LinkId::Offboard, &forged));
+    let mut ours = Signing::new(key, 2_000);
+    let genuine = gcs.encode_signed(&heartbeat, &mut ours, 0);
+    assert!(signed.handle_datagram(now, LinkId::Offboard, &genuine));
+    let c = signed.status().counters;
+    assert_eq!(
+        (c.unsigned_refused, c.signature_refused, c.bad_frames),
+        (0, 1, 1)
+    );
+}

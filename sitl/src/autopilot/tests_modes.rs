@@ -396,7 +396,7 @@ fn offset_frames_are_refused_and_keep_no_offboard_signal() {
     assert!(rig.vehicle.status().counters.rejected_setpoints >= 10);
 }
 
-fn gcs_heartbeat() -> MavMessage {
+pub(super) fn gcs_heartbeat() -> MavMessage {
     MavMessage::HEARTBEAT(HEARTBEAT_DATA {
         custom_mode: 0,
         mavtype: MavType::MAV_TYPE_GCS,
