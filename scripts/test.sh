@@ -10,6 +10,8 @@ echo "== cargo fmt --check"
 cargo fmt --all --check
 echo "== cargo clippy"
 cargo clippy --workspace --all-targets --locked -- -D warnings
+# The flight coordinator alone, without the emulator.
+cargo clippy --no-default-features --lib --bins --locked -- -D warnings
 echo "== cargo test"
 cargo test --workspace --locked
 cargo build --workspace --locked --bins

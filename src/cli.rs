@@ -24,12 +24,14 @@ pub enum Command {
     /// swarm reach a target velocity. Exit code 0 feasible, 1 infeasible.
     Plan(PlanArgs),
     /// Run N emulated PX4-like quadrotors on PX4's SITL ports until Ctrl-C.
+    #[cfg(feature = "emulator")]
     Sitl(SitlArgs),
     /// Fly the vehicles of a config over UDP (PX4, PX4 SITL or `ringswarm sitl`) with the
     /// consensus law, then land them; writes a run directory.
     Fly(FlyArgs),
     /// Fly a built-in scenario in lockstep with the emulator (virtual time), print the
     /// summary and write a run directory.
+    #[cfg(feature = "emulator")]
     Demo(DemoArgs),
     /// Write a new MAVLink 2 signing key (64 hex characters, mode 0600) to FILE; an
     /// existing file is never overwritten.

@@ -36,11 +36,13 @@ pub mod cli;
 pub mod config;
 pub mod consensus;
 pub mod control;
+#[cfg(feature = "emulator")]
 pub mod demo_cmd;
 pub mod driver;
 pub mod error;
 pub mod fly_cmd;
 pub mod frame;
+#[cfg(feature = "emulator")]
 pub mod fuzzing;
 pub mod link;
 pub mod plot;
@@ -48,6 +50,7 @@ pub mod record;
 pub mod report;
 pub mod security;
 pub mod sign_setup_cmd;
+#[cfg(feature = "emulator")]
 pub mod sitl_cmd;
 pub mod swarm;
 pub mod vehicle;

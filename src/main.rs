@@ -32,8 +32,10 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Analyze(args) => analyze(&args),
         Command::Plan(args) => plan(&args),
+        #[cfg(feature = "emulator")]
         Command::Sitl(args) => ringswarm::sitl_cmd::run(&args).map(|()| true),
         Command::Fly(args) => ringswarm::fly_cmd::run(&args).map(|()| true),
+        #[cfg(feature = "emulator")]
         Command::Demo(args) => ringswarm::demo_cmd::run(&args).map(|()| true),
         Command::Keygen(args) => keygen(&args.file).map(|()| true),
         Command::SignSetup(args) => ringswarm::sign_setup_cmd::run(&args).map(|()| true),

@@ -2,7 +2,6 @@
 //! rate? ([`crate::consensus::check_bandwidth`] has the rule and its calibration.)
 
 use nalgebra::Complex;
-use ringswarm_sitl::profile::Profile;
 
 use super::Config;
 use crate::consensus::{
@@ -58,16 +57,31 @@ impl Config {
                         "vehicle[{i}].attitude_bandwidth_rps must be a finite number in (0, 1000] rad/s, got {b}"
                     ));
                 }
-                None => v
-                    .profile
-                    .parse::<Profile>()
-                    .map(|p| p.gains.attitude_p.x.min(p.gains.attitude_p.y))
+                None => profile_attitude_bandwidth_rps(&v.profile)
                     .map_err(|e| format!("vehicle[{i}]: no attitude_bandwidth_rps and {e}"))?,
             };
             slowest = slowest.min(bandwidth);
         }
         Ok(slowest)
     }
+}
+
+/// The attitude bandwidth of an emulator profile: its roll and pitch attitude P gain,
+/// the slower of the two (rad/s).
+#[cfg(feature = "emulator")]
+fn profile_attitude_bandwidth_rps(profile: &str) -> Result<f64, String> {
+    profile
+        .parse::<ringswarm_sitl::profile::Profile>()
+        .map(|p| p.gains.attitude_p.x.min(p.gains.attitude_p.y))
+        .map_err(|e| e.to_string())
+}
+
+/// Without the emulator there are no profiles to read gains from.
+#[cfg(not(feature = "emulator"))]
+fn profile_attitude_bandwidth_rps(profile: &str) -> Result<f64, String> {
+    Err(format!(
+        "profile \"{profile}\" has no gains in a build without the emulator"
+    ))
 }
 
 /// Warns (at `warn`, which is printed by default) when the gains of a validated setup are

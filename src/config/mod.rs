@@ -1,21 +1,21 @@
 //! The coordinator's TOML configuration: the schema (serde structs with
 //! `deny_unknown_fields`, defaults), [`Config::validate`] in `validate` (every number
 //! checked, every problem reported at once, the typed [`crate::swarm::SwarmSetup`]
-//! built), and what the file means for the built-in emulator and the transport in
-//! `emulator`. docs/configuration.md lists every key with its unit, range and default.
+//! built), what the file means for the built-in emulator in `emulator` (with the
+//! `emulator` feature) and for the transport in `transport`. docs/configuration.md lists every key with its unit, range and default.
 //!
 //! Frames: vehicle start states and formation offsets are in the paper's ENU frame (x
 //! east, y north, z up, metres) about the common reference point.
 
+#[cfg(feature = "emulator")]
 mod emulator;
 mod gate;
+mod transport;
 mod validate;
 
 use std::net::SocketAddr;
 
 use serde::Deserialize;
-
-use ringswarm_wire::time::SimTime;
 
 use crate::control::SaturationMode;
 use crate::swarm::{EndAction, LossPolicy, SetpointKind};
@@ -384,12 +384,17 @@ pub struct SilenceSection {
 }
 
 /// Link faults of a lockstep run.
+#[cfg(feature = "emulator")]
 #[derive(Debug, Clone, PartialEq)]
 pub struct LockstepFaults {
     /// Latency, jitter, loss and seed on every link.
     pub conditions: crate::driver::lockstep::LinkConditions,
     /// `(vehicle index, from, until)`.
-    pub silences: Vec<(usize, SimTime, SimTime)>,
+    pub silences: Vec<(
+        usize,
+        ringswarm_wire::time::SimTime,
+        ringswarm_wire::time::SimTime,
+    )>,
 }
 
 /// `[[vehicle]]`.

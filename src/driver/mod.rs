@@ -4,6 +4,7 @@
 //!   encoded MAVLink frames in between, seeded latency and loss. Deterministic.
 //! - [`udp`]: tokio, one socket per vehicle, for real PX4 or `ringswarm sitl` vehicles.
 
+#[cfg(feature = "emulator")]
 pub mod lockstep;
 pub mod udp;
 
