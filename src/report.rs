@@ -373,7 +373,7 @@ pub fn run_plan(request: &PlanRequest) -> Result<PlanOutput, InputError> {
             out.predicted_final_velocity = Some(pair(predicted_final_velocity_mps));
             if let Some(r) = retarget {
                 out.agent = Some(r.agent + 1);
-                out.agent_class = Some(format!("{:?}", r.class).to_lowercase());
+                out.agent_class = Some(r.class.name().to_owned());
                 out.old_velocity = Some(pair(r.old_velocity_mps));
                 out.new_velocity = Some(pair(r.new_velocity_mps));
                 out.velocity_change = Some(r.change_mps);

@@ -47,6 +47,16 @@ pub enum AgentClass {
     Even,
 }
 
+impl AgentClass {
+    /// The paper's name: `odd` or `even`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Odd => "odd",
+            Self::Even => "even",
+        }
+    }
+}
+
 /// A change of one agent's initial velocity.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Retarget {
