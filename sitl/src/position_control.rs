@@ -24,7 +24,7 @@
 //! radians. Pure and deterministic: state is the integrator and the filtered velocity
 //! derivative.
 
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector2, Vector3};
+use nalgebra::{Vector2, Vector3};
 
 use crate::control::AttitudeSetpoint;
 use crate::profile::GRAVITY_MPS2;
@@ -363,25 +363,8 @@ fn saturate_thrust(p: &MpcParams, thrust: &mut Vector3<f64>) {
 /// PX4's `ControlMath::thrustToAttitude`: body z against the thrust, body x toward the
 /// heading; normalised thrust is the vector's length.
 pub fn thrust_to_attitude(thrust_ned: &Vector3<f64>, yaw_rad: f64) -> AttitudeSetpoint {
-    let mut body_z = -*thrust_ned;
-    if body_z.norm_squared() < 1e-12 {
-        body_z = Vector3::z();
-    }
-    let body_z = body_z.normalize();
-    let y_c = Vector3::new(-yaw_rad.sin(), yaw_rad.cos(), 0.0);
-    let mut body_x = y_c.cross(&body_z);
-    if body_z.z < 0.0 {
-        body_x = -body_x;
-    }
-    if body_z.z.abs() < 1e-6 {
-        body_x = Vector3::z();
-    }
-    let body_x = body_x.normalize();
-    let body_y = body_z.cross(&body_x);
-    let rotation =
-        Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[body_x, body_y, body_z]));
     AttitudeSetpoint {
-        attitude: UnitQuaternion::from_rotation_matrix(&rotation),
+        attitude: ringswarm_wire::attitude::body_z_to_attitude(-*thrust_ned, yaw_rad),
         thrust_norm: thrust_ned.norm().clamp(0.0, 1.0),
     }
 }

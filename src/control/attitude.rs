@@ -8,7 +8,8 @@
 //! `m·|f|`, normalised by the model's maximum. The result is guarded: a unit quaternion,
 //! thrust clamped to `[0, 1]`, no NaN.
 
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{UnitQuaternion, Vector3};
+use ringswarm_wire::attitude::body_z_to_attitude;
 
 use super::frames::enu_to_ned;
 use super::vehicle::{GRAVITY_MPS2, VehicleModel};
@@ -56,21 +57,11 @@ pub fn attitude_thrust_from_acceleration(
             thrust_n: 0.0,
         };
     }
-    let body_z = -specific_force_ned / magnitude;
-    let heading_y = Vector3::new(-yaw.sin(), yaw.cos(), 0.0);
-    let body_x = heading_y.cross(&body_z);
-    // The thrust axis is horizontal only for an impossible command; fall back to level.
-    let body_x = if body_x.norm() < 1e-9 {
-        Vector3::new(yaw.cos(), yaw.sin(), 0.0)
-    } else {
-        body_x.normalize()
-    };
-    let body_y = body_z.cross(&body_x);
-    let rotation =
-        Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[body_x, body_y, body_z]));
+    // Body z against the specific force, nose toward the yaw: PX4's construction.
+    let attitude_ned_frd = body_z_to_attitude(-specific_force_ned, yaw);
     let thrust_n = model.mass_kg() * magnitude;
     AttitudeThrust {
-        attitude_ned_frd: UnitQuaternion::from_rotation_matrix(&rotation),
+        attitude_ned_frd,
         thrust_norm: (thrust_n / model.max_thrust_n()).clamp(0.0, 1.0),
         thrust_n,
     }
@@ -86,7 +77,7 @@ pub fn tilt_rad(attitude_ned_frd: &UnitQuaternion<f64>) -> f64 {
 mod tests {
     use super::*;
     use crate::control::frames::euler_ned_frd;
-    use nalgebra::Rotation3;
+    use nalgebra::{Matrix3, Rotation3};
     use std::f64::consts::FRAC_PI_2;
 
     fn model() -> VehicleModel {
