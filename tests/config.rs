@@ -136,14 +136,14 @@ fn lockstep_faults_are_checked_and_converted() {
     );
     let faults = Config::from_toml(&text).unwrap().lockstep_faults().unwrap();
     assert_eq!(
-        faults.conditions.latency,
+        faults.conditions.faults.latency,
         std::time::Duration::from_millis(10)
     );
     assert_eq!(
-        faults.conditions.jitter,
+        faults.conditions.faults.jitter,
         std::time::Duration::from_millis(20)
     );
-    assert!((faults.conditions.loss - 0.2).abs() < 1e-12);
+    assert!((faults.conditions.faults.loss - 0.2).abs() < 1e-12);
     assert_eq!(faults.conditions.seed, 7);
     use ringswarm_wire::time::SimTime;
     assert_eq!(

@@ -14,7 +14,8 @@
 //! - [`codec`], [`time`]: MAVLink framing and simulated time, from `ringswarm-wire`.
 //! - [`autopilot`]: the sans-IO vehicle machine with PX4's wire behaviour.
 //! - [`config_file`]: the TOML configuration of `ringswarm sitl --config`.
-//! - [`udp`]: the tokio driver, one socket per link on PX4's ports, with fault injection.
+//! - [`udp`]: the tokio driver, one socket per link on PX4's ports, with fault injection
+//!   ([`link_faults`], also used by the coordinator's lockstep driver).
 //! - [`params`], [`world`]: parameter table, geodetic world.
 //!
 //! It never depends on `ringswarm`.
@@ -25,6 +26,7 @@ pub mod autopilot;
 pub mod config_file;
 pub mod control;
 pub mod keystore;
+pub mod link_faults;
 pub mod params;
 pub mod physics;
 pub mod position_control;

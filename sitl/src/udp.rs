@@ -19,11 +19,13 @@ use std::io;
 use std::net::{IpAddr, SocketAddr};
 use std::time::Duration;
 
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tokio::net::UdpSocket;
 use tokio::sync::watch;
 use tokio::time::{Instant, MissedTickBehavior};
+
+pub use crate::link_faults::LinkFaults;
 
 use crate::autopilot::{LinkId, Vehicle, VehicleEvent, VehicleStatus};
 use crate::keystore::{self, StoredKey};
@@ -82,40 +84,6 @@ impl Partner {
     /// Where to send.
     pub fn addr(&self) -> SocketAddr {
         self.addr
-    }
-}
-
-/// Faults injected on one link, in both directions.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct LinkFaults {
-    /// Probability that a datagram is dropped (0..1).
-    pub loss: f64,
-    /// Fixed one-way latency.
-    pub latency: Duration,
-    /// Uniform extra latency in `0..jitter`.
-    pub jitter: Duration,
-    /// Probability that a datagram is delivered twice (0..1).
-    pub duplicate: f64,
-}
-
-impl LinkFaults {
-    /// From the units a user types: percentages and milliseconds.
-    pub fn from_percent_and_ms(
-        loss_pct: f64,
-        latency_ms: f64,
-        jitter_ms: f64,
-        duplicate_pct: f64,
-    ) -> Self {
-        Self {
-            loss: loss_pct / 100.0,
-            latency: Duration::from_secs_f64(latency_ms / 1000.0),
-            jitter: Duration::from_secs_f64(jitter_ms / 1000.0),
-            duplicate: duplicate_pct / 100.0,
-        }
-    }
-
-    fn is_clean(&self) -> bool {
-        self.loss == 0.0 && self.latency.is_zero() && self.jitter.is_zero() && self.duplicate == 0.0
     }
 }
 
@@ -262,7 +230,7 @@ pub async fn run_vehicle(
         let now = clock.now();
         while let Some(tx) = vehicle.poll_transmit() {
             let link = tx.link as usize;
-            for copy in fault_copies(&faults[link], &mut rng) {
+            for copy in faults[link].copies(&mut rng) {
                 if copy.is_zero() {
                     send(&sockets[link], &tx.bytes, partners[link].addr(), sysid).await;
                 } else {
@@ -298,31 +266,6 @@ fn save_key(key_file: Option<&std::path::Path>, sysid: u8, stored: Option<&Store
     }
 }
 
-/// The delays of the copies of one datagram that survive the faults (empty: lost).
-fn fault_copies(faults: &LinkFaults, rng: &mut ChaCha8Rng) -> Vec<Duration> {
-    if faults.is_clean() {
-        return vec![Duration::ZERO];
-    }
-    if rng.random::<f64>() < faults.loss {
-        return Vec::new();
-    }
-    let copies = if rng.random::<f64>() < faults.duplicate {
-        2
-    } else {
-        1
-    };
-    (0..copies)
-        .map(|_| {
-            let jitter = if faults.jitter.is_zero() {
-                Duration::ZERO
-            } else {
-                faults.jitter.mul_f64(rng.random::<f64>())
-            };
-            faults.latency + jitter
-        })
-        .collect()
-}
-
 /// A datagram received on link `link` from `from`.
 struct Datagram<'a> {
     link: usize,
@@ -343,7 +286,7 @@ fn inbound(
 ) {
     let now = clock.now();
     let Datagram { link, from, bytes } = datagram;
-    for delay in fault_copies(faults, rng) {
+    for delay in faults.copies(rng) {
         if delay.is_zero() {
             if vehicle.handle_datagram(now, link_id(link), bytes) {
                 partners[link].on_datagram(from);

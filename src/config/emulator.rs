@@ -59,12 +59,14 @@ impl Config {
         if !problems.is_empty() {
             return Err(problems.join("\n"));
         }
-        let ms = |x: f64| Duration::from_secs_f64(x / 1000.0);
         Ok(LockstepFaults {
             conditions: crate::driver::lockstep::LinkConditions {
-                latency: ms(e.latency_ms),
-                jitter: ms(e.jitter_ms),
-                loss: e.loss_pct / 100.0,
+                faults: ringswarm_sitl::link_faults::LinkFaults::from_percent_and_ms(
+                    e.loss_pct,
+                    e.latency_ms,
+                    e.jitter_ms,
+                    0.0,
+                ),
                 seed: e.seed,
             },
             silences,

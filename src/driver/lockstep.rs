@@ -3,35 +3,30 @@
 //! on every link. Same seed, same inputs: the same trajectory, bit for bit.
 
 use std::collections::VecDeque;
-use std::time::Duration;
 
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use ringswarm_sitl::autopilot::{LinkId, PHYSICS_STEP, Vehicle};
+use ringswarm_sitl::link_faults::LinkFaults;
 use ringswarm_wire::time::SimTime;
 
 use super::Observer;
 use crate::swarm::Swarm;
 
-/// Link conditions between the coordinator and every vehicle (both directions).
+/// Link conditions between the coordinator and every vehicle (both directions): the
+/// emulator's fault model, and the seed of its draws.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LinkConditions {
-    /// One-way latency.
-    pub latency: Duration,
-    /// Uniform extra latency `0..jitter`.
-    pub jitter: Duration,
-    /// Probability that a datagram is lost.
-    pub loss: f64,
-    /// Seed of the loss and jitter draws.
+    /// Loss, latency, jitter and duplication.
+    pub faults: LinkFaults,
+    /// Seed of the draws.
     pub seed: u64,
 }
 
 impl Default for LinkConditions {
     fn default() -> Self {
         Self {
-            latency: Duration::ZERO,
-            jitter: Duration::ZERO,
-            loss: 0.0,
+            faults: LinkFaults::default(),
             seed: 1,
         }
     }
@@ -182,22 +177,17 @@ impl Lockstep {
     }
 
     fn send(&mut self, to_vehicle: bool, index: usize, bytes: Vec<u8>) {
-        if self.is_silenced(index)
-            || (self.conditions.loss > 0.0 && self.rng.random::<f64>() < self.conditions.loss)
-        {
+        if self.is_silenced(index) {
             return;
         }
-        let jitter = if self.conditions.jitter.is_zero() {
-            Duration::ZERO
-        } else {
-            self.conditions.jitter.mul_f64(self.rng.random::<f64>())
-        };
-        self.in_flight.push_back(InFlight {
-            due: self.now + self.conditions.latency + jitter,
-            to_vehicle,
-            index,
-            bytes,
-        });
+        for delay in self.conditions.faults.copies(&mut self.rng) {
+            self.in_flight.push_back(InFlight {
+                due: self.now + delay,
+                to_vehicle,
+                index,
+                bytes: bytes.clone(),
+            });
+        }
     }
 
     fn deliver(&mut self, now: SimTime, observer: &mut impl Observer) {
