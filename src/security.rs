@@ -15,10 +15,11 @@ use ringswarm_wire::signing::{SigningKey, TIMESTAMP_UNITS_PER_S, timestamp_now};
 
 use crate::vehicle::{LinkConfig, LinkSigning};
 
-/// How far ahead of the newest stamp the stored mark is kept: one minute (`fly` checks
-/// every second and writes once half of it is used, so a restart at once starts at most
-/// a minute ahead of the wall clock).
-pub const RESERVE: u64 = 60 * TIMESTAMP_UNITS_PER_S;
+/// How far ahead of the newest stamp the stored mark is kept: ten seconds (`fly` checks
+/// every second and writes once half of it is used). A restart at once starts at most
+/// this far ahead of the wall clock: well inside the minute by which a vehicle's first
+/// frames, stamped from its own clock, may lag ours before we would call them stale.
+pub const RESERVE: u64 = 10 * TIMESTAMP_UNITS_PER_S;
 
 /// The stored high-water mark of the signing clock.
 #[derive(Debug, Clone)]
