@@ -8,6 +8,8 @@
 //! the undisturbed one; with signing off the same attack takes vehicles away (so the
 //! check can fail).
 
+mod common;
+
 use nalgebra::Vector2;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -17,38 +19,18 @@ use mavlink::dialects::common::{
     COMMAND_LONG_DATA, HEARTBEAT_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot, MavCmd, MavMessage,
     MavModeFlag, MavState, MavType, SET_ATTITUDE_TARGET_DATA, SETUP_SIGNING_DATA,
 };
-use ringswarm::config::Config;
 use ringswarm::driver::Observer;
-use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
-use ringswarm::swarm::Swarm;
-use ringswarm_sitl::autopilot::{FlightMode, Vehicle};
-use ringswarm_sitl::keystore::StoredKey;
+use ringswarm::driver::lockstep::Lockstep;
+use ringswarm_sitl::autopilot::FlightMode;
 use ringswarm_wire::codec::Encoder;
 use ringswarm_wire::signing::{Signing, SigningKey};
 use ringswarm_wire::time::SimTime;
 
-const START: u64 = 36_000_000_000_000;
+const START: u64 = common::START;
 const N: usize = 6;
 
 fn build(key: Option<&SigningKey>) -> Lockstep {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml");
-    let config = Config::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
-    let mut setup = config.validate().unwrap();
-    if let Some(key) = key {
-        ringswarm::security::sign_links(&mut setup.links, key, START);
-    }
-    let (world, vehicles) = config.emulator().unwrap();
-    let vehicles = vehicles
-        .into_iter()
-        .map(|mut v| {
-            v.signing = key.map(|k| StoredKey {
-                key: k.clone(),
-                timestamp: START,
-            });
-            Vehicle::new(v, world).unwrap()
-        })
-        .collect();
-    Lockstep::new(Swarm::new(setup), vehicles, LinkConditions::default())
+    common::signed_paper_sim1(key, &vec![key.cloned(); N])
 }
 
 /// Keeps the last authentic datagrams of every link, both ways, to replay.

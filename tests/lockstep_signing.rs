@@ -1,42 +1,18 @@
 //! MAVLink 2 signing in lockstep: the paper's first simulation flown with every frame
 //! signed on both sides, and vehicles holding another key (or none) left on the ground.
 
-use ringswarm::config::Config;
+mod common;
+
 use ringswarm::driver::Observer;
-use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
-use ringswarm::swarm::Swarm;
+use ringswarm::driver::lockstep::Lockstep;
 use ringswarm::vehicle::Phase;
-use ringswarm_sitl::autopilot::{FlightMode, Vehicle};
-use ringswarm_sitl::keystore::StoredKey;
+use ringswarm_sitl::autopilot::FlightMode;
 use ringswarm_wire::codec::decode_datagram_with;
 use ringswarm_wire::signing::SigningKey;
 use ringswarm_wire::time::SimTime;
 
-/// A signing stamp in 2026 (10 µs units since 2015).
-const START: u64 = 36_000_000_000_000;
-
-/// The coordinator's key and the key each vehicle holds (`None`: no signing).
 fn build(coordinator: Option<&SigningKey>, vehicle_keys: &[Option<SigningKey>]) -> Lockstep {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml");
-    let config = Config::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
-    let mut setup = config.validate().unwrap();
-    // Both sides start from the same wall-clock stamp, as `fly` and `sitl` do.
-    if let Some(key) = coordinator {
-        ringswarm::security::sign_links(&mut setup.links, key, START);
-    }
-    let (world, vehicles) = config.emulator().unwrap();
-    let vehicles = vehicles
-        .into_iter()
-        .zip(vehicle_keys)
-        .map(|(mut v, key)| {
-            v.signing = key.clone().map(|key| StoredKey {
-                key,
-                timestamp: START,
-            });
-            Vehicle::new(v, world).unwrap()
-        })
-        .collect();
-    Lockstep::new(Swarm::new(setup), vehicles, LinkConditions::default())
+    common::signed_paper_sim1(coordinator, vehicle_keys)
 }
 
 /// Every datagram in both directions, checked against `key`: (frames, authentic frames).
@@ -179,7 +155,8 @@ fn the_vehicles_authentic_frames_from_another_link_id_are_refused() {
     run.run_until(SimTime::from_millis(2_000), |_| {});
     let before = run.swarm().links()[0].refused_frames();
     assert_eq!(before, 0);
-    let mut gcs_clock = ringswarm_wire::signing::Signing::new(key.clone(), START + 500_000_000);
+    let mut gcs_clock =
+        ringswarm_wire::signing::Signing::new(key.clone(), common::START + 500_000_000);
     let position = mavlink::dialects::common::MavMessage::LOCAL_POSITION_NED(
         mavlink::dialects::common::LOCAL_POSITION_NED_DATA {
             time_boot_ms: 1_000,

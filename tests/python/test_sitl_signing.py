@@ -69,6 +69,19 @@ def key(tmp_path):
     return path, bytes.fromhex(path.read_text().strip())
 
 
+def drain(link):
+    """Reads whatever is queued on `link`: a socket left unread while another link is
+    watched overflows within a second at the emulator's 250 messages/s, and would then
+    drop the very answer a test waits for."""
+    while link.recv_match(blocking=False) is not None:
+        pass
+
+
+def write(link, data):
+    drain(link)
+    link.write(data)
+
+
 def acks(link, command, seconds=NOT_OBEYED_S):
     """The COMMAND_ACKs for `command` until `seconds` pass, or 0.3 s after the first."""
     found = []
@@ -82,12 +95,14 @@ def acks(link, command, seconds=NOT_OBEYED_S):
 
 
 def arm(link, value, seconds=NOT_OBEYED_S):
+    drain(link)
     link.mav.command_long_send(1, 1, ARM, 0, float(value), 0, 0, 0, 0, 0, 0)
     return acks(link, ARM, seconds)
 
 
 def armed(link):
     """The armed flag of the next heartbeat from system 1."""
+    drain(link)
     end = time.time() + 3
     while time.time() < end:
         hb = link.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2)
@@ -151,22 +166,22 @@ def test_unsigned_foreign_replayed_and_stale_commands_are_not_obeyed(tmp_path, k
         assert arm(unsigned, 1) == []
         assert not armed(signed)
         # Signed with another key.
-        signed.write(signed_bytes(bytes(32 * [7]), 3, now_stamp(), arm_msg(1)))
+        write(signed, signed_bytes(bytes(32 * [7]), 3, now_stamp(), arm_msg(1)))
         assert acks(signed, ARM) == []
         assert not armed(signed)
         # Arm and disarm signed, then replay the arm frame: refused.
         arm_frame = signed_bytes(secret, 4, now_stamp(), arm_msg(1))
-        signed.write(arm_frame)
+        write(signed, arm_frame)
         assert [a.result for a in acks(signed, ARM)] == [0]
         assert arm(signed, 0)[0].result == 0
-        signed.write(arm_frame)
+        write(signed, arm_frame)
         assert acks(signed, ARM) == []
         assert not armed(signed)
         # A new stream two minutes older than the vehicle's clock: stale. One minute
         # minus a second old: taken (the C library's window).
-        signed.write(signed_bytes(secret, 5, now_stamp() - 2 * ONE_MINUTE, arm_msg(1)))
+        write(signed, signed_bytes(secret, 5, now_stamp() - 2 * ONE_MINUTE, arm_msg(1)))
         assert acks(signed, ARM) == []
-        signed.write(signed_bytes(secret, 6, now_stamp() - ONE_MINUTE + 100_000, arm_msg(1)))
+        write(signed, signed_bytes(secret, 6, now_stamp() - ONE_MINUTE + 100_000, arm_msg(1)))
         assert [a.result for a in acks(signed, ARM)] == [0]
         assert armed(signed)
     finally:
@@ -181,10 +196,12 @@ def test_setup_signing_follows_px4_and_the_key_survives_a_restart(tmp_path, key)
         plain = sitl.connect(14540)
         assert arm(plain, 1)[0].result == 0, "no key: unsigned commands are obeyed"
         # While armed, SETUP_SIGNING is refused.
+        drain(plain)
         plain.mav.setup_signing_send(1, 1, secret, now_stamp())
         assert statustext(plain) == "MAVLink signing: rejected while armed"
         assert arm(plain, 0)[0].result == 0
         # Disarmed: accepted unsigned (there is no key yet), whatever its target.
+        drain(plain)
         plain.mav.setup_signing_send(0, 0, secret, now_stamp())
         assert statustext(plain) == "MAVLink signing key accepted"
         assert arm(plain, 1) == [], "unsigned commands are refused from now on"
@@ -200,8 +217,10 @@ def test_setup_signing_follows_px4_and_the_key_survives_a_restart(tmp_path, key)
         assert arm(signed, 0)[0].result == 0
         # A blank key unsigned is refused (as every unsigned SETUP_SIGNING now); signed
         # it disables signing.
+        drain(plain)
         plain.mav.setup_signing_send(1, 1, bytes(32), 0)
         assert statustext(plain, 1.5) is None
+        drain(signed)
         signed.mav.setup_signing_send(1, 1, bytes(32), 0)
         assert statustext(signed) == "MAVLink signing disabled"
         assert arm(plain, 1)[0].result == 0, "no key: unsigned commands are obeyed again"

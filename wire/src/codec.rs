@@ -291,13 +291,14 @@ impl Encoder {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use mavlink::dialects::common::{
         COMMAND_LONG_DATA, HEARTBEAT_DATA, MavAutopilot, MavCmd, MavModeFlag, MavState, MavType,
     };
 
-    fn heartbeat() -> MavMessage {
+    /// A PX4 quadrotor's heartbeat in OFFBOARD, standby.
+    pub(crate) fn heartbeat() -> MavMessage {
         MavMessage::HEARTBEAT(HEARTBEAT_DATA {
             custom_mode: 6 << 16,
             mavtype: MavType::MAV_TYPE_QUADROTOR,

@@ -1,8 +1,7 @@
 use super::*;
+use crate::codec::tests::heartbeat;
 use crate::codec::{Encoder, decode_datagram, decode_datagram_with};
-use mavlink::dialects::common::{
-    HEARTBEAT_DATA, MavAutopilot, MavMessage, MavModeFlag, MavState, MavType, TIMESYNC_DATA,
-};
+use mavlink::dialects::common::{MavMessage, TIMESYNC_DATA};
 
 fn key(first: u8) -> SigningKey {
     let mut bytes = [0u8; 32];
@@ -10,17 +9,6 @@ fn key(first: u8) -> SigningKey {
         *b = first.wrapping_add(i as u8);
     }
     SigningKey::from_bytes(bytes)
-}
-
-fn heartbeat() -> MavMessage {
-    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-        custom_mode: 6 << 16,
-        mavtype: MavType::MAV_TYPE_QUADROTOR,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
-        base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-        system_status: MavState::MAV_STATE_STANDBY,
-        mavlink_version: 3,
-    })
 }
 
 /// A TIMESYNC (message id 111), not let through unsigned.

@@ -1,0 +1,39 @@
+//! What several integration tests build the same way.
+
+use ringswarm::config::Config;
+use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
+use ringswarm::swarm::Swarm;
+use ringswarm_sitl::autopilot::Vehicle;
+use ringswarm_sitl::keystore::StoredKey;
+use ringswarm_wire::signing::SigningKey;
+
+/// A signing stamp in 2026 (10 µs units since 2015): both sides start from it, as `fly`
+/// and `sitl` start from the wall clock.
+pub const START: u64 = 36_000_000_000_000;
+
+/// paper-sim1 in lockstep, the coordinator signing with `coordinator` (or not) and
+/// vehicle `i` holding `vehicle_keys[i]` (or no key).
+pub fn signed_paper_sim1(
+    coordinator: Option<&SigningKey>,
+    vehicle_keys: &[Option<SigningKey>],
+) -> Lockstep {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml");
+    let config = Config::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut setup = config.validate().unwrap();
+    if let Some(key) = coordinator {
+        ringswarm::security::sign_links(&mut setup.links, key, START);
+    }
+    let (world, vehicles) = config.emulator().unwrap();
+    let vehicles = vehicles
+        .into_iter()
+        .zip(vehicle_keys)
+        .map(|(mut v, key)| {
+            v.signing = key.clone().map(|key| StoredKey {
+                key,
+                timestamp: START,
+            });
+            Vehicle::new(v, world).unwrap()
+        })
+        .collect();
+    Lockstep::new(Swarm::new(setup), vehicles, LinkConditions::default())
+}
