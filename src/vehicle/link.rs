@@ -6,17 +6,19 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use mavlink::dialects::common::{MavCmd, MavMessage};
-use ringswarm_wire::signing::Signing;
 use ringswarm_wire::time::SimTime;
 
 use super::telemetry::{OriginVerdict, PositionVerdict, TelemetryGate};
 use super::{LinkConfig, LinkEvent, Phase, Setpoint, VehicleState};
 use crate::link::{
-    AUTOPILOT_PX4, Encoder, Frame, Inbound, autopilot_name, decode_datagram_with, gcs_heartbeat,
-    inbound, set_attitude_target, set_position_target_acceleration,
+    AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, decode_datagram_with, gcs_heartbeat, inbound,
+    set_attitude_target, set_position_target_acceleration,
 };
 
 mod commands;
+mod signer;
+
+use signer::Signer;
 
 /// A command waiting for its acknowledgement.
 #[derive(Debug, Clone, Copy)]
@@ -40,11 +42,7 @@ pub struct VehicleLink {
     next_heartbeat: SimTime,
     pending: Option<Pending>,
     encoder: Encoder,
-    signing: Option<Signing>,
-    refused_frames: u64,
-    signing_warned: bool,
-    /// The link id the vehicle signs its frames to us with (its first authentic one).
-    vehicle_link_id: Option<u8>,
+    signer: Option<Signer>,
     outbox: VecDeque<Vec<u8>>,
     events: VecDeque<LinkEvent>,
     ignored_frames: u64,
@@ -70,15 +68,8 @@ impl VehicleLink {
     /// takes over (normally level at hover throttle, or zero acceleration).
     pub fn new(cfg: LinkConfig, idle: impl Into<Setpoint>) -> Self {
         let encoder = Encoder::new(cfg.own_ids.0, cfg.own_ids.1);
-        let signing = cfg
-            .signing
-            .as_ref()
-            .map(|s| Signing::new(s.key.clone(), s.timestamp_at_zero));
         Self {
-            signing,
-            refused_frames: 0,
-            signing_warned: false,
-            vehicle_link_id: None,
+            signer: cfg.signing.as_ref().map(Signer::new),
             cfg,
             phase: Phase::Discovering,
             state: VehicleState::default(),
@@ -106,54 +97,28 @@ impl VehicleLink {
 
     /// Frames from the vehicle refused by the signing rules.
     pub fn refused_frames(&self) -> u64 {
-        self.refused_frames
+        self.signer.as_ref().map_or(0, |s| s.refused)
     }
 
     /// The timestamp the next signed frame gets, if the link signs (what a restart must
     /// stay above).
     pub fn signing_timestamp(&self) -> Option<u64> {
-        self.signing.as_ref().map(Signing::timestamp)
+        self.signer.as_ref().map(Signer::timestamp)
     }
 
     /// Moves the signing clock to `now`.
     fn clock(&mut self, now: SimTime) {
-        if let (Some(signing), Some(cfg)) = (self.signing.as_mut(), self.cfg.signing.as_ref()) {
-            signing.advance_to(cfg.timestamp_at_zero + now.as_micros() / 10);
+        if let Some(signer) = self.signer.as_mut() {
+            signer.clock(now);
         }
-    }
-
-    /// Whether `frame` passes the signing rules (always, when the link does not sign).
-    /// The vehicle talks to us over one of its MAVLink instances: the link id of its first
-    /// authentic frame is taken as that instance's, and an authentic frame of the vehicle
-    /// from another link id (its telemetry to another station, replayed to us) is refused.
-    fn check_signature(&mut self, frame: &Frame) -> Result<(), String> {
-        let Some(signing) = self.signing.as_mut() else {
-            return Ok(());
-        };
-        let ours = frame.header.system_id == u32::from(self.cfg.system_id);
-        if let (Some(t), Some(expected), true) = (frame.signature, self.vehicle_link_id, ours)
-            && t.authentic
-            && t.link_id != expected
-        {
-            return Err(format!(
-                "signed on link id {}, but the vehicle talks to us on link id {expected}",
-                t.link_id
-            ));
-        }
-        signing.accept(frame, &[]).map_err(|why| why.to_string())?;
-        if let (Some(t), true) = (frame.signature, ours) {
-            self.vehicle_link_id.get_or_insert(t.link_id);
-        }
-        Ok(())
     }
 
     /// Encodes `msg` (signed when the link signs) and queues it.
     fn queue(&mut self, msg: &MavMessage) {
-        let signing = match (self.signing.as_mut(), self.cfg.signing.as_ref()) {
-            (Some(signing), Some(cfg)) => Some((signing, cfg.link_id)),
-            _ => None,
+        let bytes = match self.signer.as_mut() {
+            Some(signer) => signer.encode(&mut self.encoder, msg),
+            None => self.encoder.encode(msg),
         };
-        let bytes = self.encoder.encode_maybe_signed(msg, signing);
         self.outbox.push_back(bytes);
     }
 
@@ -307,16 +272,18 @@ impl VehicleLink {
     /// Handles one datagram from the vehicle's address.
     pub fn handle_datagram(&mut self, now: SimTime, bytes: &[u8]) {
         self.clock(now);
-        let key = self.signing.as_ref().map(|s| s.key().clone());
+        let key = self.signer.as_ref().map(|s| s.key().clone());
         for frame in decode_datagram_with(bytes, key.as_ref()) {
             let Ok(frame) = frame else {
                 self.ignored_frames += 1;
                 continue;
             };
-            if let Err(why) = self.check_signature(&frame) {
-                self.refused_frames += 1;
-                if !self.signing_warned {
-                    self.signing_warned = true;
+            if let Some(signer) = self.signer.as_mut()
+                && let Err(why) = signer.check(&frame, self.cfg.system_id)
+            {
+                signer.refused += 1;
+                if !signer.reported {
+                    signer.reported = true;
                     self.events.push_back(LinkEvent::SigningRefused(why));
                 }
                 continue;
