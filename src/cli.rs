@@ -175,6 +175,9 @@ pub struct AnalyzeArgs {
     /// The control rate (Hz) for the bandwidth gate.
     #[arg(long, default_value_t = 50.0)]
     pub control_rate: f64,
+    /// List every eigenvalue of L and the left null vector (listed anyway up to 64 agents).
+    #[arg(long)]
+    pub eigenvalues: bool,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,

@@ -74,6 +74,7 @@ fn analyze(args: &AnalyzeArgs) -> anyhow::Result<bool> {
         design_k: args.design_k,
         gain_margin: args.gain_margin,
         airframe: args.attitude_bandwidth.map(|a| (a, args.control_rate)),
+        list_eigenvalues: args.eigenvalues,
     })?;
     if args.json {
         emit(&serde_json::to_string_pretty(&output)?)?;

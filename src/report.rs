@@ -9,14 +9,16 @@ use serde::Serialize;
 
 use crate::consensus::{
     BandwidthCheck, CouplingGains, PlanOutcome, PlanRequest, RingDigraph, StabilityReport, analyze,
-    check_bandwidth, fastest_mode_per_s, nonzero_eigenvalues, numeric_k_lower_bound, plan,
-    recommend_gains,
+    check_bandwidth, fastest_mode_per_s, numeric_k_lower_bound, plan, recommend_gains,
 };
 use crate::error::InputError;
 
-/// The largest ring `analyze` accepts (a dense `2m × 2m` eigenvalue problem, plus a
-/// numeric bisection on it).
-pub const MAX_ANALYZE_MACRO_VERTICES: usize = 256;
+/// The largest ring `analyze` accepts: everything is `O(m)` (the Fourier blocks), about
+/// 0.3 s per million macro-vertices; this keeps memory under a gigabyte.
+pub const MAX_ANALYZE_MACRO_VERTICES: usize = 10_000_000;
+
+/// Up to this many agents `analyze` lists the eigenvalues and `w` without being asked.
+pub const LISTED_AGENTS: usize = 64;
 
 /// Tolerance of the numeric cross-check of the bound on `k`.
 const NUMERIC_BOUND_TOLERANCE: f64 = 1e-9;
@@ -36,6 +38,8 @@ pub struct AnalyzeRequest {
     pub gain_margin: f64,
     /// Attitude bandwidth (rad/s) and control rate (Hz) for the bandwidth gate.
     pub airframe: Option<(f64, f64)>,
+    /// List every eigenvalue and `w` even above [`LISTED_AGENTS`].
+    pub list_eigenvalues: bool,
 }
 
 /// Recommended gains in the output.
@@ -68,10 +72,16 @@ pub struct AnalyzeOutput {
     pub k_min_numeric: f64,
     /// `k − k_min`.
     pub k_margin: f64,
-    /// Eigenvalues of `L` as `[re, im]`, sorted by real part.
-    pub laplacian_eigenvalues: Vec<[f64; 2]>,
-    /// The left null vector `w`.
-    pub w: Vec<f64>,
+    /// Eigenvalues of `L` as `[re, im]`, sorted by real part (`null` when not listed:
+    /// above [`LISTED_AGENTS`] without `--eigenvalues`).
+    pub laplacian_eigenvalues: Option<Vec<[f64; 2]>>,
+    /// The smallest real part over the non-zero eigenvalues (how fast the slowest mode
+    /// of `L` decays; negative when `L` is unstable).
+    pub smallest_nonzero_real_part: f64,
+    /// The largest modulus over the eigenvalues.
+    pub largest_modulus: f64,
+    /// The left null vector `w = (1, 1+k, 1, 1+k, …)` (`null` when not listed).
+    pub w: Option<Vec<f64>>,
     /// Yu's bound on `β²/α` (`null` when `L` is unstable).
     pub yu_bound: Option<f64>,
     /// `α`, when given.
@@ -161,7 +171,7 @@ pub fn run_analyze(request: &AnalyzeRequest) -> Result<AnalyzeOutput, InputError
                     return Err(InputError::OutOfRange { name, range, value });
                 }
             }
-            let mu = nonzero_eigenvalues(&report.laplacian_eigenvalues);
+            let mu = report.spectrum.nonzero_up_to_conjugation();
             Some(check_bandwidth(
                 fastest_mode_per_s(&mu, gains),
                 attitude,
@@ -171,6 +181,8 @@ pub fn run_analyze(request: &AnalyzeRequest) -> Result<AnalyzeOutput, InputError
         _ => None,
     };
     let check = report.gain_check.as_ref();
+    let listed = request.list_eigenvalues || ring.agents() <= LISTED_AGENTS;
+    let nonzero = report.spectrum.nonzero_up_to_conjugation();
     Ok(AnalyzeOutput {
         macro_vertices: report.macro_vertices,
         agents: ring.agents(),
@@ -178,12 +190,17 @@ pub fn run_analyze(request: &AnalyzeRequest) -> Result<AnalyzeOutput, InputError
         k_min: report.k_min,
         k_min_numeric: numeric_k_lower_bound(request.macro_vertices, NUMERIC_BOUND_TOLERANCE)?,
         k_margin: report.k_margin,
-        laplacian_eigenvalues: report
-            .laplacian_eigenvalues
-            .iter()
-            .map(|z| [z.re, z.im])
-            .collect(),
-        w: report.w.clone(),
+        laplacian_eigenvalues: listed.then(|| {
+            report
+                .spectrum
+                .eigenvalues()
+                .iter()
+                .map(|z| [z.re, z.im])
+                .collect()
+        }),
+        smallest_nonzero_real_part: nonzero.iter().map(|z| z.re).fold(f64::INFINITY, f64::min),
+        largest_modulus: nonzero.iter().map(|z| z.norm()).fold(0.0, f64::max),
+        w: listed.then(|| (0..ring.agents()).map(|i| ring.w(i)).collect()),
         yu_bound: report.yu_bound,
         alpha: gains.map(|g| g.alpha),
         beta: gains.map(|g| g.beta),
@@ -218,12 +235,34 @@ impl fmt::Display for AnalyzeOutput {
             "  k is {side} the bound: margin k - k_min = {:+.6}",
             self.k_margin
         )?;
-        writeln!(f, "eigenvalues of L:")?;
-        for [re, im] in &self.laplacian_eigenvalues {
-            writeln!(f, "  {re:+.6} {im:+.6}i")?;
+        match (&self.laplacian_eigenvalues, &self.w) {
+            (Some(eigenvalues), Some(w)) => {
+                writeln!(f, "eigenvalues of L:")?;
+                for [re, im] in eigenvalues {
+                    writeln!(f, "  {re:+.6} {im:+.6}i")?;
+                }
+                let w: Vec<String> = w.iter().map(|x| format!("{x}")).collect();
+                writeln!(f, "left null vector w = ({})", w.join(", "))?;
+            }
+            _ => {
+                writeln!(
+                    f,
+                    "eigenvalues of L: {} from {} Fourier blocks (list them with --eigenvalues)",
+                    self.agents, self.macro_vertices
+                )?;
+                writeln!(
+                    f,
+                    "left null vector w = (1, {}, 1, {}, ...)",
+                    1.0 + self.k,
+                    1.0 + self.k
+                )?;
+            }
         }
-        let w: Vec<String> = self.w.iter().map(|x| format!("{x}")).collect();
-        writeln!(f, "left null vector w = ({})", w.join(", "))?;
+        writeln!(
+            f,
+            "  smallest non-zero real part {:+.6e}, largest modulus {:.6}",
+            self.smallest_nonzero_real_part, self.largest_modulus
+        )?;
         match self.yu_bound {
             Some(bound) => writeln!(f, "Yu's bound: beta^2/alpha > {bound:.6}")?,
             None => writeln!(

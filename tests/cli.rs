@@ -46,6 +46,42 @@ fn analyze_example_1_is_stable() {
 }
 
 #[test]
+fn analyze_a_ring_of_two_hundred_thousand_without_listing_it() {
+    let out = ringswarm(&["analyze", "-m", "100000", "-k", "1", "--json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let v = json(&out);
+    assert_eq!(v["agents"], serde_json::json!(200_000));
+    assert!(v["laplacian_eigenvalues"].is_null() && v["w"].is_null());
+    // Large-ring asymptote of Yu's bound, 2c³/((c² − 2)θ²) with c = 3, θ = 2π/m
+    // (tests/properties.rs derives it; the remainder is 5·10⁻¹⁰ here).
+    let theta = 2.0 * std::f64::consts::PI / 100_000.0;
+    let asymptote = 54.0 / (7.0 * theta * theta);
+    let bound = v["yu_bound"].as_f64().unwrap();
+    assert!(
+        (bound / asymptote - 1.0).abs() < 2e-9,
+        "{bound} vs {asymptote}"
+    );
+    // The slowest mode: Re μ ≈ θ²(c² − 2)/(2c³) = 7θ²/54.
+    let slowest = v["smallest_nonzero_real_part"].as_f64().unwrap();
+    assert!(
+        (slowest / (7.0 * theta * theta / 54.0) - 1.0).abs() < 1e-6,
+        "{slowest}"
+    );
+    assert!((v["largest_modulus"].as_f64().unwrap() - 3.0).abs() < 1e-12);
+    let k_min = -2.0 + std::f64::consts::SQRT_2 * (std::f64::consts::PI / 100_000.0).cos();
+    assert!((v["k_min_numeric"].as_f64().unwrap() - k_min).abs() < 1e-8);
+    // Listing is asked for: all 2m eigenvalues.
+    let out = ringswarm(&["analyze", "-m", "40", "-k", "1", "--eigenvalues", "--json"]);
+    assert_eq!(
+        json(&out)["laplacian_eigenvalues"]
+            .as_array()
+            .unwrap()
+            .len(),
+        80
+    );
+}
+
+#[test]
 fn analyze_unstable_gains_exit_with_one() {
     let out = ringswarm(&[
         "analyze", "-m", "4", "-k", "-0.8", "--alpha", "1", "--beta", "3", "--json",

@@ -5,9 +5,10 @@ use nalgebra::{Complex, DMatrix, DVector, SVector, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use ringswarm::consensus::{
-    CouplingGains, HorizontalState, RingDigraph, closed_loop_abscissa, closed_loop_matrix,
-    eigenvalues, k_lower_bound, laplacian_is_stable_numerically, nonzero_eigenvalues,
-    numeric_k_lower_bound, predicted_final_velocity, recommend_gains, ring_accelerations, yu_bound,
+    CouplingGains, HorizontalState, RingDigraph, RingSpectrum, closed_loop_abscissa,
+    closed_loop_matrix, eigenvalues, k_lower_bound, laplacian_is_stable_numerically,
+    nonzero_eigenvalues, numeric_k_lower_bound, predicted_final_velocity, recommend_gains,
+    ring_accelerations, yu_bound,
 };
 use ringswarm::control::{Envelope, SaturationMode, VehicleModel, saturate};
 
@@ -77,6 +78,84 @@ fn numeric_spectrum_equals_the_block_circulant_spectrum_and_w_is_a_left_null_vec
             );
         }
     }
+}
+
+#[test]
+fn fourier_block_spectrum_equals_the_dense_one_for_m_up_to_64() {
+    let mut r = rng(3);
+    for m in 1..=64 {
+        for _ in 0..3 {
+            let k = r.random_range(-2.5..6.0);
+            let ring = RingDigraph::new(m, k).unwrap();
+            let blocks = RingSpectrum::of(&ring);
+            let ours = blocks.eigenvalues();
+            let mut dense = eigenvalues(ring.laplacian()).unwrap();
+            assert_eq!(ours.len(), dense.len());
+            // One to one: each block eigenvalue takes the nearest dense one left.
+            for mu in &ours {
+                let (at, distance) = dense
+                    .iter()
+                    .enumerate()
+                    .map(|(i, z)| (i, (z - mu).norm()))
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .unwrap();
+                assert!(distance < 1e-9, "m = {m}, k = {k}: {mu} off by {distance}");
+                dense.swap_remove(at);
+            }
+            // The quantities built on them, from half the spectrum and from the whole.
+            let dense_nonzero = nonzero_eigenvalues(&eigenvalues(ring.laplacian()).unwrap());
+            let half = blocks.nonzero_up_to_conjugation();
+            assert_eq!(
+                blocks.is_stable(),
+                yu_bound(&dense_nonzero).is_some(),
+                "m = {m}, k = {k}"
+            );
+            if let (Some(a), Some(b)) = (yu_bound(&half), yu_bound(&dense_nonzero)) {
+                assert!((a - b).abs() <= 1e-9 * b.max(1.0), "Yu's bound {a} vs {b}");
+            }
+            let gains =
+                CouplingGains::new(r.random_range(0.1..3.0), r.random_range(0.1..6.0)).unwrap();
+            let (a, b) = (
+                closed_loop_abscissa(&half, gains),
+                closed_loop_abscissa(&dense_nonzero, gains),
+            );
+            assert!((a - b).abs() < 1e-9, "abscissa {a} vs {b}");
+        }
+    }
+}
+
+/// For a large ring the slowest Fourier block (`θ = 2π/m`) sets Yu's bound. Expanding its
+/// small root `μ = d/c + d²/c³ + O(d³)` with `d = 1 − e^{−iθ} = iθ + θ²/2 + O(θ³)` and
+/// `c = 2 + k`: `Im μ = θ/c + O(θ³)`, `Re μ = θ²(c² − 2)/(2c³) + O(θ⁴)`, so
+/// `Im²/(Re·|μ|²) = 2c³/((c² − 2)θ²)·(1 + O(θ²))` (checked with 50-digit arithmetic:
+/// the relative remainder is 5.3·10⁻¹⁰ at m = 10⁵, k = 1).
+#[test]
+fn a_ring_of_a_hundred_thousand_keeps_its_trace_yu_asymptote_and_bound() {
+    let (m, k) = (100_000, 1.0);
+    let ring = RingDigraph::new(m, k).unwrap();
+    let spectrum = RingSpectrum::of(&ring);
+    let all = spectrum.eigenvalues();
+    assert_eq!(all.len(), 2 * m);
+    // trace(L) = Σ L_ii = m(1 + k) + m.
+    let trace: Complex<f64> = all.iter().sum();
+    let expected_trace = m as f64 * (2.0 + k);
+    assert!(
+        (trace.re - expected_trace).abs() < 1e-9 * expected_trace,
+        "{trace}"
+    );
+    assert!(trace.im.abs() < 1e-6, "{trace}");
+    let c: f64 = 2.0 + k;
+    let theta = 2.0 * std::f64::consts::PI / m as f64;
+    let asymptote = 2.0 * c.powi(3) / ((c * c - 2.0) * theta * theta);
+    let bound = yu_bound(&spectrum.nonzero_up_to_conjugation()).unwrap();
+    assert!(
+        (bound / asymptote - 1.0).abs() < 2e-9,
+        "{bound} vs {asymptote}"
+    );
+    // The bisection on the blocks finds Theorem 1's bound for a large ring too.
+    let numeric = numeric_k_lower_bound(m, 1e-10).unwrap();
+    let formula = k_lower_bound(m).unwrap();
+    assert!((numeric - formula).abs() < 1e-9, "{numeric} vs {formula}");
 }
 
 #[test]

@@ -1,19 +1,16 @@
 //! The bandwidth gate of a configuration: can its vehicles fly its gains at its control
 //! rate? ([`crate::consensus::check_bandwidth`] has the rule and its calibration.)
 
-use nalgebra::Complex;
-
 use super::Config;
 use crate::consensus::{
-    BandwidthCheck, CouplingGains, RingDigraph, check_bandwidth, eigenvalues, fastest_mode_per_s,
-    nonzero_eigenvalues,
+    BandwidthCheck, CouplingGains, RingDigraph, RingSpectrum, check_bandwidth, fastest_mode_per_s,
 };
 use crate::swarm::SwarmSetup;
 
 impl Config {
     /// The gate for the gains as flown (time scale applied), against the slowest
     /// vehicle's attitude bandwidth and the control rate. Call it on a validated config;
-    /// [`Config::validate`] runs the same gate on the eigenvalues it already has and puts
+    /// [`Config::validate`] runs the same gate on the spectrum it already has and puts
     /// it in the setup.
     ///
     /// # Errors
@@ -24,20 +21,19 @@ impl Config {
         let c = g.time_scale;
         let ring = RingDigraph::for_agents(self.vehicle.len(), g.k).map_err(|e| e.to_string())?;
         let gains = CouplingGains::new(g.alpha * c * c, g.beta * c).map_err(|e| e.to_string())?;
-        let eigs = eigenvalues(ring.laplacian()).map_err(|e| e.to_string())?;
-        self.bandwidth_from(&eigs, gains)
+        self.bandwidth_from(&RingSpectrum::of(&ring), gains)
     }
 
-    /// The gate from the Laplacian's eigenvalues and the gains as flown.
+    /// The gate from the Laplacian's spectrum and the gains as flown.
     ///
     /// # Errors
     /// A vehicle without a bandwidth, named.
     pub(super) fn bandwidth_from(
         &self,
-        laplacian_eigenvalues: &[Complex<f64>],
+        spectrum: &RingSpectrum,
         gains: CouplingGains,
     ) -> Result<BandwidthCheck, String> {
-        let mu = nonzero_eigenvalues(laplacian_eigenvalues);
+        let mu = spectrum.nonzero_up_to_conjugation();
         Ok(check_bandwidth(
             fastest_mode_per_s(&mu, gains),
             self.slowest_attitude_bandwidth_rps()?,

@@ -116,9 +116,7 @@ impl Config {
         if let (Some(ring), Some(gains)) = (&ring, gains) {
             let analysis = analyze(ring, Some(gains));
             if let Ok(report) = &analysis {
-                bandwidth = self
-                    .bandwidth_from(&report.laplacian_eigenvalues, gains)
-                    .ok();
+                bandwidth = self.bandwidth_from(&report.spectrum, gains).ok();
             }
             match analysis {
                 Ok(report) if !report.stable => p.push(format!(

@@ -7,8 +7,9 @@
 //! refined around its worst point, then multiplied by `1 + margin`. `α` is fixed at 1 and
 //! `β = √((1 + margin)·bound)`. Pure: no I/O.
 
-use super::graph::{RingDigraph, check_finite};
-use super::stability::{CouplingGains, eigenvalues, k_lower_bound, nonzero_eigenvalues, yu_bound};
+use super::graph::check_finite;
+use super::spectrum::RingModes;
+use super::stability::{CouplingGains, k_lower_bound, yu_bound};
 use crate::error::ConsensusError;
 
 /// Grid points over `[k̂, k]` before refinement.
@@ -55,16 +56,18 @@ pub fn recommend_gains(
     if !(design_k > k_min && design_k <= k) {
         return Err(ConsensusError::BadDesignGain { design_k, k, k_min });
     }
+    let modes = RingModes::new(macro_vertices);
     let bound_at = |kk: f64| -> Result<f64, ConsensusError> {
-        let ring = RingDigraph::new(macro_vertices, kk)?;
-        let eigs = eigenvalues(ring.laplacian())?;
+        check_finite("k", kk)?;
         // Inside (k_min, ∞) the Laplacian is stable, so the bound exists; an infinite
         // value would only mean an eigenvalue on the imaginary axis.
-        Ok(yu_bound(&nonzero_eigenvalues(&eigs)).unwrap_or(f64::INFINITY))
+        Ok(yu_bound(&modes.spectrum(kk).nonzero_up_to_conjugation()).unwrap_or(f64::INFINITY))
     };
+    // A design at k alone (the usual case) needs one evaluation, not a grid.
+    let points = if k > design_k { GRID_POINTS } else { 1 };
     let step = (k - design_k) / (GRID_POINTS - 1) as f64;
     let mut worst = (design_k, bound_at(design_k)?);
-    for i in 1..GRID_POINTS {
+    for i in 1..points {
         let kk = design_k + step * i as f64;
         let b = bound_at(kk)?;
         if b > worst.1 {
@@ -103,7 +106,8 @@ pub fn recommend_gains(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::consensus::stability::closed_loop_abscissa;
+    use crate::consensus::RingDigraph;
+    use crate::consensus::stability::{closed_loop_abscissa, eigenvalues, nonzero_eigenvalues};
 
     #[test]
     fn design_at_k_alone_meets_the_bound_with_the_margin() {

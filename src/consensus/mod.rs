@@ -8,6 +8,7 @@ mod design;
 mod graph;
 mod law;
 mod planner;
+mod spectrum;
 mod stability;
 mod velocity;
 
@@ -20,6 +21,7 @@ pub use law::{HorizontalState, consensus_acceleration, ring_accelerations};
 pub use planner::{
     AgentClass, Plan, PlanOutcome, PlanRequest, Retarget, g_and_h, plan, retarget_velocity,
 };
+pub use spectrum::{RingModes, RingSpectrum};
 pub use stability::{
     CouplingGains, GainCheck, StabilityReport, analyze, closed_loop_abscissa,
     closed_loop_eigenvalues, closed_loop_matrix, eigenvalues, k_lower_bound,

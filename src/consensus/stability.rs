@@ -11,12 +11,14 @@
 //!   gives the double zero of the drifting consensus. Its spectral abscissa here means
 //!   the largest real part over all the other eigenvalues.
 //!
-//! Every formula is cross-checked numerically (dense eigenvalues from faer). Pure: no
-//! I/O, no logging.
+//! The spectrum comes from the ring's Fourier blocks in `O(m)` ([`RingSpectrum`]); every
+//! formula is cross-checked in tests against dense eigenvalues (faer) of the `2m × 2m`
+//! Laplacian. Pure: no I/O, no logging.
 
-use nalgebra::{Complex, DMatrix, DVector};
+use nalgebra::{Complex, DMatrix};
 
 use super::graph::{RingDigraph, check_finite};
+use super::spectrum::{RingModes, RingSpectrum};
 use crate::error::ConsensusError;
 
 /// The coupling strengths of the law `u = −αL(p−d) − βLv`, both strictly positive.
@@ -145,25 +147,24 @@ pub fn closed_loop_matrix(laplacian: &DMatrix<f64>, gains: CouplingGains) -> DMa
     a
 }
 
-/// Whether every non-zero eigenvalue of `L(m, k)`, computed numerically, has a positive
-/// real part.
+/// Whether every non-zero eigenvalue of `L(m, k)`, computed from the Fourier blocks, has a
+/// positive real part.
 ///
 /// # Errors
-/// As [`RingDigraph::new`] and [`eigenvalues`].
+/// As [`RingDigraph::new`].
 pub fn laplacian_is_stable_numerically(
     macro_vertices: usize,
     k: f64,
 ) -> Result<bool, ConsensusError> {
-    let ring = RingDigraph::new(macro_vertices, k)?;
-    let eigs = eigenvalues(ring.laplacian())?;
-    Ok(nonzero_eigenvalues(&eigs).iter().all(|mu| mu.re > 0.0))
+    RingDigraph::new(macro_vertices, k)?;
+    Ok(RingModes::new(macro_vertices).is_stable(k))
 }
 
-/// The stability threshold on `k` found by bisection on numerically computed eigenvalues
-/// (independent of the closed form), to within `tolerance`.
+/// The stability threshold on `k` found by bisection on the eigenvalues of the Fourier
+/// blocks (independent of Theorem 1's closed form), to within `tolerance`: `O(m)` per step.
 ///
 /// # Errors
-/// As [`laplacian_is_stable_numerically`]; [`ConsensusError::NotPositive`] for a
+/// [`ConsensusError::NoMacroVertices`] for `m = 0`; [`ConsensusError::NotPositive`] for a
 /// tolerance that is not positive.
 pub fn numeric_k_lower_bound(macro_vertices: usize, tolerance: f64) -> Result<f64, ConsensusError> {
     if tolerance.is_nan() || tolerance <= 0.0 {
@@ -172,12 +173,14 @@ pub fn numeric_k_lower_bound(macro_vertices: usize, tolerance: f64) -> Result<f6
             value: tolerance,
         });
     }
+    RingDigraph::new(macro_vertices, 0.0)?;
+    let modes = RingModes::new(macro_vertices);
     // k = 0 is the plain directed cycle (stable for every m); below k = −2 the eigenvalue
     // 2+k of the first Fourier block is negative (unstable for every m).
     let (mut unstable, mut stable) = (-2.5_f64, 0.0_f64);
     while stable - unstable > tolerance {
         let mid = 0.5 * (stable + unstable);
-        if laplacian_is_stable_numerically(macro_vertices, mid)? {
+        if modes.is_stable(mid) {
             stable = mid;
         } else {
             unstable = mid;
@@ -210,10 +213,8 @@ pub struct StabilityReport {
     pub k_min: f64,
     /// `k − k_min`: positive when `L` is stable.
     pub k_margin: f64,
-    /// Eigenvalues of `L`, sorted by real part.
-    pub laplacian_eigenvalues: Vec<Complex<f64>>,
-    /// The left null vector `w`.
-    pub w: Vec<f64>,
+    /// The eigenvalues of `L`, from its Fourier blocks.
+    pub spectrum: RingSpectrum,
     /// Yu's bound on `β²/α`; `None` when `L` is unstable.
     pub yu_bound: Option<f64>,
     /// The gain check, when gains were given.
@@ -227,14 +228,14 @@ pub struct StabilityReport {
 /// An unstable `k` is an answer (with a negative margin), not an error.
 ///
 /// # Errors
-/// Only for invalid inputs ([`RingDigraph::new`]) or a failed eigenvalue computation.
+/// Only for invalid inputs ([`RingDigraph::new`]).
 pub fn analyze(
     ring: &RingDigraph,
     gains: Option<CouplingGains>,
 ) -> Result<StabilityReport, ConsensusError> {
     let k_min = k_lower_bound(ring.macro_vertices())?;
-    let eigs = eigenvalues(ring.laplacian())?;
-    let nonzero = nonzero_eigenvalues(&eigs);
+    let spectrum = RingSpectrum::of(ring);
+    let nonzero = spectrum.nonzero_up_to_conjugation();
     let yu = yu_bound(&nonzero);
     let laplacian_stable = yu.is_some();
     let gain_check = gains.map(|gains| {
@@ -255,8 +256,7 @@ pub fn analyze(
         k: ring.k(),
         k_min,
         k_margin: ring.k() - k_min,
-        laplacian_eigenvalues: eigs,
-        w: DVector::iter(&ring.left_null_vector()).copied().collect(),
+        spectrum,
         yu_bound: yu,
         gain_check,
         stable,

@@ -6,8 +6,7 @@ use ringswarm_wire::time::SimTime;
 
 use super::{PlanDecision, Retargeted, Swarm, SwarmPhase, TargetVelocity};
 use crate::consensus::{
-    PlanOutcome, PlanRequest, RingDigraph, analyze, eigenvalues, fastest_mode_per_s, k_lower_bound,
-    nonzero_eigenvalues,
+    PlanOutcome, PlanRequest, RingDigraph, RingModes, analyze, fastest_mode_per_s, k_lower_bound,
 };
 
 impl Swarm {
@@ -113,10 +112,10 @@ impl Swarm {
             return Ok(target.k_max);
         };
         let m = self.setup.ring.macro_vertices();
+        let modes = RingModes::new(m);
         let fastest = |k: f64| -> Result<f64, String> {
-            let ring = RingDigraph::new(m, k).map_err(|e| e.to_string())?;
-            let mu =
-                nonzero_eigenvalues(&eigenvalues(ring.laplacian()).map_err(|e| e.to_string())?);
+            RingDigraph::new(m, k).map_err(|e| e.to_string())?;
+            let mu = modes.spectrum(k).nonzero_up_to_conjugation();
             Ok(fastest_mode_per_s(&mu, self.setup.gains))
         };
         if fastest(target.k_max)? <= allowed {
