@@ -233,8 +233,8 @@ impl Observer for DemoObserver {
 /// `--realtime`: the emulated vehicles on PX4's SITL ports in this process, the
 /// coordinator flying them over real UDP sockets (like `sitl` + `fly` in two terminals).
 fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> {
-    use ringswarm_sitl::udp::{LinkFaults, SimClock, VehicleTask, bind, px4_ports, run_vehicle};
-    use tokio::sync::{mpsc, watch};
+    use ringswarm_sitl::udp::{FleetVehicle, LinkFaults, SimClock, spawn_shards};
+    use tokio::sync::watch;
 
     let setup = config
         .validate()
@@ -248,7 +248,10 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
         eprintln!("note: [[emulator.silence]] applies to lockstep runs only");
     }
     let faults = LinkFaults::from_percent_and_ms(e.loss_pct, e.latency_ms, e.jitter_ms, 0.0);
-    let endpoints = config.all_udp_endpoints().map_err(anyhow::Error::msg)?;
+    let transport = config.transport_plan().map_err(anyhow::Error::msg)?;
+    let placements = config
+        .emulator_placements()
+        .map_err(|e| anyhow::anyhow!("scenario {name}: {e}"))?;
     let epoch_s = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());
@@ -263,38 +266,26 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
     let summary = runtime.block_on(async {
         let (stop_tx, stop_rx) = watch::channel(false);
         let clock = SimClock::new(1.0);
-        let mut tasks = Vec::new();
-        let mut controls = Vec::new();
-        for (i, cfg) in vehicle_configs.into_iter().enumerate() {
+        let mut fleet = Vec::new();
+        for (i, (cfg, placement)) in vehicle_configs.into_iter().zip(placements).enumerate() {
             let vehicle = Vehicle::new(cfg, world).map_err(anyhow::Error::msg)?;
-            let plan = px4_ports(i as u16, std::net::IpAddr::from([127, 0, 0, 1]));
-            let sockets = bind(&plan)
+            let links = placement
+                .bind(faults)
                 .await
-                .with_context(|| format!("emulated vehicle {}: bind the PX4 ports", i + 1))?;
-            let (status_tx, _status_rx) = watch::channel(vehicle.status());
-            let (control_tx, control) = mpsc::channel(1);
-            controls.push(control_tx);
-            tasks.push(tokio::spawn(run_vehicle(
-                VehicleTask {
-                    vehicle,
-                    sockets,
-                    default_peers: [plan.offboard_peer, plan.gcs_peer],
-                    faults: [faults, faults],
-                    seed: e.seed.wrapping_add(i as u64),
-                    control,
-                    key_file: None,
-                },
-                clock,
-                status_tx,
-                stop_rx.clone(),
-            )));
+                .with_context(|| format!("emulated vehicle {}: bind its ports", i + 1))?;
+            let (status, _) = watch::channel(vehicle.status());
+            fleet.push(FleetVehicle {
+                vehicle,
+                links,
+                seed: e.seed.wrapping_add(i as u64),
+                key_file: None,
+                status,
+            });
         }
-        let summary = crate::fly_cmd::fly(Swarm::new(setup), endpoints, &out, None).await;
+        let shards = spawn_shards(fleet, crate::sitl_cmd::cores(), clock, &stop_rx);
+        let summary = crate::fly_cmd::fly(Swarm::new(setup), &transport, &out, None).await;
         stop_tx.send_replace(true);
-        drop(controls);
-        for task in tasks {
-            task.await.context("emulated vehicle task")??;
-        }
+        shards.join().await.context("emulated vehicles")?;
         summary
     })?;
     runtime.shutdown_background();

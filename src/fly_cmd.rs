@@ -17,6 +17,7 @@ use crate::cli::FlyArgs;
 use crate::config::Config;
 use crate::driver::Observer;
 use crate::driver::udp::{DriverCommand, run_swarm};
+use crate::link::router::{Router, TransportPlan};
 use crate::record::Recorder;
 use crate::record::metrics::Summary;
 use crate::security::FlightSigning;
@@ -61,7 +62,7 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let endpoints = config.all_udp_endpoints().map_err(anyhow::Error::msg)?;
+    let transport = config.transport_plan().map_err(anyhow::Error::msg)?;
     let out = args
         .out
         .clone()
@@ -70,7 +71,7 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("start the tokio runtime")?;
-    let summary = runtime.block_on(fly(Swarm::new(setup), endpoints, &out, signing))?;
+    let summary = runtime.block_on(fly(Swarm::new(setup), &transport, &out, signing))?;
     runtime.shutdown_background();
     println!("{}", serde_json::to_string_pretty(&summary)?);
     println!("run directory: {}", out.display());
@@ -98,23 +99,11 @@ fn default_run_dir(config: &Path) -> PathBuf {
 /// A port that cannot be bound, a run directory that cannot be written.
 pub(crate) async fn fly(
     swarm: Swarm,
-    endpoints: Vec<(std::net::SocketAddr, std::net::SocketAddr)>,
+    transport: &TransportPlan,
     out: &Path,
     signing: Option<FlightSigning>,
 ) -> anyhow::Result<Summary> {
-    let mut sockets = Vec::new();
-    let mut peers = Vec::new();
-    for (i, (peer, bind)) in endpoints.into_iter().enumerate() {
-        let socket = UdpSocket::bind(bind).await.with_context(|| {
-            format!(
-                "bind {bind} for vehicle {} (another ground station on that port? set \
-                 [[vehicle]] bind)",
-                i + 1
-            )
-        })?;
-        sockets.push(socket);
-        peers.push(peer);
-    }
+    let sockets = bind_all(transport).await?;
     let epoch_us = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as u64);
@@ -148,7 +137,8 @@ pub(crate) async fn fly(
         signing,
     };
     let wall = Instant::now();
-    let (swarm, mut observer) = run_swarm(swarm, sockets, peers, command_rx, observer).await?;
+    let router = Router::new(transport);
+    let (swarm, mut observer) = run_swarm(swarm, sockets, router, command_rx, observer).await?;
     observer.keep_signing_clock(&swarm);
     let now = observer.last;
     let (summary, trace) = observer
@@ -160,6 +150,26 @@ pub(crate) async fn fly(
         eprintln!("plots not written: {e}");
     }
     Ok(summary)
+}
+
+/// Binds every socket of the plan, naming the one that cannot be bound.
+///
+/// # Errors
+/// The first bind error.
+pub(crate) async fn bind_all(transport: &TransportPlan) -> anyhow::Result<Vec<UdpSocket>> {
+    let mut sockets = Vec::with_capacity(transport.sockets.len());
+    for (s, plan) in transport.sockets.iter().enumerate() {
+        let bind = plan.bind;
+        let socket = UdpSocket::bind(bind).await.with_context(|| match &plan.network {
+            Some(name) => format!("bind {bind} for network \"{name}\" (another ground station on that port?)"),
+            None => format!(
+                "bind {bind} for vehicle {} (another ground station on that port? set [[vehicle]] bind)",
+                transport.routes.iter().position(|r| r.socket == s).map_or(0, |i| i + 1)
+            ),
+        })?;
+        sockets.push(socket);
+    }
+    Ok(sockets)
 }
 
 struct FlyObserver {

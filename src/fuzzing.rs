@@ -245,7 +245,9 @@ pub fn coordinator_inbound(bytes: &[u8]) -> Vec<crate::vehicle::Phase> {
                 now = now + d;
                 swarm.handle_timeout(now);
             }
-            Some(Step::Deliver(datagram)) => swarm.handle_datagram(now, link, &datagram),
+            Some(Step::Deliver(datagram)) => {
+                swarm.handle_datagram(now, link, &datagram);
+            }
             None => {}
         }
         while let Some((_, datagram)) = swarm.poll_transmit() {

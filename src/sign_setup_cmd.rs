@@ -11,6 +11,7 @@ use ringswarm_wire::time::SimTime;
 use crate::cli::SignSetupArgs;
 use crate::config::Config;
 use crate::link::provision::{Provision, ProvisionState};
+use crate::link::router::Router;
 use crate::security::FlightSigning;
 
 /// Provisions every vehicle; an error names those that did not take the key.
@@ -31,46 +32,65 @@ pub fn run(args: &SignSetupArgs) -> anyhow::Result<()> {
     };
     let signing = FlightSigning::open(key_file).map_err(anyhow::Error::msg)?;
     let own_ids = (config.swarm.gcs_system_id, config.swarm.gcs_component_id);
-    let endpoints = config.all_udp_endpoints().map_err(anyhow::Error::msg)?;
-    let mut links = Vec::new();
-    for ((peer, bind), vehicle) in endpoints.into_iter().zip(&config.vehicle) {
-        let socket = UdpSocket::bind(bind)
-            .with_context(|| format!("bind {bind} for vehicle {}", vehicle.system_id))?;
+    let transport = config.transport_plan().map_err(anyhow::Error::msg)?;
+    let mut sockets = Vec::new();
+    for plan in &transport.sockets {
+        let socket = UdpSocket::bind(plan.bind).with_context(|| format!("bind {}", plan.bind))?;
         socket
             .set_nonblocking(true)
             .context("a non-blocking socket")?;
-        let provision = Provision::new(
-            vehicle.system_id,
-            signing.key.clone(),
-            signing.start,
-            own_ids,
-        );
-        links.push((vehicle.system_id, socket, peer, provision));
+        sockets.push(socket);
     }
+    let mut router = Router::new(&transport);
+    let mut links: Vec<(u8, Provision)> = config
+        .vehicle
+        .iter()
+        .map(|v| {
+            let provision =
+                Provision::new(v.system_id, signing.key.clone(), signing.start, own_ids);
+            (v.system_id, provision)
+        })
+        .collect();
     let start = Instant::now();
     let mut buf = [0u8; 2048];
+    let mut pieces = Vec::new();
     while links
         .iter()
-        .any(|(_, _, _, p)| p.state() == &ProvisionState::Pending)
+        .any(|(_, p)| p.state() == &ProvisionState::Pending)
     {
         let now = SimTime::from_micros(start.elapsed().as_micros() as u64);
-        for (_, socket, peer, p) in &mut links {
+        for (i, (_, p)) in links.iter_mut().enumerate() {
             p.handle_timeout(now);
             while let Some(bytes) = p.poll_transmit() {
-                if let Err(e) = socket.send_to(&bytes, *peer) {
-                    tracing::warn!(%peer, error = %e, "send failed");
+                // A network vehicle not heard from yet has no address: its turn comes
+                // with the next attempt.
+                let Some((s, to)) = router.destination(i) else {
+                    continue;
+                };
+                if let Err(e) = sockets[s].send_to(&bytes, to) {
+                    tracing::warn!(%to, error = %e, "send failed");
                 }
             }
+        }
+        for (s, socket) in sockets.iter().enumerate() {
             while let Ok((n, from)) = socket.recv_from(&mut buf) {
-                if from == *peer {
-                    p.handle_datagram(&buf[..n]);
+                router.route_inbound(s, from, &buf[..n], &mut pieces);
+                for (i, range) in pieces.drain(..) {
+                    // Before the key is set nothing can vouch for a sender: the first
+                    // frame with the vehicle's id tells where it is (this runs before
+                    // a flight, on a trusted network).
+                    router.vouched(i, from, now);
+                    links[i].1.handle_datagram(&buf[range]);
                 }
             }
         }
         std::thread::sleep(Duration::from_millis(5));
     }
     let mut failed = Vec::new();
-    for (system_id, _, peer, p) in &links {
+    for (i, (system_id, p)) in links.iter().enumerate() {
+        let peer = router
+            .destination(i)
+            .map_or("address never known".to_owned(), |(_, a)| a.to_string());
         match p.state() {
             ProvisionState::Provisioned => {
                 println!("vehicle {system_id} ({peer}): key taken, its frames are signed with it");

@@ -8,17 +8,19 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use nalgebra::Vector3;
+use ringswarm_sitl::autopilot::LinkId;
 use ringswarm_sitl::autopilot::{Vehicle, VehicleConfig, VehicleStatus};
 use ringswarm_sitl::config_file::SitlConfig;
 use ringswarm_sitl::keystore::{self, StoredKey};
 use ringswarm_sitl::profile::Profile;
 use ringswarm_sitl::udp::{
-    LinkFaults, SimClock, VehicleControl, VehicleTask, bind, px4_ports, run_vehicle,
+    FleetVehicle, LinkFaults, LinkSocket, Placement, Shards, SimClock, VehicleControl, px4_ports,
+    spawn_shards,
 };
 use ringswarm_sitl::world::World;
 use ringswarm_wire::signing::{SigningKey, timestamp_now};
 use tokio::io::AsyncBufReadExt;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::watch;
 
 use crate::cli::SitlArgs;
 
@@ -29,13 +31,15 @@ use crate::cli::SitlArgs;
 /// already in use.
 pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
     let mut key_file = args.signing_key.clone();
+    let mut placements = None;
     let mut setup = match &args.config {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("read {}", path.display()))?;
-            let (config, security_key) =
+            let (config, security_key, config_placements) =
                 sitl_config(&text).map_err(|e| anyhow::anyhow!("{}:\n{e}", path.display()))?;
             key_file = key_file.or(security_key);
+            placements = config_placements;
             if let Some(n) = args
                 .vehicles
                 .filter(|n| usize::from(*n) != config.vehicles.len())
@@ -65,7 +69,22 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("start the tokio runtime")?;
-    let result = runtime.block_on(serve(args, setup));
+    let placements = match placements {
+        Some(p) => p,
+        None => (0..setup.vehicles.len())
+            .map(|i| {
+                u16::try_from(i)
+                    .ok()
+                    .filter(|i| {
+                        i.checked_add(ringswarm_wire::px4::GCS_LISTEN_PORT)
+                            .is_some()
+                    })
+                    .map(|i| Placement::Ports(px4_ports(i, args.host)))
+                    .with_context(|| format!("no PX4 port for instance {i}"))
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?,
+    };
+    let result = runtime.block_on(serve(args, setup, placements));
     // The stdin reader is a blocking read that only ends with the next line; do not wait
     // for it (every vehicle task has already been awaited).
     runtime.shutdown_background();
@@ -95,25 +114,29 @@ fn boot_key(
 }
 
 /// An emulator file, or a coordinator file (it has `[gains]`): then the emulator flies its
-/// `[[vehicle]]` start states in its `[emulator]` world, without faults, so that
+/// `[[vehicle]]` start states in its `[emulator]` world, without faults, where `fly` with
+/// the same file reaches them (its own sockets or its `[[network]]`s), so that
 /// `ringswarm sitl --config F` and `ringswarm fly --config F` go together; a coordinator
 /// file's `[security] signing_key_file` comes back with it.
-fn sitl_config(text: &str) -> Result<(SitlConfig, Option<PathBuf>), String> {
+type Emulated = (SitlConfig, Option<PathBuf>, Option<Vec<Placement>>);
+
+fn sitl_config(text: &str) -> Result<Emulated, String> {
     let is_coordinator = text
         .parse::<toml::Table>()
         .is_ok_and(|t| t.contains_key("gains"));
     if !is_coordinator {
-        return SitlConfig::from_toml(text).map(|c| (c, None));
+        return SitlConfig::from_toml(text).map(|c| (c, None, None));
     }
     let config = crate::config::Config::from_toml(text)?;
     let (world, vehicles) = config.emulator()?;
+    let placements = config.emulator_placements()?;
     let sitl = SitlConfig {
         world,
         faults: LinkFaults::default(),
         fault_seed: 1,
         vehicles,
     };
-    Ok((sitl, config.security.signing_key_file))
+    Ok((sitl, config.security.signing_key_file, Some(placements)))
 }
 
 /// The configuration the flags describe: N vehicles of one profile on the ground, 5 m
@@ -165,59 +188,54 @@ fn config_from_flags(args: &SitlArgs) -> anyhow::Result<SitlConfig> {
     })
 }
 
-async fn serve(args: &SitlArgs, setup: SitlConfig) -> anyhow::Result<()> {
+async fn serve(
+    args: &SitlArgs,
+    setup: SitlConfig,
+    placements: Vec<Placement>,
+) -> anyhow::Result<()> {
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let clock = SimClock::new(args.speed);
     let mut statuses = Vec::new();
-    let mut tasks = Vec::new();
-    let mut controls = Vec::new();
     let system_ids: Vec<u8> = setup.vehicles.iter().map(|v| v.system_id).collect();
-    println!(
-        "ringswarm sitl: {} vehicle(s), {}x real time",
-        setup.vehicles.len(),
-        args.speed
-    );
-    for (i, cfg) in setup.vehicles.into_iter().enumerate() {
+    let n = setup.vehicles.len();
+    let verbose = n <= STATUS_LINES_UP_TO;
+    println!("ringswarm sitl: {n} vehicle(s), {}x real time", args.speed);
+    let mut fleet = Vec::with_capacity(n);
+    for (i, (cfg, placement)) in setup.vehicles.into_iter().zip(placements).enumerate() {
         let system_id = cfg.system_id;
         let profile = cfg.profile.name;
         let key_file = keystore::key_path(&args.state_dir, system_id);
-        if cfg.signing.is_some() {
+        if cfg.signing.is_some() && verbose {
             println!(
                 "  vehicle {system_id}: MAVLink 2 signing on (key stored in {}): unsigned frames refused but HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION",
                 key_file.display()
             );
         }
         let vehicle = Vehicle::new(cfg, setup.world).map_err(anyhow::Error::msg)?;
-        let plan = px4_ports(i as u16, args.host);
-        let sockets = bind(&plan).await?;
-        println!(
-            "  vehicle {system_id} ({profile}): offboard/API link udp {} -> {} (MAVSDK: udpin://0.0.0.0:{}), GCS link udp {} -> {}",
-            plan.offboard_bind,
-            plan.offboard_peer,
-            plan.offboard_peer.port(),
-            plan.gcs_bind,
-            plan.gcs_peer
-        );
+        let links = placement
+            .bind(setup.faults)
+            .await
+            .with_context(|| format!("vehicle {} (system id {system_id})", i + 1))?;
+        if verbose {
+            println!(
+                "  vehicle {system_id} ({profile}): {}",
+                describe_links(&links)
+            );
+        }
         let (status_tx, status_rx) = watch::channel(vehicle.status());
         statuses.push(status_rx);
-        let (control_tx, control) = mpsc::channel(4);
-        controls.push(control_tx);
-        let task = VehicleTask {
+        fleet.push(FleetVehicle {
             vehicle,
-            sockets,
-            default_peers: [plan.offboard_peer, plan.gcs_peer],
-            faults: [setup.faults, setup.faults],
+            links,
             seed: setup.fault_seed.wrapping_add(i as u64),
-            control,
             key_file: Some(key_file),
-        };
-        tasks.push(tokio::spawn(run_vehicle(
-            task,
-            clock,
-            status_tx,
-            shutdown_rx.clone(),
-        )));
+            status: status_tx,
+        });
     }
+    if !verbose {
+        println!("  {}", placements_summary(&fleet));
+    }
+    let shards = spawn_shards(fleet, cores(), clock, &shutdown_rx);
     println!(
         "Ctrl-C stops; on stdin, \"kill N\" powers vehicle N off and \"restart N\" boots it again."
     );
@@ -236,14 +254,19 @@ async fn serve(args: &SitlArgs, setup: SitlConfig) -> anyhow::Result<()> {
             _ = &mut ctrl_c => break,
             line = stdin.next_line(), if stdin_open => match line {
                 Ok(Some(line)) => {
-                    if let Err(err) = apply_control(&line, &system_ids, &controls).await {
+                    if let Err(err) = apply_control(&line, &system_ids, &shards).await {
                         eprintln!("{err:#}");
                     }
                 }
                 _ => stdin_open = false,
             },
             _ = every.tick() => {
-                let lines: Vec<String> = statuses.iter().map(|s| status_line(&s.borrow(), clock.now().as_secs_f64())).collect();
+                let now_s = clock.now().as_secs_f64();
+                let lines: Vec<String> = if verbose {
+                    statuses.iter().map(|s| status_line(&s.borrow(), now_s)).collect()
+                } else {
+                    vec![fleet_line(&statuses, now_s)]
+                };
                 let mut out = std::io::stdout().lock();
                 if interactive && drawn > 0 {
                     write!(out, "\x1b[{drawn}A")?;
@@ -257,20 +280,14 @@ async fn serve(args: &SitlArgs, setup: SitlConfig) -> anyhow::Result<()> {
         }
     }
     shutdown_tx.send_replace(true);
-    drop(controls);
-    for task in tasks {
-        task.await.context("vehicle task")??;
-    }
+    shards.join().await.context("vehicle task")?;
     println!("stopped");
     Ok(())
 }
 
-/// Parses `kill N` / `restart N` and sends it to the vehicle with system id N.
-async fn apply_control(
-    line: &str,
-    system_ids: &[u8],
-    controls: &[mpsc::Sender<VehicleControl>],
-) -> anyhow::Result<()> {
+/// Parses `kill N` / `restart N` and sends it to the vehicle with system id N (the
+/// first with that id, when networks repeat it).
+async fn apply_control(line: &str, system_ids: &[u8], shards: &Shards) -> anyhow::Result<()> {
     let words: Vec<&str> = line.split_whitespace().collect();
     let (request, id) = match words.as_slice() {
         [] => return Ok(()),
@@ -284,11 +301,86 @@ async fn apply_control(
     let Some(index) = system_ids.iter().position(|s| *s == id) else {
         bail!("no vehicle with system id {id}");
     };
-    controls[index]
-        .send(request)
+    shards
+        .control(index, request)
         .await
-        .context("the vehicle task has stopped")?;
-    Ok(())
+        .map_err(anyhow::Error::msg)
+}
+
+/// Up to this many vehicles, one status line each; above, one line for the fleet.
+const STATUS_LINES_UP_TO: usize = 16;
+
+/// Each link's socket and where it sends.
+fn describe_links(links: &[LinkSocket]) -> String {
+    links
+        .iter()
+        .map(|l| {
+            let at = l
+                .socket
+                .local_addr()
+                .map_or("?".to_owned(), |a| a.to_string());
+            match l.id {
+                LinkId::Offboard => format!(
+                    "offboard/API link udp {at} -> {} (MAVSDK: udpin://0.0.0.0:{})",
+                    l.default_peer,
+                    l.default_peer.port()
+                ),
+                LinkId::Gcs => format!("GCS link udp {at} -> {}", l.default_peer),
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// How many vehicles there are and where they send.
+fn placements_summary(fleet: &[FleetVehicle]) -> String {
+    let mut peers: Vec<std::net::SocketAddr> = fleet
+        .iter()
+        .filter_map(|v| v.links.first().map(|l| l.default_peer))
+        .collect();
+    peers.sort();
+    peers.dedup();
+    let shown: Vec<String> = peers.iter().take(8).map(ToString::to_string).collect();
+    format!(
+        "{} vehicles on {} core(s), sending to {} address(es): {}{}",
+        fleet.len(),
+        cores(),
+        peers.len(),
+        shown.join(", "),
+        if peers.len() > shown.len() {
+            ", ..."
+        } else {
+            ""
+        }
+    )
+}
+
+/// The cores to step vehicles on.
+pub(crate) fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, usize::from)
+}
+
+/// One line for a large fleet: how many are armed, in each mode, heard from.
+fn fleet_line(statuses: &[watch::Receiver<VehicleStatus>], now_s: f64) -> String {
+    let mut armed = 0;
+    let mut heard = 0;
+    let mut modes: std::collections::BTreeMap<&'static str, usize> = Default::default();
+    let mut lowest = f64::INFINITY;
+    let mut highest = f64::NEG_INFINITY;
+    for s in statuses {
+        let s = s.borrow();
+        armed += usize::from(s.armed);
+        heard += usize::from(s.last_heard[0].is_some_and(|t| now_s - t.as_secs_f64() < 2.0));
+        *modes.entry(s.mode.name()).or_default() += 1;
+        lowest = lowest.min(s.height_m);
+        highest = highest.max(s.height_m);
+    }
+    let modes: Vec<String> = modes.iter().map(|(m, n)| format!("{m} {n}")).collect();
+    format!(
+        "  t {now_s:7.1} s  {} vehicles: {armed} armed, offboard link up {heard}, {}  height {lowest:.1}..{highest:.1} m",
+        statuses.len(),
+        modes.join(", ")
+    )
 }
 
 fn status_line(s: &VehicleStatus, now_s: f64) -> String {

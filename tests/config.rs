@@ -377,3 +377,94 @@ fn shipped_scenarios_pass_the_bandwidth_gate() {
         assert!(gate.fits, "{}: {gate:?}", path.display());
     }
 }
+
+/// A ring of `n` ideal vehicles hovering in formation, `vehicle_lines(i)` added to
+/// vehicle `i`'s table, then `extra`.
+fn ring_config(n: usize, vehicle_lines: impl Fn(usize) -> String, extra: &str) -> String {
+    let mut text = String::from(
+        "[swarm]\ncontrol_rate_hz = 50.0\n\n[gains]\nk = 1.0\nalpha = 1.0\nbeta = 400.0\n\
+         k_pz = 1.0\nk_vz = 4.0\ntime_scale = 0.02\n\n[formation]\nkind = \"polygon\"\n\
+         radius_m = 500.0\naltitude_m = 50.0\n\n",
+    );
+    for i in 0..n {
+        text += &format!(
+            "[[vehicle]]\nprofile = \"ideal\"\nmass_kg = 1.0\nhover_throttle = 0.2\nin_air = true\n{}\n",
+            vehicle_lines(i)
+        );
+    }
+    text + extra
+}
+
+#[test]
+fn forty_one_vehicles_on_px4_ports_are_refused_with_the_way_out() {
+    let text = ring_config(42, |i| format!("system_id = {}", i + 1), "");
+    let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
+    assert!(
+        err.contains(
+            "the coordinator's socket for vehicle[40] binds 0.0.0.0:14580, where vehicle[0] listens (127.0.0.1:14580): \
+             PX4 SITL's ports collide from the 41st vehicle on; put the vehicles on a [[network]]"
+        ),
+        "{err}"
+    );
+    // Forty fit.
+    let text = ring_config(40, |i| format!("system_id = {}", i + 1), "");
+    Config::from_toml(&text).unwrap().validate().unwrap();
+}
+
+#[test]
+fn a_thousand_vehicles_fit_on_four_networks_with_repeated_ids() {
+    let networks = (0..4)
+        .map(|j| {
+            format!(
+                "[[network]]\nname = \"n{j}\"\nbind = \"0.0.0.0:{}\"\n\n",
+                14600 + j
+            )
+        })
+        .collect::<String>();
+    let text = ring_config(
+        1000,
+        |i| format!("system_id = {}\nnetwork = \"n{}\"", i % 250 + 1, i / 250),
+        &networks,
+    );
+    let config = Config::from_toml(&text).unwrap();
+    let setup = config.validate().unwrap();
+    assert_eq!(setup.ring.agents(), 1000);
+    let plan = config.transport_plan().unwrap();
+    assert_eq!(plan.sockets.len(), 4, "one socket per network");
+    assert_eq!(plan.routes[999].socket, 3);
+    assert_eq!(plan.routes[999].system_id, 250);
+    assert!(plan.routes.iter().all(|r| r.address.is_none()));
+}
+
+#[test]
+fn network_mistakes_are_all_named() {
+    let text = ring_config(
+        6,
+        |i| match i {
+            0 => "system_id = 1\nnetwork = \"a\"".to_owned(),
+            1 => "system_id = 1\nnetwork = \"a\"".to_owned(),
+            2 => "system_id = 1\nnetwork = \"b\"\nbind = \"0.0.0.0:15000\"".to_owned(),
+            3 => "system_id = 2\nnetwork = \"nowhere\"".to_owned(),
+            4 => "system_id = 3\nnetwork = \"b\"\naddress = \"127.0.0.1:14551\"".to_owned(),
+            _ => "system_id = 1".to_owned(),
+        },
+        "[[network]]\nname = \"a\"\nbind = \"0.0.0.0:14550\"\n\n\
+         [[network]]\nname = \"b\"\nbind = \"127.0.0.1:14551\"\n\n\
+         [[network]]\nname = \"a\"\nbind = \"0.0.0.0:14552\"\n\n\
+         [[network]]\nname = \"c\"\nbind = \"127.0.0.1:14550\"\n",
+    );
+    let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
+    for needle in [
+        "network[2].name \"a\" is used twice",
+        "vehicle[1].system_id 1 is used twice on network \"a\"",
+        "vehicle[2].bind: a vehicle on network \"b\" is reached through the network's socket",
+        "vehicle[3].network \"nowhere\" is not a [[network]] name",
+        "network \"a\" and network \"c\" both bind port 14550",
+        "network \"b\" binds 127.0.0.1:14551, where vehicle[4] listens (127.0.0.1:14551)",
+    ] {
+        assert!(err.contains(needle), "{needle} not in:\n{err}");
+    }
+    // System id 1 on network a, on network b and without a network: three vehicles.
+    assert!(!err.contains("vehicle[2].system_id"), "{err}");
+    assert!(!err.contains("vehicle[5].system_id"), "{err}");
+}

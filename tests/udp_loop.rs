@@ -1,4 +1,5 @@
-//! The swarm over real UDP sockets against emulated vehicles in the same process.
+//! The swarm over real UDP sockets against emulated vehicles in the same process, on two
+//! MAVLink networks whose system ids overlap.
 
 use std::time::Duration;
 
@@ -7,54 +8,77 @@ use ringswarm::consensus::{CouplingGains, RingDigraph};
 use ringswarm::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel};
 use ringswarm::driver::udp::{DriverCommand, run_swarm};
 use ringswarm::frame::{CommonFrame, Geodetic};
+use ringswarm::link::router::{RoutePlan, Router, SocketPlan, TransportPlan};
 use ringswarm::swarm::{EndAction, LossPolicy, Swarm, SwarmSetup};
 use ringswarm::vehicle::{LinkConfig, Phase};
-use ringswarm_sitl::autopilot::{Vehicle, VehicleConfig};
+use ringswarm_sitl::autopilot::{LinkId, Vehicle, VehicleConfig};
 use ringswarm_sitl::profile::Profile;
-use ringswarm_sitl::udp::{LinkFaults, SimClock, VehicleTask, run_vehicle};
+use ringswarm_sitl::udp::{FleetVehicle, LinkFaults, LinkSocket, SimClock, spawn_shards};
 use ringswarm_sitl::world::World;
 use ringswarm_wire::time::SimTime;
 use tokio::net::UdpSocket;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::watch;
 
+/// Two networks, system ids 1 and 2 on each. Vehicle 3 (network b, id 1) sends first, as
+/// PX4 does; vehicle 4 (network b, id 2) sends to a port nobody reads until someone talks
+/// to it: the coordinator knows its address from the config and must contact it first.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_rate() {
     const N: usize = 4;
     let world = World::default();
     let (stop_tx, stop_rx) = watch::channel(false);
     let clock = SimClock::new(1.0);
-    let mut coordinator_sockets = Vec::new();
-    let mut vehicle_addrs = Vec::new();
+    let networks = [
+        UdpSocket::bind("127.0.0.1:0").await.unwrap(),
+        UdpSocket::bind("127.0.0.1:0").await.unwrap(),
+    ];
+    let nowhere = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let mut plan = TransportPlan {
+        sockets: ["a", "b"]
+            .iter()
+            .zip(&networks)
+            .map(|(name, s)| SocketPlan {
+                bind: s.local_addr().unwrap(),
+                network: Some((*name).to_owned()),
+            })
+            .collect(),
+        routes: Vec::new(),
+    };
     let mut statuses = Vec::new();
-    let mut vehicles = Vec::new();
+    let mut fleet = Vec::new();
     for i in 0..N {
-        let ours = UdpSocket::bind("127.0.0.1:0").await.unwrap();
-        let offboard = UdpSocket::bind("127.0.0.1:0").await.unwrap();
-        let gcs = UdpSocket::bind("127.0.0.1:0").await.unwrap();
-        vehicle_addrs.push(offboard.local_addr().unwrap());
-        let mut cfg = VehicleConfig::new(i as u8 + 1, Profile::x500());
+        let (network, system_id) = (i / 2, (i % 2) as u8 + 1);
+        let socket = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+        let quiet = i == 3;
+        plan.routes.push(RoutePlan {
+            socket: network,
+            address: quiet.then(|| socket.local_addr().unwrap()),
+            system_id,
+        });
+        let default_peer = if quiet {
+            nowhere.local_addr().unwrap()
+        } else {
+            plan.sockets[network].bind
+        };
+        let mut cfg = VehicleConfig::new(system_id, Profile::x500());
         cfg.start.pos_world_ned_m.y = 5.0 * i as f64;
         let vehicle = Vehicle::new(cfg, world).unwrap();
-        let (status_tx, status_rx) = watch::channel(vehicle.status());
+        let (status, status_rx) = watch::channel(vehicle.status());
         statuses.push(status_rx);
-        let (_control_tx, control) = mpsc::channel(1);
-        let task = VehicleTask {
+        fleet.push(FleetVehicle {
             vehicle,
-            default_peers: [ours.local_addr().unwrap(), gcs.local_addr().unwrap()],
-            sockets: [offboard, gcs],
-            faults: [LinkFaults::default(); 2],
+            links: vec![LinkSocket {
+                id: LinkId::Offboard,
+                socket,
+                default_peer,
+                faults: LinkFaults::default(),
+            }],
             seed: i as u64,
-            control,
             key_file: None,
-        };
-        vehicles.push(tokio::spawn(run_vehicle(
-            task,
-            clock,
-            status_tx,
-            stop_rx.clone(),
-        )));
-        coordinator_sockets.push(ours);
+            status,
+        });
     }
+    let shards = spawn_shards(fleet, 2, clock, &stop_rx);
     let model = VehicleModel::from_hover_throttle(2.0, 0.5).unwrap();
     let setup = SwarmSetup {
         ring: RingDigraph::for_agents(N, 1.0).unwrap(),
@@ -72,7 +96,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
             lon_deg: world.reference.lon_deg,
             alt_amsl_m: world.reference.alt_amsl_m,
         }),
-        links: (1..=N as u8).map(LinkConfig::new).collect(),
+        links: (0..N).map(|i| LinkConfig::new((i % 2) as u8 + 1)).collect(),
         duration: None,
         handshake_timeout: Duration::from_secs(30),
         estimate_hover: true,
@@ -87,8 +111,8 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
     let (command_tx, command_rx) = watch::channel(DriverCommand::Fly);
     let swarm_task = tokio::spawn(run_swarm(
         Swarm::new(setup),
-        coordinator_sockets,
-        vehicle_addrs,
+        networks.into(),
+        Router::new(&plan),
         command_rx,
         move |swarm: &Swarm, now: SimTime| {
             if all_flying_at.is_none() && swarm.links().iter().all(|l| l.phase() == Phase::Flying) {
@@ -138,7 +162,13 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
     stop_tx.send_replace(true);
     let (swarm, _) = swarm_task.await.unwrap().unwrap();
     assert!(swarm.links().iter().all(|l| l.phase() == Phase::Flying));
-    for v in vehicles {
-        v.await.unwrap().unwrap();
-    }
+    shards.join().await.unwrap();
+    // Vehicle 4's first frames went to its default peer, not to the coordinator: it was
+    // found only because the coordinator spoke first.
+    nowhere.set_nonblocking(true).unwrap();
+    let mut buf = [0u8; 512];
+    assert!(
+        nowhere.recv_from(&mut buf).is_ok(),
+        "vehicle 4 never sent to its default peer"
+    );
 }

@@ -25,6 +25,7 @@
 pub mod autopilot;
 pub mod config_file;
 pub mod control;
+pub mod fleet;
 pub mod keystore;
 pub mod link_faults;
 pub mod params;

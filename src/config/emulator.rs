@@ -1,13 +1,16 @@
 //! What a coordinator config means for the built-in emulator: the emulated world and
 //! vehicles, and the lockstep link faults (built with the `emulator` feature only).
 
+use std::net::{IpAddr, SocketAddr};
 use std::time::Duration;
 
 use nalgebra::Vector3;
 use ringswarm_sitl::autopilot::estimator::{EstimatorConfig, FaultKind, TelemetryFault};
 use ringswarm_sitl::autopilot::{BatteryConfig, StartState, VehicleConfig};
 use ringswarm_sitl::profile::Profile;
+use ringswarm_sitl::udp::{Placement, PortPlan};
 use ringswarm_sitl::world::World;
+use ringswarm_wire::px4;
 use ringswarm_wire::time::SimTime;
 
 use super::validate::Problems;
@@ -128,6 +131,53 @@ impl Config {
             return Err(p.0.join("\n"));
         }
         Ok((world, vehicles))
+    }
+
+    /// Where the built-in emulator puts each vehicle so that `fly` with this config
+    /// reaches it: a vehicle with its own socket listens where the config says (PX4's
+    /// 14580+i by default), sends to the coordinator's socket for it and has a GCS link
+    /// on PX4's 18570+i; a vehicle on a network listens at its `address` (any free port
+    /// without one) and sends to the network's socket. A `0.0.0.0` bind is reached on
+    /// 127.0.0.1.
+    ///
+    /// # Errors
+    /// The transport's problems ([`Config::transport_plan`]).
+    pub fn emulator_placements(&self) -> Result<Vec<Placement>, String> {
+        let plan = self.transport_plan()?;
+        let reach = |a: SocketAddr| {
+            if a.ip().is_unspecified() {
+                SocketAddr::new(IpAddr::from([127, 0, 0, 1]), a.port())
+            } else {
+                a
+            }
+        };
+        let mut out = Vec::with_capacity(plan.routes.len());
+        for (i, route) in plan.routes.iter().enumerate() {
+            let Some(socket) = plan.sockets.get(route.socket) else {
+                return Err(format!("vehicle[{i}]: no coordinator socket"));
+            };
+            let coordinator = reach(socket.bind);
+            out.push(match (&socket.network, route.address) {
+                (Some(_), address) => Placement::Network {
+                    bind: address.unwrap_or(SocketAddr::new(coordinator.ip(), 0)),
+                    peer: coordinator,
+                },
+                (None, Some(address)) => {
+                    let gcs = u16::try_from(i)
+                        .ok()
+                        .and_then(|i| px4::GCS_LISTEN_PORT.checked_add(i))
+                        .ok_or_else(|| format!("vehicle[{i}]: no GCS port for instance {i}"))?;
+                    Placement::Ports(PortPlan {
+                        offboard_bind: address,
+                        offboard_peer: coordinator,
+                        gcs_bind: SocketAddr::new(address.ip(), gcs),
+                        gcs_peer: SocketAddr::new(address.ip(), px4::GCS_PEER_PORT),
+                    })
+                }
+                (None, None) => return Err(format!("vehicle[{i}]: no address")),
+            });
+        }
+        Ok(out)
     }
 
     /// The estimate's errors of `[emulator]`, the same for every vehicle (each draws its

@@ -44,6 +44,10 @@ pub struct Config {
     /// The world of the built-in emulator.
     #[serde(default)]
     pub emulator: EmulatorSection,
+    /// MAVLink networks: one coordinator socket each, its vehicles told apart by system
+    /// id (as a ground station on 14550 tells PX4 instances apart).
+    #[serde(default)]
+    pub network: Vec<NetworkSection>,
     /// One table per vehicle, in ring order.
     #[serde(default)]
     pub vehicle: Vec<VehicleSection>,
@@ -397,16 +401,33 @@ pub struct LockstepFaults {
     )>,
 }
 
+/// `[[network]]`: one UDP socket of the coordinator, shared by the vehicles that name it.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NetworkSection {
+    /// The name `[[vehicle]] network` uses.
+    pub name: String,
+    /// Where the coordinator's socket is bound (`0.0.0.0:14550` as a ground station).
+    /// The emulator's vehicles on this network send to it (to 127.0.0.1 for 0.0.0.0).
+    pub bind: SocketAddr,
+}
+
 /// `[[vehicle]]`.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct VehicleSection {
-    /// MAVLink system id.
+    /// MAVLink system id: unique among the vehicles of its network, or among those
+    /// without one.
     pub system_id: u8,
-    /// Where its offboard link listens (default PX4's 127.0.0.1:14580+i).
+    /// The `[[network]]` it is reached on; without one it gets a socket of its own, on
+    /// PX4 SITL's ports.
+    pub network: Option<String>,
+    /// Where its link listens. Without a network: default PX4's 127.0.0.1:14580+i. On a
+    /// network: optional, the coordinator contacts it there first (otherwise it waits
+    /// for the vehicle's frames and answers where they come from).
     pub address: Option<SocketAddr>,
     /// Where the coordinator's socket for it is bound (default 0.0.0.0:14540+i, the
-    /// port PX4 SITL sends its offboard link to).
+    /// port PX4 SITL sends its offboard link to); not on a network.
     pub bind: Option<SocketAddr>,
     /// Emulator profile (`ideal`, `x500`).
     #[serde(default = "default_profile")]

@@ -1,38 +1,193 @@
-//! What a coordinator config means for the transport: each vehicle's UDP endpoints.
+//! What a coordinator config means for the transport: the coordinator's UDP sockets and
+//! how each vehicle is reached ([`TransportPlan`]), checked for collisions.
 
+use std::collections::{HashMap, HashSet};
 use std::net::SocketAddr;
 
 use ringswarm_wire::px4;
 
 use super::Config;
+use super::validate::Problems;
+use crate::link::router::{RoutePlan, SocketPlan, TransportPlan};
+
+/// Whether two bind/listen addresses take the same port on a common interface
+/// (`0.0.0.0` overlaps every address of its family).
+fn overlaps(a: SocketAddr, b: SocketAddr) -> bool {
+    a.port() == b.port() && (a.ip() == b.ip() || a.ip().is_unspecified() || b.ip().is_unspecified())
+}
 
 impl Config {
-    /// Every vehicle's `(address, bind address)`, in order.
+    /// The coordinator's sockets and every vehicle's route, in ring order.
     ///
     /// # Errors
-    /// A vehicle whose default port would pass 65535, named.
-    pub fn all_udp_endpoints(&self) -> Result<Vec<(SocketAddr, SocketAddr)>, String> {
-        (0..self.vehicle.len())
-            .map(|i| {
-                self.udp_endpoints(i)
-                    .ok_or_else(|| format!("vehicle {}: no default port", i + 1))
-            })
-            .collect()
+    /// Every problem, one per line: an unknown or duplicate network, a `bind` on a
+    /// networked vehicle, a vehicle without a network whose default port would pass
+    /// 65535, two sockets on one port, a coordinator socket on a vehicle's port.
+    pub fn transport_plan(&self) -> Result<TransportPlan, String> {
+        let mut p = Problems::default();
+        let plan = self.transport(&mut p);
+        if p.0.is_empty() {
+            Ok(plan)
+        } else {
+            Err(p.0.join("\n"))
+        }
     }
 
-    /// Vehicle `i`'s address and the coordinator's bind address for it (PX4 SITL
-    /// defaults: the vehicle listens on 14580+i and sends to 14540+i).
-    pub fn udp_endpoints(&self, i: usize) -> Option<(SocketAddr, SocketAddr)> {
-        let v = self.vehicle.get(i)?;
-        let port = |base: u16| u16::try_from(i).ok().and_then(|i| base.checked_add(i));
-        let peer = match v.address {
-            Some(a) => a,
-            None => SocketAddr::from(([127, 0, 0, 1], port(px4::OFFBOARD_LISTEN_PORT)?)),
+    /// Builds the plan, pushing every problem found.
+    pub(super) fn transport(&self, p: &mut Problems) -> TransportPlan {
+        let mut sockets = Vec::new();
+        let mut by_name = HashMap::new();
+        for (j, n) in self.network.iter().enumerate() {
+            if n.name.trim().is_empty() {
+                p.push(format!("network[{j}].name must not be empty"));
+            } else if by_name.insert(n.name.as_str(), sockets.len()).is_some() {
+                p.push(format!("network[{j}].name \"{}\" is used twice", n.name));
+            }
+            sockets.push(SocketPlan {
+                bind: n.bind,
+                network: Some(n.name.clone()),
+            });
+        }
+        let mut routes = Vec::new();
+        let mut listening = Vec::new();
+        for (i, v) in self.vehicle.iter().enumerate() {
+            let route = match &v.network {
+                Some(name) => {
+                    if v.bind.is_some() {
+                        p.push(format!(
+                            "vehicle[{i}].bind: a vehicle on network \"{name}\" is reached \
+                             through the network's socket (its bind)"
+                        ));
+                    }
+                    let Some(&socket) = by_name.get(name.as_str()) else {
+                        p.push(format!(
+                            "vehicle[{i}].network \"{name}\" is not a [[network]] name"
+                        ));
+                        continue;
+                    };
+                    RoutePlan {
+                        socket,
+                        address: v.address,
+                        system_id: v.system_id,
+                    }
+                }
+                None => {
+                    let Some((peer, bind)) = px4_endpoints(i, v.address, v.bind) else {
+                        p.push(format!(
+                            "vehicle[{i}]: PX4's default port for instance {i} passes 65535; \
+                             set its address and bind, or put it on a [[network]]"
+                        ));
+                        continue;
+                    };
+                    sockets.push(SocketPlan {
+                        bind,
+                        network: None,
+                    });
+                    RoutePlan {
+                        socket: sockets.len() - 1,
+                        address: Some(peer),
+                        system_id: v.system_id,
+                    }
+                }
+            };
+            if let Some(address) = route.address {
+                listening.push((i, address));
+            }
+            routes.push(route);
+        }
+        let describe = |s: &SocketPlan, k: usize| match &s.network {
+            Some(name) => format!("network \"{name}\""),
+            None => format!(
+                "the coordinator's socket for vehicle[{}]",
+                vehicle_of(&routes, k)
+            ),
         };
-        let bind = match v.bind {
-            Some(a) => a,
-            None => SocketAddr::from(([0, 0, 0, 0], port(px4::OFFBOARD_PEER_PORT)?)),
-        };
-        Some((peer, bind))
+        for (a, sa) in sockets.iter().enumerate() {
+            for (b, sb) in sockets.iter().enumerate().skip(a + 1) {
+                if overlaps(sa.bind, sb.bind) {
+                    p.push(format!(
+                        "{} and {} both bind port {} ({} and {})",
+                        describe(sa, a),
+                        describe(sb, b),
+                        sa.bind.port(),
+                        sa.bind,
+                        sb.bind
+                    ));
+                }
+            }
+            // A vehicle on another host listens on its own interface, not ours.
+            let here = |l: &SocketAddr| l.ip().is_loopback() || l.ip() == sa.bind.ip();
+            if let Some(&(i, address)) = listening
+                .iter()
+                .find(|(_, l)| here(l) && overlaps(sa.bind, *l))
+            {
+                p.push(format!(
+                    "{} binds {}, where vehicle[{i}] listens ({address}){}",
+                    describe(sa, a),
+                    sa.bind,
+                    if sa.network.is_none() && self.network.is_empty() {
+                        ": PX4 SITL's ports collide from the 41st vehicle on; put the \
+                         vehicles on a [[network]]"
+                    } else {
+                        ""
+                    }
+                ));
+            }
+        }
+        self.check_system_ids(p);
+        TransportPlan { sockets, routes }
     }
+
+    /// System ids: 1..=250 (PX4's MAV_SYS_ID range), unique within each network and
+    /// among the vehicles without one, never the coordinator's own.
+    fn check_system_ids(&self, p: &mut Problems) {
+        let mut seen = HashSet::new();
+        for (i, v) in self.vehicle.iter().enumerate() {
+            if v.system_id == 0 || v.system_id > 250 {
+                p.push(format!(
+                    "vehicle[{i}].system_id must be 1..=250, got {}",
+                    v.system_id
+                ));
+            }
+            if !seen.insert((v.network.as_deref(), v.system_id)) {
+                p.push(match &v.network {
+                    Some(name) => format!(
+                        "vehicle[{i}].system_id {} is used twice on network \"{name}\"",
+                        v.system_id
+                    ),
+                    None => format!("vehicle[{i}].system_id {} is used twice", v.system_id),
+                });
+            }
+            if v.system_id == self.swarm.gcs_system_id {
+                p.push(format!(
+                    "vehicle[{i}].system_id {} is the coordinator's own swarm.gcs_system_id",
+                    v.system_id
+                ));
+            }
+        }
+    }
+}
+
+/// The vehicle whose own socket is `socket`.
+fn vehicle_of(routes: &[RoutePlan], socket: usize) -> usize {
+    routes.iter().position(|r| r.socket == socket).unwrap_or(0)
+}
+
+/// Vehicle `i`'s address and the coordinator's bind address for it on PX4 SITL's ports
+/// (the vehicle listens on 14580+i and sends to 14540+i), where not configured.
+fn px4_endpoints(
+    i: usize,
+    address: Option<SocketAddr>,
+    bind: Option<SocketAddr>,
+) -> Option<(SocketAddr, SocketAddr)> {
+    let port = |base: u16| u16::try_from(i).ok().and_then(|i| base.checked_add(i));
+    let peer = match address {
+        Some(a) => a,
+        None => SocketAddr::from(([127, 0, 0, 1], port(px4::OFFBOARD_LISTEN_PORT)?)),
+    };
+    let bind = match bind {
+        Some(a) => a,
+        None => SocketAddr::from(([0, 0, 0, 0], port(px4::OFFBOARD_PEER_PORT)?)),
+    };
+    Some((peer, bind))
 }

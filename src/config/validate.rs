@@ -187,6 +187,7 @@ impl Config {
         let timing = self.check_swarm(&mut p);
         let target = self.target(&mut p);
         let models = self.models(envelope.as_ref(), &mut p);
+        self.transport(&mut p);
         if !p.0.is_empty() {
             return Err(p.0.join("\n"));
         }
@@ -322,31 +323,11 @@ impl Config {
         })
     }
 
-    /// `[[vehicle]]`: ids, models and start states.
+    /// `[[vehicle]]`: models and start states (ids: `transport`).
     fn models(&self, envelope: Option<&Envelope>, p: &mut Problems) -> Vec<VehicleModel> {
         let mut models = Vec::new();
-        let mut ids = Vec::new();
         for (i, v) in self.vehicle.iter().enumerate() {
             let key = |name: &str| format!("vehicle[{i}].{name}");
-            if v.system_id == 0 || v.system_id > 250 {
-                p.push(format!(
-                    "vehicle[{i}].system_id must be 1..=250, got {}",
-                    v.system_id
-                ));
-            }
-            if ids.contains(&v.system_id) {
-                p.push(format!(
-                    "vehicle[{i}].system_id {} is used twice",
-                    v.system_id
-                ));
-            }
-            ids.push(v.system_id);
-            if v.system_id == self.swarm.gcs_system_id {
-                p.push(format!(
-                    "vehicle[{i}].system_id {} is the coordinator's own swarm.gcs_system_id",
-                    v.system_id
-                ));
-            }
             let mass_ok = p.positive(&key("mass_kg"), v.mass_kg, 1000.0, " kg");
             let hover_ok = p.within(&key("hover_throttle"), v.hover_throttle, 0.01, 0.99, "");
             if mass_ok && hover_ok {

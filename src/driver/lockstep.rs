@@ -1,6 +1,12 @@
 //! The lockstep driver: the swarm machine and the emulator's vehicle machines exchange
 //! encoded MAVLink frames in virtual time, 1 ms at a time, with a seeded latency and loss
 //! on every link. Same seed, same inputs: the same trajectory, bit for bit.
+//!
+//! By default link `i` talks to vehicle `i`. With a transport plan
+//! ([`Lockstep::with_transport`]) datagrams go through the same [`Router`] as over UDP:
+//! each vehicle has a virtual address (its configured one, or a unique one in
+//! 10.0.0.0/8), a network's vehicles are told apart by system id and found from their
+//! frames, and what the router cannot deliver is dropped.
 
 use std::collections::VecDeque;
 
@@ -10,7 +16,12 @@ use ringswarm_sitl::autopilot::{LinkId, PHYSICS_STEP, Vehicle};
 use ringswarm_sitl::link_faults::LinkFaults;
 use ringswarm_wire::time::SimTime;
 
+use std::collections::HashMap;
+use std::net::{IpAddr, SocketAddr};
+use std::ops::Range;
+
 use super::Observer;
+use crate::link::router::{Router, TransportPlan};
 use crate::swarm::Swarm;
 
 /// Link conditions between the coordinator and every vehicle (both directions): the
@@ -41,6 +52,19 @@ struct InFlight {
     bytes: Vec<u8>,
 }
 
+/// Datagrams through a [`Router`], between virtual addresses.
+#[derive(Debug)]
+struct Routing {
+    router: Router,
+    /// Vehicle `j`'s address.
+    addresses: Vec<SocketAddr>,
+    /// And back.
+    vehicle_at: HashMap<SocketAddr, usize>,
+    /// The coordinator socket vehicle `j` sends to.
+    socket_of: Vec<usize>,
+    pieces: Vec<(usize, Range<usize>)>,
+}
+
 /// The coordinator and its vehicles in one virtual world.
 #[derive(Debug)]
 pub struct Lockstep {
@@ -51,6 +75,9 @@ pub struct Lockstep {
     conditions: LinkConditions,
     rng: ChaCha8Rng,
     silenced: Vec<Vec<(SimTime, SimTime)>>,
+    routing: Option<Routing>,
+    /// Datagrams from the swarm the router had no address for.
+    unsent: u64,
 }
 
 impl Lockstep {
@@ -65,7 +92,39 @@ impl Lockstep {
             rng: ChaCha8Rng::seed_from_u64(conditions.seed),
             conditions,
             silenced: vec![Vec::new(); n],
+            routing: None,
+            unsent: 0,
         }
+    }
+
+    /// Routes every datagram as `plan` says (vehicle `j` sits at its route's address, or
+    /// at a unique virtual one, and sends to its route's socket).
+    pub fn with_transport(mut self, plan: &TransportPlan) -> Self {
+        let addresses: Vec<SocketAddr> = plan
+            .routes
+            .iter()
+            .enumerate()
+            .map(|(j, r)| {
+                r.address.unwrap_or_else(|| {
+                    let [_, a, b, c] = (j as u32).to_be_bytes();
+                    SocketAddr::new(IpAddr::from([10, a, b, c]), 14580)
+                })
+            })
+            .collect();
+        self.routing = Some(Routing {
+            router: Router::new(plan),
+            vehicle_at: addresses.iter().enumerate().map(|(j, a)| (*a, j)).collect(),
+            addresses,
+            socket_of: plan.routes.iter().map(|r| r.socket).collect(),
+            pieces: Vec::new(),
+        });
+        self
+    }
+
+    /// Datagrams from the swarm that had nowhere to go (a network vehicle not heard
+    /// from yet).
+    pub fn unsent(&self) -> u64 {
+        self.unsent
     }
 
     /// The swarm and the emulated vehicles of a coordinator config, with its `[emulator]`
@@ -81,7 +140,9 @@ impl Lockstep {
             .into_iter()
             .map(|v| Vehicle::new(v, world))
             .collect::<Result<Vec<_>, _>>()?;
-        let mut run = Self::new(Swarm::new(setup), vehicles, faults.conditions);
+        let plan = config.transport_plan()?;
+        let mut run =
+            Self::new(Swarm::new(setup), vehicles, faults.conditions).with_transport(&plan);
         for (i, from, until) in faults.silences {
             run.silence(i, from, until);
         }
@@ -145,7 +206,10 @@ impl Lockstep {
         }
         while let Some((i, bytes)) = self.swarm.poll_transmit() {
             observer.datagram(now, i, true, &bytes);
-            self.send(true, i, bytes);
+            match self.vehicle_reached_by(i) {
+                Some(j) => self.send(true, j, bytes),
+                None => self.unsent += 1,
+            }
         }
         self.deliver(now, observer);
     }
@@ -167,6 +231,39 @@ impl Lockstep {
         while self.now < end {
             self.step();
             observe(self);
+        }
+    }
+
+    /// The vehicle a datagram for link `i` reaches.
+    fn vehicle_reached_by(&self, i: usize) -> Option<usize> {
+        let Some(r) = &self.routing else {
+            return Some(i);
+        };
+        let (_, to) = r.router.destination(i)?;
+        r.vehicle_at.get(&to).copied()
+    }
+
+    /// Hands a datagram from vehicle `j` to the swarm (through the router, if any).
+    fn deliver_to_swarm(&mut self, now: SimTime, j: usize, bytes: &[u8], observer: &mut impl Observer) {
+        let Some(r) = self.routing.as_mut() else {
+            observer.datagram(now, j, false, bytes);
+            self.swarm.handle_datagram(now, j, bytes);
+            return;
+        };
+        let (socket, from) = (r.socket_of[j], r.addresses[j]);
+        let mut pieces = std::mem::take(&mut r.pieces);
+        r.router.route_inbound(socket, from, bytes, &mut pieces);
+        for (i, range) in pieces.drain(..) {
+            let piece = &bytes[range];
+            observer.datagram(now, i, false, piece);
+            if self.swarm.handle_datagram(now, i, piece)
+                && let Some(r) = self.routing.as_mut()
+            {
+                r.router.vouched(i, from, now);
+            }
+        }
+        if let Some(r) = self.routing.as_mut() {
+            r.pieces = pieces; // keeps its capacity: no allocation per datagram
         }
     }
 
@@ -203,8 +300,7 @@ impl Lockstep {
             if d.to_vehicle {
                 self.vehicles[d.index].handle_datagram(now, LinkId::Offboard, &d.bytes);
             } else {
-                observer.datagram(now, d.index, false, &d.bytes);
-                self.swarm.handle_datagram(now, d.index, &d.bytes);
+                self.deliver_to_swarm(now, d.index, &d.bytes, observer);
             }
         }
     }

@@ -1,10 +1,11 @@
-//! The tokio UDP driver of the swarm: one socket per vehicle (so a reply can never come
-//! from, or go to, the wrong vehicle), per-socket receive tasks feeding one channel, and a
-//! single task that owns the swarm machine and sleeps until its next deadline.
+//! The tokio UDP driver of the swarm: the coordinator's sockets (one per vehicle in PX4
+//! SITL's layout, one per MAVLink network otherwise), a receive task per socket feeding
+//! one channel, and a single task that owns the swarm machine and sleeps until its next
+//! deadline. Which vehicle a datagram is for, and where a vehicle's datagrams go, is the
+//! [`Router`]'s business.
 //!
 //! Real PX4 or `ringswarm sitl` vehicle `i` listens on `14580+i` and answers whoever
-//! talks to it; the coordinator's socket for vehicle `i` may be bound anywhere
-//! (PX4's convention is `14540+i`).
+//! talks to it; on a network it sends to the network's socket from a port of its own.
 
 use std::io;
 use std::net::SocketAddr;
@@ -17,6 +18,7 @@ use tokio::task::JoinSet;
 use tokio::time::Instant;
 
 use super::Observer;
+use crate::link::router::Router;
 use crate::swarm::Swarm;
 
 /// What the owner of a running swarm asks of it.
@@ -34,10 +36,10 @@ pub enum DriverCommand {
 /// Largest datagram read.
 const MAX_DATAGRAM: usize = 2048;
 
-/// Runs `swarm` over `sockets[i]` ↔ `peers[i]` until the swarm has landed every vehicle,
-/// or `commands` says [`DriverCommand::Stop`]; returns the swarm and the observer. The
-/// observer sees every datagram and the swarm after every change, with the time since
-/// start.
+/// Runs `swarm` over `sockets` (bound as `router`'s plan says) until the swarm has
+/// landed every vehicle, or `commands` says [`DriverCommand::Stop`]; returns the swarm
+/// and the observer. The observer sees every datagram (a network datagram once per
+/// vehicle frame in it) and the swarm after every change, with the time since start.
 ///
 /// # Errors
 /// A receive task's error (send errors are logged: a vehicle may be unreachable for a
@@ -45,31 +47,29 @@ const MAX_DATAGRAM: usize = 2048;
 pub async fn run_swarm<O: Observer>(
     mut swarm: Swarm,
     sockets: Vec<UdpSocket>,
-    peers: Vec<SocketAddr>,
+    mut router: Router,
     mut commands: watch::Receiver<DriverCommand>,
     mut observer: O,
 ) -> io::Result<(Swarm, O)> {
     let start = Instant::now();
     let now = || SimTime::from_micros(start.elapsed().as_micros() as u64);
     let sockets: Vec<Arc<UdpSocket>> = sockets.into_iter().map(Arc::new).collect();
-    let (tx, mut rx) = mpsc::channel::<(usize, Vec<u8>)>(1024);
+    let (tx, mut rx) = mpsc::channel::<(usize, SocketAddr, Vec<u8>)>(1024);
     let mut receivers = JoinSet::new();
-    for (i, socket) in sockets.iter().enumerate() {
-        let (socket, tx, peer) = (Arc::clone(socket), tx.clone(), peers[i]);
+    for (s, socket) in sockets.iter().enumerate() {
+        let (socket, tx) = (Arc::clone(socket), tx.clone());
         receivers.spawn(async move {
             let mut buf = [0u8; MAX_DATAGRAM];
             loop {
                 let (n, from) = socket.recv_from(&mut buf).await?;
-                if from.ip() != peer.ip() || from.port() != peer.port() {
-                    tracing::debug!(vehicle = i, %from, "datagram from an unexpected address ignored");
-                    continue;
-                }
-                if tx.send((i, buf[..n].to_vec())).await.is_err() {
+                if tx.send((s, from, buf[..n].to_vec())).await.is_err() {
                     return Ok::<(), io::Error>(());
                 }
             }
         });
     }
+    let mut pieces = Vec::new();
+    let mut unsent = vec![0u64; swarm.links().len()];
     drop(tx);
     loop {
         let deadline = start + std::time::Duration::from_micros(swarm.poll_timeout().as_micros());
@@ -83,10 +83,23 @@ pub async fn run_swarm<O: Observer>(
                 }
             }
             received = rx.recv() => match received {
-                Some((i, bytes)) => {
+                Some((socket, from, bytes)) => {
                     let t = now();
-                    observer.datagram(t, i, false, &bytes);
-                    swarm.handle_datagram(t, i, &bytes);
+                    router.route_inbound(socket, from, &bytes, &mut pieces);
+                    for (i, range) in pieces.drain(..) {
+                        let piece = &bytes[range];
+                        observer.datagram(t, i, false, piece);
+                        if swarm.handle_datagram(t, i, piece)
+                            && let Some(learned) = router.vouched(i, from, t)
+                        {
+                            tracing::info!(
+                                vehicle = i,
+                                before = ?learned.before,
+                                address = %learned.now,
+                                "vehicle address learned from its frames"
+                            );
+                        }
+                    }
                 }
                 None => break,
             },
@@ -94,7 +107,12 @@ pub async fn run_swarm<O: Observer>(
         }
         while let Some((i, bytes)) = swarm.poll_transmit() {
             observer.datagram(now(), i, true, &bytes);
-            if let Err(err) = sockets[i].send_to(&bytes, peers[i]).await {
+            let Some((socket, to)) = router.destination(i) else {
+                // A network vehicle not heard from yet: nowhere to send.
+                unsent[i] += 1;
+                continue;
+            };
+            if let Err(err) = sockets[socket].send_to(&bytes, to).await {
                 tracing::warn!(vehicle = i, error = %err, "send failed");
             }
         }
@@ -102,6 +120,13 @@ pub async fn run_swarm<O: Observer>(
         if swarm.is_finished() {
             break;
         }
+    }
+    for (i, n) in unsent.iter().enumerate().filter(|(_, n)| **n > 0) {
+        tracing::info!(
+            vehicle = i,
+            datagrams = n,
+            "not sent: the vehicle's address was not known yet"
+        );
     }
     receivers.abort_all();
     while let Some(joined) = receivers.join_next().await {

@@ -5,11 +5,12 @@
 
 mod convert;
 pub mod provision;
+pub mod router;
 
 pub use convert::{
     AUTOPILOT_PX4, Inbound, autopilot_name, gcs_heartbeat, inbound, set_attitude_target,
     set_position_target_acceleration,
 };
 pub use ringswarm_wire::codec::{
-    Encoder, Frame, FrameError, decode_datagram, decode_datagram_with, raw_frames,
+    Encoder, Frame, FrameError, decode_datagram, decode_datagram_with, frame_system_id, raw_frames,
 };

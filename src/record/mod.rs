@@ -109,7 +109,7 @@ impl Recorder {
         let Some(tlog) = self.tlog.as_mut() else {
             return;
         };
-        let result = raw_frames(bytes).into_iter().try_for_each(|frame| {
+        let result = raw_frames(bytes).try_for_each(|frame| {
             tlog.write_all(&stamp)?;
             tlog.write_all(frame)
         });

@@ -358,12 +358,15 @@ impl Swarm {
         })
     }
 
-    /// Hands a datagram from vehicle `i` to its link.
-    pub fn handle_datagram(&mut self, now: SimTime, i: usize, bytes: &[u8]) {
-        if let Some(link) = self.links.get_mut(i) {
-            link.handle_datagram(now, bytes);
-        }
+    /// Hands a datagram from vehicle `i` to its link; `true` when the link took a frame
+    /// of it as the vehicle's (see [`VehicleLink::handle_datagram`]).
+    pub fn handle_datagram(&mut self, now: SimTime, i: usize, bytes: &[u8]) -> bool {
+        let taken = self
+            .links
+            .get_mut(i)
+            .is_some_and(|link| link.handle_datagram(now, bytes));
         self.drain_link_events(now);
+        taken
     }
 
     /// When [`Swarm::handle_timeout`] must next be called.

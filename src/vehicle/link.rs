@@ -269,9 +269,12 @@ impl VehicleLink {
         self.land_requested
     }
 
-    /// Handles one datagram from the vehicle's address.
-    pub fn handle_datagram(&mut self, now: SimTime, bytes: &[u8]) {
+    /// Handles one datagram from the vehicle's address. `true` when at least one frame
+    /// was taken as the vehicle's: decoded, authentic when the link signs, from its
+    /// system id and component 1 (what may tell a router where the vehicle is).
+    pub fn handle_datagram(&mut self, now: SimTime, bytes: &[u8]) -> bool {
         self.clock(now);
+        let mut taken = false;
         let key = self.signer.as_ref().map(|s| s.key().clone());
         for frame in decode_datagram_with(bytes, key.as_ref()) {
             let Ok(frame) = frame else {
@@ -302,6 +305,7 @@ impl VehicleLink {
                 self.ignored_frames += 1;
                 continue;
             }
+            taken = true;
             if let MavMessage::COMMAND_ACK(ack) = &frame.msg
                 && (ack.target_system != 0 && ack.target_system != self.cfg.own_ids.0)
             {
@@ -312,6 +316,7 @@ impl VehicleLink {
                 self.apply(now, update);
             }
         }
+        taken
     }
 
     fn apply(&mut self, now: SimTime, update: Inbound) {

@@ -114,24 +114,50 @@ pub fn decode_datagram_with(
 }
 
 /// The complete frames of a datagram as raw bytes (what a `.tlog` records), skipping
-/// bytes outside frames and a truncated tail. Checksums are not checked.
-pub fn raw_frames(bytes: &[u8]) -> Vec<&[u8]> {
-    let mut out = Vec::new();
-    let mut at = 0;
-    while let Some(skip) = bytes[at..]
-        .iter()
-        .position(|b| *b == STX_V1 || *b == STX_V2)
-    {
-        at += skip;
-        match frame_len(&bytes[at..]) {
-            Some(n) if n <= bytes.len() - at => {
-                out.push(&bytes[at..at + n]);
-                at += n;
+/// bytes outside frames and a truncated tail. Checksums are not checked. Allocates
+/// nothing.
+pub fn raw_frames(bytes: &[u8]) -> RawFrames<'_> {
+    RawFrames { bytes, at: 0 }
+}
+
+/// The iterator of [`raw_frames`].
+#[derive(Debug, Clone)]
+pub struct RawFrames<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Iterator for RawFrames<'a> {
+    type Item = &'a [u8];
+
+    fn next(&mut self) -> Option<&'a [u8]> {
+        let bytes = self.bytes;
+        let skip = bytes[self.at..]
+            .iter()
+            .position(|b| *b == STX_V1 || *b == STX_V2)?;
+        self.at += skip;
+        match frame_len(&bytes[self.at..]) {
+            Some(n) if n <= bytes.len() - self.at => {
+                let frame = &bytes[self.at..self.at + n];
+                self.at += n;
+                Some(frame)
             }
-            _ => break,
+            _ => {
+                self.at = bytes.len();
+                None
+            }
         }
     }
-    out
+}
+
+/// The sender's system id of a frame [`raw_frames`] returned (`None` for anything
+/// shorter than a header).
+pub fn frame_system_id(frame: &[u8]) -> Option<u8> {
+    match *frame.first()? {
+        STX_V2 => frame.get(5).copied(),
+        STX_V1 => frame.get(3).copied(),
+        _ => None,
+    }
 }
 
 /// Header length and total length of the frame starting at `bytes[0]` (an STX), once
@@ -310,6 +336,16 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn frame_system_id_reads_both_versions_headers() {
+        let v2 = Encoder::new(207, 1).encode(&heartbeat());
+        assert_eq!(frame_system_id(&v2), Some(207));
+        // MAVLink 1: STX, len, seq, sysid, compid, msgid.
+        assert_eq!(frame_system_id(&[STX_V1, 0, 0, 42, 1, 0, 0, 0]), Some(42));
+        assert_eq!(frame_system_id(&[STX_V2, 9, 0, 0]), None);
+        assert_eq!(frame_system_id(&[0x00, 1, 2, 3, 4, 5]), None);
+    }
+
+    #[test]
     fn raw_frames_splits_a_datagram_and_drops_garbage_and_a_truncated_tail() {
         let mut enc = Encoder::new(1, 1);
         let a = enc.encode(&heartbeat());
@@ -318,7 +354,7 @@ pub(crate) mod tests {
         datagram.extend_from_slice(&a);
         datagram.extend_from_slice(&b);
         datagram.extend_from_slice(&a[..5]);
-        let frames = raw_frames(&datagram);
+        let frames: Vec<&[u8]> = raw_frames(&datagram).collect();
         assert_eq!(frames, vec![a.as_slice(), b.as_slice()]);
         // 10-byte header + 9-byte heartbeat payload + 2-byte CRC.
         assert_eq!(a.len(), 21);

@@ -1,0 +1,434 @@
+//! The tokio UDP driver of many vehicles: one task steps a whole shard of vehicles on a
+//! common 1 ms tick, and one light receive task per socket hands datagrams over through
+//! a channel. A thousand vehicles cost a few tasks' worth of timer wake-ups, not a
+//! thousand; run one shard per core.
+//!
+//! Each vehicle has one or two links (offboard and GCS), each its own socket. Which peer
+//! a link answers follows PX4's `mavlink_receiver.cpp` ([`Partner`]): the default address
+//! until the first datagram arrives, then that datagram's sender for good (until a
+//! restart); datagrams from anyone are still read. Unlike PX4, which latches before
+//! parsing, only a datagram with a frame the vehicle admitted (decoded, and signed with
+//! the key when one is set) latches: garbage, a forged frame or an unsigned HEARTBEAT
+//! never chooses whom a link answers. Faults are injected per link, in both directions,
+//! from a seeded RNG: loss, latency with jitter, duplication.
+//!
+//! Sends never wait: a datagram the socket cannot take at once is dropped and counted,
+//! as a full UDP buffer drops it anyway.
+
+use std::collections::VecDeque;
+use std::io;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use tokio::net::UdpSocket;
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinSet;
+use tokio::time::MissedTickBehavior;
+
+use crate::autopilot::{LinkId, Vehicle, VehicleEvent, VehicleStatus};
+use crate::keystore::{self, StoredKey};
+use crate::link_faults::LinkFaults;
+use crate::time::SimTime;
+use crate::udp::{Partner, SimClock};
+
+/// What a test (or an operator) can do to a running vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VehicleControl {
+    /// Power off: the vehicle stops answering and sending (its sockets stay bound).
+    Kill,
+    /// Power on again: a fresh boot from the configured start state.
+    Restart,
+}
+
+/// One link of a vehicle: its socket, where it sends until a peer talks to it, and its
+/// faults.
+pub struct LinkSocket {
+    /// Which of the vehicle's MAVLink instances this is.
+    pub id: LinkId,
+    /// The socket, already bound.
+    pub socket: UdpSocket,
+    /// Where the link sends until a peer talks to it.
+    pub default_peer: SocketAddr,
+    /// Faults on this link, both directions.
+    pub faults: LinkFaults,
+}
+
+/// One vehicle of a shard.
+pub struct FleetVehicle {
+    /// The machine.
+    pub vehicle: Vehicle,
+    /// Its links (one or two).
+    pub links: Vec<LinkSocket>,
+    /// Seed of its fault RNG.
+    pub seed: u64,
+    /// Where its signing key is stored (see [`crate::keystore`]); `None` keeps a key set
+    /// over the wire only until the process ends.
+    pub key_file: Option<PathBuf>,
+    /// Where its status is published, about ten times a second.
+    pub status: watch::Sender<VehicleStatus>,
+}
+
+/// A datagram held back by the latency fault.
+struct Delayed {
+    due: SimTime,
+    link: usize,
+    /// The sender of an inbound datagram; `None` for an outbound one.
+    from: Option<SocketAddr>,
+    bytes: Vec<u8>,
+}
+
+/// A vehicle while the shard runs.
+struct Slot {
+    vehicle: Vehicle,
+    sockets: Vec<Arc<UdpSocket>>,
+    ids: Vec<LinkId>,
+    default_peers: Vec<SocketAddr>,
+    partners: Vec<Partner>,
+    faults: Vec<LinkFaults>,
+    rng: ChaCha8Rng,
+    delayed: VecDeque<Delayed>,
+    key_file: Option<PathBuf>,
+    status: watch::Sender<VehicleStatus>,
+    alive: bool,
+    /// Datagrams the socket could not take at once.
+    dropped_sends: u64,
+}
+
+/// A datagram received on one link of one vehicle.
+struct Received {
+    slot: usize,
+    link: usize,
+    from: SocketAddr,
+    bytes: Vec<u8>,
+}
+
+/// Largest datagram read.
+const MAX_DATAGRAM: usize = 2048;
+
+/// Runs a shard of vehicles until `shutdown` turns true. `controls` carries
+/// `(index in vehicles, request)`.
+///
+/// # Errors
+/// A socket receive error other than a transient one.
+pub async fn run_fleet(
+    vehicles: Vec<FleetVehicle>,
+    clock: SimClock,
+    mut controls: mpsc::Receiver<(usize, VehicleControl)>,
+    mut shutdown: watch::Receiver<bool>,
+) -> io::Result<()> {
+    let (tx, mut rx) = mpsc::channel::<Received>(4096);
+    let mut receivers = JoinSet::new();
+    let mut slots: Vec<Slot> = Vec::with_capacity(vehicles.len());
+    for (s, v) in vehicles.into_iter().enumerate() {
+        let mut sockets = Vec::new();
+        let ids: Vec<LinkId> = v.links.iter().map(|l| l.id).collect();
+        let defaults: Vec<SocketAddr> = v.links.iter().map(|l| l.default_peer).collect();
+        let faults: Vec<LinkFaults> = v.links.iter().map(|l| l.faults).collect();
+        for (link, l) in v.links.into_iter().enumerate() {
+            let socket = Arc::new(l.socket);
+            sockets.push(Arc::clone(&socket));
+            let tx = tx.clone();
+            receivers.spawn(async move {
+                let mut buf = [0u8; MAX_DATAGRAM];
+                loop {
+                    let (n, from) = match socket.recv_from(&mut buf).await {
+                        Ok(got) => got,
+                        // ICMP port unreachable from an earlier send (nobody listening
+                        // at the default peer yet) surfaces here on some systems.
+                        Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
+                        Err(e) => return Err(e),
+                    };
+                    let received = Received {
+                        slot: s,
+                        link,
+                        from,
+                        bytes: buf[..n].to_vec(),
+                    };
+                    if tx.send(received).await.is_err() {
+                        return Ok::<(), io::Error>(());
+                    }
+                }
+            });
+        }
+        slots.push(Slot {
+            vehicle: v.vehicle,
+            sockets,
+            ids,
+            partners: defaults.iter().copied().map(Partner::new).collect(),
+            default_peers: defaults,
+            faults,
+            rng: ChaCha8Rng::seed_from_u64(v.seed),
+            delayed: VecDeque::new(),
+            key_file: v.key_file,
+            status: v.status,
+            alive: true,
+            dropped_sends: 0,
+        });
+    }
+    drop(tx);
+    let mut tick = tokio::time::interval(Duration::from_millis(1));
+    tick.set_missed_tick_behavior(MissedTickBehavior::Skip);
+    let mut last_status = SimTime::ZERO;
+    loop {
+        tokio::select! {
+            changed = shutdown.changed() => {
+                if changed.is_err() || *shutdown.borrow() { break; }
+            }
+            Some((s, request)) = controls.recv() => {
+                if let Some(slot) = slots.get_mut(s) {
+                    slot.control(request, clock.now());
+                    slot.flush(clock.now());
+                }
+            }
+            received = rx.recv() => {
+                let Some(first) = received else { break };
+                let now = clock.now();
+                let mut next = Some(first);
+                while let Some(r) = next {
+                    if let Some(slot) = slots.get_mut(r.slot) {
+                        slot.inbound(now, r.link, r.from, &r.bytes);
+                        slot.flush(now);
+                    }
+                    next = rx.try_recv().ok();
+                }
+            }
+            _ = tick.tick() => {
+                let now = clock.now();
+                let publish = now.saturating_since(last_status) >= Duration::from_millis(100);
+                if publish {
+                    last_status = now;
+                }
+                for slot in &mut slots {
+                    if !slot.alive {
+                        continue;
+                    }
+                    slot.vehicle.handle_timeout(now);
+                    slot.deliver_delayed(now);
+                    slot.flush(now);
+                    if publish {
+                        slot.status.send_replace(slot.vehicle.status());
+                    }
+                }
+            }
+        }
+    }
+    receivers.abort_all();
+    for slot in &slots {
+        if slot.alive {
+            store_key(slot.key_file.as_deref(), &slot.vehicle);
+        }
+        if slot.dropped_sends > 0 {
+            tracing::info!(
+                sysid = slot.vehicle.system_id(),
+                dropped = slot.dropped_sends,
+                "datagrams dropped: the socket's send buffer was full"
+            );
+        }
+    }
+    while let Some(joined) = receivers.join_next().await {
+        if let Ok(Err(err)) = joined {
+            return Err(err);
+        }
+    }
+    Ok(())
+}
+
+/// Running shards: their tasks and, per vehicle in the order given, how to reach it.
+pub struct Shards {
+    /// One task per shard.
+    pub tasks: Vec<tokio::task::JoinHandle<io::Result<()>>>,
+    /// Per vehicle: its shard's control channel and its index there.
+    pub controls: Vec<(mpsc::Sender<(usize, VehicleControl)>, usize)>,
+}
+
+impl Shards {
+    /// Sends `request` to vehicle `i` (in the order given to [`spawn_shards`]).
+    ///
+    /// # Errors
+    /// No such vehicle, or its shard has stopped.
+    pub async fn control(&self, i: usize, request: VehicleControl) -> Result<(), String> {
+        let (tx, at) = self
+            .controls
+            .get(i)
+            .ok_or_else(|| format!("no vehicle {i}"))?;
+        tx.send((*at, request))
+            .await
+            .map_err(|_| "the vehicle's task has stopped".to_owned())
+    }
+
+    /// Waits for every shard.
+    ///
+    /// # Errors
+    /// The first shard's error, or a shard that panicked.
+    pub async fn join(self) -> io::Result<()> {
+        for task in self.tasks {
+            task.await.map_err(io::Error::other)??;
+        }
+        Ok(())
+    }
+}
+
+/// Spreads `vehicles` over `shards` tasks (vehicle `i` in shard `i mod shards`) on the
+/// current tokio runtime; one per core keeps every core busy.
+pub fn spawn_shards(
+    vehicles: Vec<FleetVehicle>,
+    shards: usize,
+    clock: SimClock,
+    shutdown: &watch::Receiver<bool>,
+) -> Shards {
+    let shards = shards.clamp(1, vehicles.len().max(1));
+    let mut fleets: Vec<Vec<FleetVehicle>> = (0..shards).map(|_| Vec::new()).collect();
+    let mut placed = Vec::with_capacity(vehicles.len());
+    for (i, v) in vehicles.into_iter().enumerate() {
+        let shard = i % shards;
+        placed.push((shard, fleets[shard].len()));
+        fleets[shard].push(v);
+    }
+    let mut senders = Vec::new();
+    let mut tasks = Vec::new();
+    for fleet in fleets {
+        let (tx, rx) = mpsc::channel(16);
+        senders.push(tx);
+        tasks.push(tokio::spawn(run_fleet(fleet, clock, rx, shutdown.clone())));
+    }
+    Shards {
+        tasks,
+        controls: placed
+            .into_iter()
+            .map(|(shard, at)| (senders[shard].clone(), at))
+            .collect(),
+    }
+}
+
+impl Slot {
+    fn control(&mut self, request: VehicleControl, now: SimTime) {
+        let sysid = self.vehicle.system_id();
+        match request {
+            VehicleControl::Kill => {
+                self.alive = false;
+                store_key(self.key_file.as_deref(), &self.vehicle);
+                self.delayed.clear();
+                while self.vehicle.poll_transmit().is_some() {}
+                tracing::info!(sysid, "vehicle killed");
+            }
+            VehicleControl::Restart => {
+                self.alive = true;
+                self.partners = self
+                    .default_peers
+                    .iter()
+                    .copied()
+                    .map(Partner::new)
+                    .collect();
+                self.vehicle.reboot(now);
+                tracing::info!(sysid, "vehicle restarted");
+            }
+        }
+    }
+
+    /// Hands a datagram to the vehicle (or holds its copies back, under a latency
+    /// fault); one the vehicle admits latches the link's partner.
+    fn inbound(&mut self, now: SimTime, link: usize, from: SocketAddr, bytes: &[u8]) {
+        if !self.alive || link >= self.sockets.len() {
+            return;
+        }
+        for delay in self.faults[link].copies(&mut self.rng) {
+            if delay.is_zero() {
+                if self.vehicle.handle_datagram(now, self.ids[link], bytes) {
+                    self.partners[link].on_datagram(from);
+                }
+            } else {
+                self.delayed.push_back(Delayed {
+                    due: now + delay,
+                    link,
+                    from: Some(from),
+                    bytes: bytes.to_vec(),
+                });
+            }
+        }
+    }
+
+    fn deliver_delayed(&mut self, now: SimTime) {
+        let mut i = 0;
+        while i < self.delayed.len() {
+            if self.delayed[i].due > now {
+                i += 1;
+                continue;
+            }
+            let Some(d) = self.delayed.remove(i) else {
+                break;
+            };
+            match d.from {
+                Some(from) => {
+                    if self
+                        .vehicle
+                        .handle_datagram(now, self.ids[d.link], &d.bytes)
+                    {
+                        self.partners[d.link].on_datagram(from);
+                    }
+                }
+                None => self.send(d.link, &d.bytes),
+            }
+        }
+    }
+
+    /// Stores a changed key, then sends (or holds back) everything the vehicle queued.
+    fn flush(&mut self, now: SimTime) {
+        while let Some(event) = self.vehicle.poll_event() {
+            if let VehicleEvent::SigningChanged(stored) = event {
+                save_key(
+                    self.key_file.as_deref(),
+                    self.vehicle.system_id(),
+                    stored.as_ref(),
+                );
+            }
+        }
+        while let Some(tx) = self.vehicle.poll_transmit() {
+            let Some(link) = self.ids.iter().position(|id| *id == tx.link) else {
+                continue; // a link this vehicle does not serve
+            };
+            for copy in self.faults[link].copies(&mut self.rng) {
+                if copy.is_zero() {
+                    self.send(link, &tx.bytes);
+                } else {
+                    self.delayed.push_back(Delayed {
+                        due: now + copy,
+                        link,
+                        from: None,
+                        bytes: tx.bytes.clone(),
+                    });
+                }
+            }
+        }
+    }
+
+    fn send(&mut self, link: usize, bytes: &[u8]) {
+        let to = self.partners[link].addr();
+        match self.sockets[link].try_send_to(bytes, to) {
+            Ok(_) => {}
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => self.dropped_sends += 1,
+            Err(e) => {
+                tracing::debug!(sysid = self.vehicle.system_id(), %to, error = %e, "send failed")
+            }
+        }
+    }
+}
+
+/// Stores the vehicle's key with its clock as it is now, so that a restart goes on with
+/// newer timestamps (PX4 stores the clock only when a key is set).
+fn store_key(key_file: Option<&std::path::Path>, vehicle: &Vehicle) {
+    if let Some(stored) = vehicle.signing_key() {
+        save_key(key_file, vehicle.system_id(), Some(&stored));
+    }
+}
+
+fn save_key(key_file: Option<&std::path::Path>, sysid: u8, stored: Option<&StoredKey>) {
+    let Some(path) = key_file else { return };
+    match keystore::save(path, stored) {
+        Ok(()) => tracing::info!(sysid, path = %path.display(), "signing key stored"),
+        Err(err) => tracing::error!(sysid, %err, "signing key not stored"),
+    }
+}

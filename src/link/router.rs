@@ -1,0 +1,349 @@
+//! Which coordinator socket and address reach each vehicle, and which vehicle a received
+//! datagram is for: a sans-IO router between UDP sockets and the swarm's links.
+//!
+//! Two kinds of socket:
+//! - **Own socket** (PX4 SITL's layout): one socket per vehicle, a fixed address; only
+//!   datagrams from that address are the vehicle's (so a reply never comes from, or goes
+//!   to, the wrong vehicle).
+//! - **Network socket** (a ground station on 14550): one socket for many vehicles, told
+//!   apart by the system id in each frame's header; system ids are unique within a
+//!   network, not across networks. A vehicle's address is learned from the frames it
+//!   sends, like QGroundControl and MAVSDK do: the first frame its link takes (decoded,
+//!   from its system id, authentic when signing is on) sets it. An address known from the
+//!   config is used until then, so such a vehicle is contacted first. Afterwards only
+//!   an address silent for [`RELEARN_AFTER`] gives way to a new one (a restarted vehicle
+//!   on another port); a frame from elsewhere meanwhile is still handed to the link,
+//!   which judges it, but moves nothing.
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::ops::Range;
+use std::time::Duration;
+
+use ringswarm_wire::codec::{frame_system_id, raw_frames};
+use ringswarm_wire::time::SimTime;
+
+/// How long a learned address must stay silent before another takes its place.
+pub const RELEARN_AFTER: Duration = Duration::from_secs(2);
+
+/// One coordinator socket.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SocketPlan {
+    /// Where it is bound.
+    pub bind: SocketAddr,
+    /// The network's name, for a network socket.
+    pub network: Option<String>,
+}
+
+/// How vehicle `i` is reached.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RoutePlan {
+    /// Index of its socket in [`TransportPlan::sockets`].
+    pub socket: usize,
+    /// Its address: fixed on an own socket, the first to try on a network.
+    pub address: Option<SocketAddr>,
+    /// Its system id (what a network socket demultiplexes on).
+    pub system_id: u8,
+}
+
+/// The coordinator's sockets and each vehicle's route, in ring order.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TransportPlan {
+    /// The sockets to bind.
+    pub sockets: Vec<SocketPlan>,
+    /// One route per vehicle.
+    pub routes: Vec<RoutePlan>,
+}
+
+/// A vehicle's address changed (first learned, or replaced after silence).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AddressLearned {
+    /// The vehicle (ring index).
+    pub vehicle: usize,
+    /// The address before, if any.
+    pub before: Option<SocketAddr>,
+    /// The address now.
+    pub now: SocketAddr,
+}
+
+#[derive(Debug, Clone)]
+enum Demux {
+    /// An own socket: its one vehicle.
+    Own(usize),
+    /// A network socket: system id → vehicle.
+    Network(HashMap<u8, usize>),
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Route {
+    socket: usize,
+    address: Option<SocketAddr>,
+    /// Whether frames can move the address (network sockets).
+    learns: bool,
+    /// When a frame the link took last came from `address`.
+    last_vouched: Option<SimTime>,
+}
+
+/// The router.
+#[derive(Debug, Clone)]
+pub struct Router {
+    demux: Vec<Demux>,
+    routes: Vec<Route>,
+    unroutable: Vec<u64>,
+}
+
+impl Router {
+    /// A router for `plan` (a route's socket index must be in range: the config checks).
+    pub fn new(plan: &TransportPlan) -> Self {
+        let mut demux: Vec<Demux> = plan
+            .sockets
+            .iter()
+            .map(|s| match s.network {
+                Some(_) => Demux::Network(HashMap::new()),
+                None => Demux::Own(usize::MAX),
+            })
+            .collect();
+        let mut routes = Vec::with_capacity(plan.routes.len());
+        for (i, r) in plan.routes.iter().enumerate() {
+            let learns = match demux.get_mut(r.socket) {
+                Some(Demux::Network(by_id)) => {
+                    by_id.insert(r.system_id, i);
+                    true
+                }
+                Some(Demux::Own(vehicle)) => {
+                    *vehicle = i;
+                    false
+                }
+                None => false,
+            };
+            routes.push(Route {
+                socket: r.socket,
+                address: r.address,
+                learns,
+                last_vouched: None,
+            });
+        }
+        Self {
+            unroutable: vec![0; demux.len()],
+            demux,
+            routes,
+        }
+    }
+
+    /// The pieces of a datagram received on `socket` from `from`, each as the vehicle it
+    /// is for and its byte range, in `out` (cleared first): the whole datagram on an
+    /// own socket when it comes from the vehicle's address, each frame on a network
+    /// socket whose system id belongs to one of its vehicles. Anything else is counted
+    /// in [`Router::unroutable`]. Allocates nothing once `out` has grown.
+    pub fn route_inbound(
+        &mut self,
+        socket: usize,
+        from: SocketAddr,
+        bytes: &[u8],
+        out: &mut Vec<(usize, Range<usize>)>,
+    ) {
+        out.clear();
+        match self.demux.get(socket) {
+            Some(Demux::Own(vehicle)) => match self.routes.get(*vehicle) {
+                Some(route) if route.address == Some(from) => out.push((*vehicle, 0..bytes.len())),
+                _ => self.unroutable[socket] += 1,
+            },
+            Some(Demux::Network(by_id)) => {
+                let base = bytes.as_ptr() as usize;
+                for frame in raw_frames(bytes) {
+                    let start = frame.as_ptr() as usize - base;
+                    match frame_system_id(frame).and_then(|id| by_id.get(&id)) {
+                        Some(&vehicle) => out.push((vehicle, start..start + frame.len())),
+                        None => self.unroutable[socket] += 1,
+                    }
+                }
+            }
+            None => {}
+        }
+    }
+
+    /// Vehicle `vehicle`'s link took a frame that came from `from` at `now`: on a network,
+    /// that may set its address.
+    pub fn vouched(
+        &mut self,
+        vehicle: usize,
+        from: SocketAddr,
+        now: SimTime,
+    ) -> Option<AddressLearned> {
+        let route = self.routes.get_mut(vehicle)?;
+        if !route.learns {
+            return None;
+        }
+        if route.address == Some(from) {
+            route.last_vouched = Some(now);
+            // A configured address answering for the first time is news too.
+            return None;
+        }
+        let silent = route
+            .last_vouched
+            .is_none_or(|last| now.saturating_since(last) >= RELEARN_AFTER);
+        if !silent {
+            return None;
+        }
+        let before = route.address;
+        route.address = Some(from);
+        route.last_vouched = Some(now);
+        Some(AddressLearned {
+            vehicle,
+            before,
+            now: from,
+        })
+    }
+
+    /// Where a datagram for `vehicle` goes: its socket and address, or `None` while a
+    /// network vehicle's address is unknown (nothing has come from it and none was
+    /// configured).
+    pub fn destination(&self, vehicle: usize) -> Option<(usize, SocketAddr)> {
+        let route = self.routes.get(vehicle)?;
+        Some((route.socket, route.address?))
+    }
+
+    /// Datagrams (own sockets) or frames (network sockets) received on `socket` that
+    /// belonged to no vehicle.
+    pub fn unroutable(&self, socket: usize) -> u64 {
+        self.unroutable.get(socket).copied().unwrap_or(0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ringswarm_wire::codec::Encoder;
+
+    fn addr(port: u16) -> SocketAddr {
+        SocketAddr::from(([127, 0, 0, 1], port))
+    }
+
+    fn heartbeat(system_id: u8) -> Vec<u8> {
+        Encoder::new(system_id, 1).encode(&crate::link::gcs_heartbeat())
+    }
+
+    /// Two networks whose system ids overlap (1 and 2 on each) and one own socket.
+    fn plan() -> TransportPlan {
+        let network = |name: &str, port| SocketPlan {
+            bind: addr(port),
+            network: Some(name.to_owned()),
+        };
+        TransportPlan {
+            sockets: vec![
+                network("a", 14550),
+                network("b", 14551),
+                SocketPlan {
+                    bind: addr(14540),
+                    network: None,
+                },
+            ],
+            routes: vec![
+                RoutePlan {
+                    socket: 0,
+                    address: None,
+                    system_id: 1,
+                },
+                RoutePlan {
+                    socket: 0,
+                    address: Some(addr(30002)),
+                    system_id: 2,
+                },
+                RoutePlan {
+                    socket: 1,
+                    address: None,
+                    system_id: 1,
+                },
+                RoutePlan {
+                    socket: 1,
+                    address: None,
+                    system_id: 2,
+                },
+                RoutePlan {
+                    socket: 2,
+                    address: Some(addr(14580)),
+                    system_id: 1,
+                },
+            ],
+        }
+    }
+
+    #[test]
+    fn the_same_system_id_on_two_networks_reaches_two_vehicles() {
+        let mut router = Router::new(&plan());
+        let mut out = Vec::new();
+        let hb = heartbeat(1);
+        router.route_inbound(0, addr(30001), &hb, &mut out);
+        assert_eq!(out, vec![(0, 0..hb.len())]);
+        router.route_inbound(1, addr(31001), &hb, &mut out);
+        assert_eq!(out, vec![(2, 0..hb.len())]);
+        // An unknown system id on a network is nobody's.
+        router.route_inbound(1, addr(31009), &heartbeat(9), &mut out);
+        assert!(out.is_empty());
+        assert_eq!(router.unroutable(1), 1);
+    }
+
+    #[test]
+    fn a_datagram_with_frames_of_two_vehicles_is_split() {
+        let mut router = Router::new(&plan());
+        let (one, two) = (heartbeat(1), heartbeat(2));
+        let both = [one.clone(), two.clone()].concat();
+        let mut out = Vec::new();
+        router.route_inbound(0, addr(30001), &both, &mut out);
+        assert_eq!(out, vec![(0, 0..one.len()), (1, one.len()..both.len())]);
+        assert_eq!(&both[out[1].1.clone()], two.as_slice());
+    }
+
+    #[test]
+    fn an_own_socket_takes_only_its_vehicles_address() {
+        let mut router = Router::new(&plan());
+        let hb = heartbeat(1);
+        let mut out = Vec::new();
+        router.route_inbound(2, addr(14580), &hb, &mut out);
+        assert_eq!(out, vec![(4, 0..hb.len())]);
+        router.route_inbound(2, addr(14581), &hb, &mut out);
+        assert!(out.is_empty());
+        assert_eq!(router.unroutable(2), 1);
+        // Its address never moves.
+        assert_eq!(router.vouched(4, addr(14581), SimTime::ZERO), None);
+        assert_eq!(router.destination(4), Some((2, addr(14580))));
+    }
+
+    #[test]
+    fn a_network_address_is_learned_once_and_replaced_only_after_silence() {
+        let mut router = Router::new(&plan());
+        let t = |s: f64| SimTime::from_secs_f64(s);
+        // Unknown until the vehicle is heard; a configured one is contacted first.
+        assert_eq!(router.destination(0), None);
+        assert_eq!(router.destination(1), Some((0, addr(30002))));
+        let learned = router.vouched(0, addr(30001), t(1.0));
+        assert_eq!(
+            learned,
+            Some(AddressLearned {
+                vehicle: 0,
+                before: None,
+                now: addr(30001)
+            })
+        );
+        assert_eq!(router.destination(0), Some((0, addr(30001))));
+        // Another sender while the first is alive moves nothing.
+        assert_eq!(router.vouched(0, addr(40000), t(1.5)), None);
+        assert_eq!(router.vouched(0, addr(30001), t(2.0)), None);
+        assert_eq!(router.vouched(0, addr(40000), t(3.9)), None);
+        assert_eq!(router.destination(0), Some((0, addr(30001))));
+        // Silent for RELEARN_AFTER: the new one takes over.
+        assert_eq!(
+            router.vouched(0, addr(40000), t(4.0)),
+            Some(AddressLearned {
+                vehicle: 0,
+                before: Some(addr(30001)),
+                now: addr(40000)
+            })
+        );
+        // A configured address that answers keeps its place; another one replaces it
+        // only when it never answered.
+        assert_eq!(router.vouched(1, addr(30002), t(1.0)), None);
+        assert_eq!(router.vouched(1, addr(30003), t(1.5)), None);
+        assert_eq!(router.destination(1), Some((0, addr(30002))));
+    }
+}
