@@ -3,6 +3,7 @@
 
 use std::time::Duration;
 
+use mavlink::Message;
 use mavlink::dialects::common::MavMessage;
 use nalgebra::UnitQuaternion;
 use ringswarm::control::AttitudeThrust;
@@ -119,6 +120,67 @@ fn handshake_reaches_armed_offboard_after_the_pre_stream() {
         .filter(|m| matches!(m, MavMessage::SET_ATTITUDE_TARGET(_)))
         .count();
     assert_eq!(setpoints, 150);
+}
+
+#[test]
+fn the_link_turns_off_the_streams_it_does_not_read_and_waits_for_the_origin() {
+    // Every GPS_GLOBAL_ORIGIN is lost until 2.5 s (the answer to the first request and the
+    // 0.2 Hz stream's): no arming before the origin, which is asked again each second.
+    let mut origin_lost = |to_vehicle: bool, m: &MavMessage| {
+        to_vehicle || !matches!(m, MavMessage::GPS_GLOBAL_ORIGIN(_))
+    };
+    let mut h = Harness::new(1, 1);
+    h.run(Duration::from_millis(2500), &mut origin_lost);
+    assert!(
+        matches!(h.link.phase(), Phase::Streaming(_)),
+        "{:?}",
+        h.link.phase()
+    );
+    assert!(!h.vehicle.status().armed, "armed without an origin");
+    let requests = |h: &Harness| {
+        h.commands_sent()
+            .iter()
+            .filter(|m| matches!(m, MavMessage::COMMAND_LONG(c) if c.command as u32 == 512 && c.param1 == 49.0))
+            .count()
+    };
+    // At discovery and with the first heartbeat (both at 1 ms), then with the heartbeats
+    // at 1 s and 2 s.
+    assert_eq!(requests(&h), 4);
+    h.run(Duration::from_millis(1500), &mut deliver_all);
+    assert!(h.link.state().origin.is_some());
+    assert_eq!(h.link.phase(), Phase::Flying);
+    // The answer to the 3 s request came: no more requests after it.
+    assert_eq!(requests(&h), 5);
+    // ATTITUDE (30) and GLOBAL_POSITION_INT (33) off on this link (interval −1); the two
+    // it reads at the control rate (20 ms).
+    let intervals: Vec<(f32, f32)> = h
+        .commands_sent()
+        .iter()
+        .filter_map(|m| match m {
+            MavMessage::COMMAND_LONG(c) if c.command as u32 == 511 => Some((c.param1, c.param2)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        intervals,
+        vec![
+            (32.0, 20_000.0),
+            (31.0, 20_000.0),
+            (30.0, -1.0),
+            (33.0, -1.0)
+        ]
+    );
+    // And the vehicle stopped sending them.
+    let mut seen = Vec::new();
+    let mut record = |to_vehicle: bool, m: &MavMessage| {
+        if !to_vehicle {
+            seen.push(m.message_id());
+        }
+        true
+    };
+    h.run(Duration::from_secs(1), &mut record);
+    assert!(!seen.contains(&30) && !seen.contains(&33), "{seen:?}");
+    assert!(seen.iter().filter(|id| **id == 32).count() >= 49);
 }
 
 #[test]

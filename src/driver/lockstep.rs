@@ -244,7 +244,13 @@ impl Lockstep {
     }
 
     /// Hands a datagram from vehicle `j` to the swarm (through the router, if any).
-    fn deliver_to_swarm(&mut self, now: SimTime, j: usize, bytes: &[u8], observer: &mut impl Observer) {
+    fn deliver_to_swarm(
+        &mut self,
+        now: SimTime,
+        j: usize,
+        bytes: &[u8],
+        observer: &mut impl Observer,
+    ) {
         let Some(r) = self.routing.as_mut() else {
             observer.datagram(now, j, false, bytes);
             self.swarm.handle_datagram(now, j, bytes);

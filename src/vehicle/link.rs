@@ -448,6 +448,17 @@ impl VehicleLink {
         self.clock(now);
         if now >= self.next_heartbeat {
             self.queue(&gcs_heartbeat());
+            let streaming = matches!(
+                self.phase,
+                Phase::Streaming(_)
+                    | Phase::Arming
+                    | Phase::Offboarding
+                    | Phase::Flying
+                    | Phase::VehicleHold
+            );
+            if streaming && self.state.origin.is_none() {
+                self.request_origin();
+            }
             let next = self.next_heartbeat + self.cfg.heartbeat_interval;
             self.next_heartbeat = if next <= now {
                 now + self.cfg.heartbeat_interval
@@ -488,8 +499,11 @@ impl VehicleLink {
         if self.held == Some(true) && self.phase == Phase::VehicleHold && self.state_fresh(now) {
             self.start_streaming(now);
         }
+        // Arm and take OFFBOARD only once the origin is known: without it the swarm
+        // cannot place the vehicle, and would hand it to its Hold on the first tick.
         if let Phase::Streaming(since) = self.phase
             && now - since >= self.cfg.pre_stream
+            && self.state.origin.is_some()
         {
             if self.state.armed {
                 self.request_offboard(now)

@@ -15,10 +15,17 @@ const ACCEPTED: u8 = 0;
 /// How long an ACCEPTED for DO_SET_MODE waits for a second, real answer (PX4 main sends
 /// it a few milliseconds after its early ACCEPTED).
 pub(super) const MODE_ACK_SETTLE: Duration = Duration::from_millis(100);
-/// Message ids the coordinator asks to be streamed, and GPS_GLOBAL_ORIGIN asked once.
+/// Message ids the coordinator asks to be streamed, and GPS_GLOBAL_ORIGIN asked for (at
+/// the start of streaming, then with every heartbeat until it has come).
 const LOCAL_POSITION_NED: f32 = 32.0;
 const ATTITUDE_QUATERNION: f32 = 31.0;
 const GPS_GLOBAL_ORIGIN: f32 = 49.0;
+/// Fast streams of PX4's onboard link the coordinator does not read (ATTITUDE,
+/// GLOBAL_POSITION_INT): turned off on its link (interval −1), which halves what a large
+/// swarm sends it. A ground station on another link keeps its own streams.
+const UNREAD_FAST_STREAMS: [f32; 2] = [30.0, 33.0];
+/// SET_MESSAGE_INTERVAL's "stop this stream".
+const STREAM_OFF: f32 = -1.0;
 
 impl VehicleLink {
     pub(super) fn hand_to_hold(&mut self, now: SimTime, reason: String, resume_when_fresh: bool) {
@@ -106,13 +113,25 @@ impl VehicleLink {
         self.pending = None;
         self.next_setpoint = now;
         let interval_us = self.cfg.telemetry_interval.as_micros() as f32;
-        for id in [LOCAL_POSITION_NED, ATTITUDE_QUATERNION] {
+        let streams = [
+            (LOCAL_POSITION_NED, interval_us),
+            (ATTITUDE_QUATERNION, interval_us),
+        ];
+        let off = UNREAD_FAST_STREAMS.map(|id| (id, STREAM_OFF));
+        for (id, interval) in streams.into_iter().chain(off) {
             self.send_command(
                 MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
-                [id, interval_us, 0.0, 0.0, 0.0, 0.0, 0.0],
+                [id, interval, 0.0, 0.0, 0.0, 0.0, 0.0],
                 0,
             );
         }
+        self.request_origin();
+    }
+
+    /// Asks for GPS_GLOBAL_ORIGIN once (fire and forget: the heartbeat timer asks again
+    /// while it has not come, so a lost request or answer costs a second, not the 5 s
+    /// of PX4's slow origin stream).
+    pub(super) fn request_origin(&mut self) {
         self.send_command(
             MavCmd::MAV_CMD_REQUEST_MESSAGE,
             [GPS_GLOBAL_ORIGIN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
