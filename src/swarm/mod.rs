@@ -43,6 +43,8 @@ mod tick;
 use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 
+use std::cmp::Reverse;
+use std::collections::{BTreeSet, BinaryHeap};
 use std::fmt;
 use std::time::Duration;
 
@@ -149,6 +151,15 @@ pub struct Swarm {
     saturated_ticks: u64,
     consensus_ticks: u64,
     next_link: usize,
+    /// Links that may have output queued, served in cyclic order from `next_link`: a
+    /// datagram costs O(log N), not a scan of every link.
+    ready: BTreeSet<usize>,
+    /// Link deadlines, earliest first: `(deadline, link)`; an entry whose deadline is not
+    /// `scheduled[link]` any more is stale and skipped. A timer event visits the links
+    /// that are due, not all of them.
+    timers: BinaryHeap<Reverse<(SimTime, usize)>>,
+    /// Each link's deadline as the heap has it.
+    scheduled: Vec<SimTime>,
     log: EventLog,
     failure: Option<SwarmFailure>,
     isolated: Vec<bool>,
@@ -164,6 +175,10 @@ pub struct Swarm {
     control_ticks: u64,
     plan: Option<PlanDecision>,
 }
+
+/// The finest a link timer is looked at again when it stays due: the emulator's and the
+/// lockstep driver's step.
+const TIMER_GRANULARITY: Duration = Duration::from_millis(1);
 
 impl Swarm {
     /// A swarm that starts handshaking every vehicle.
@@ -219,6 +234,9 @@ impl Swarm {
             saturated_ticks: 0,
             consensus_ticks: 0,
             next_link: 0,
+            ready: BTreeSet::new(),
+            timers: (0..n).map(|i| Reverse((SimTime::ZERO, i))).collect(),
+            scheduled: vec![SimTime::ZERO; n],
             log: EventLog::default(),
             failure: None,
             isolated: vec![false; n],
@@ -308,6 +326,7 @@ impl Swarm {
         for link in &mut self.links {
             link.land(now);
         }
+        self.after_all_links(now);
     }
 
     /// Whether every vehicle has landed and disarmed (or was never armed), or can no
@@ -360,34 +379,47 @@ impl Swarm {
 
     /// Hands a datagram from vehicle `i` to its link; `true` when the link took a frame
     /// of it as the vehicle's (see [`VehicleLink::handle_datagram`]).
+    ///
+    /// Costs the link's work only: nothing here visits the other links.
     pub fn handle_datagram(&mut self, now: SimTime, i: usize, bytes: &[u8]) -> bool {
-        let taken = self
-            .links
-            .get_mut(i)
-            .is_some_and(|link| link.handle_datagram(now, bytes));
-        self.drain_link_events(now);
+        let Some(link) = self.links.get_mut(i) else {
+            return false;
+        };
+        let taken = link.handle_datagram(now, bytes);
+        self.after_link(now, i);
         taken
     }
 
-    /// When [`Swarm::handle_timeout`] must next be called.
+    /// When [`Swarm::handle_timeout`] must next be called (never later than needed; a
+    /// deadline that moved later may cause one early call).
     pub fn poll_timeout(&self) -> SimTime {
-        self.links
-            .iter()
-            .map(VehicleLink::poll_timeout)
-            .fold(self.next_control, SimTime::min)
+        self.timers
+            .peek()
+            .map_or(self.next_control, |Reverse((t, _))| {
+                self.next_control.min(*t)
+            })
     }
 
     /// The next datagram and the vehicle it is for (round robin over the links).
     pub fn poll_transmit(&mut self) -> Option<(usize, Vec<u8>)> {
         let n = self.links.len();
-        for k in 0..n {
-            let i = (self.next_link + k) % n;
-            if let Some(bytes) = self.links[i].poll_transmit() {
-                self.next_link = (i + 1) % n;
-                return Some((i, bytes));
+        loop {
+            let i = self
+                .ready
+                .range(self.next_link..)
+                .next()
+                .or_else(|| self.ready.iter().next())
+                .copied()?;
+            let Some(bytes) = self.links[i].poll_transmit() else {
+                self.ready.remove(&i);
+                continue;
+            };
+            if !self.links[i].has_output() {
+                self.ready.remove(&i);
             }
+            self.next_link = (i + 1) % n;
+            return Some((i, bytes));
         }
-        None
     }
 
     /// Runs the control tick and the links' timers due at `now`.
@@ -402,22 +434,64 @@ impl Swarm {
             } else {
                 next
             };
+            // The law touched every link.
+            self.after_all_links(now);
         }
-        for link in &mut self.links {
-            if now >= link.poll_timeout() {
-                link.handle_timeout(now);
+        while let Some(&Reverse((t, i))) = self.timers.peek() {
+            if t > now {
+                break;
+            }
+            self.timers.pop();
+            if self.scheduled[i] != t {
+                continue; // stale: the link's deadline moved
+            }
+            // Not in the heap any more: scheduled again below.
+            self.scheduled[i] = SimTime::MAX;
+            if now >= self.links[i].poll_timeout() {
+                self.links[i].handle_timeout(now);
+            }
+            self.after_link(now, i);
+            // A deadline that stays due (nothing for the link to do about it) is looked
+            // at again a millisecond later, not in a loop.
+            if self.scheduled[i] <= now {
+                let later = now + TIMER_GRANULARITY;
+                self.scheduled[i] = later;
+                self.timers.push(Reverse((later, i)));
             }
         }
-        self.drain_link_events(now);
     }
 
-    fn drain_link_events(&mut self, now: SimTime) {
-        for (i, link) in self.links.iter_mut().enumerate() {
-            while let Some(event) = link.poll_event() {
-                let id = self.setup.links[i].system_id;
-                self.log
-                    .push(now, Some(id), event.is_warning(), event.to_string());
-            }
+    /// After something that may have touched every link (landing): O(N), rare.
+    fn after_all_links(&mut self, now: SimTime) {
+        for i in 0..self.links.len() {
+            self.after_link(now, i);
+        }
+    }
+
+    /// After link `i` ran: its output, its next deadline, its events.
+    fn after_link(&mut self, now: SimTime, i: usize) {
+        let Some(link) = self.links.get(i) else {
+            return;
+        };
+        if link.has_output() {
+            self.ready.insert(i);
+        }
+        let t = link.poll_timeout();
+        if t != self.scheduled[i] {
+            self.scheduled[i] = t;
+            self.timers.push(Reverse((t, i)));
+        }
+        self.drain_events_of(now, i);
+    }
+
+    fn drain_events_of(&mut self, now: SimTime, i: usize) {
+        let Some(link) = self.links.get_mut(i) else {
+            return;
+        };
+        while let Some(event) = link.poll_event() {
+            let id = self.setup.links[i].system_id;
+            self.log
+                .push(now, Some(id), event.is_warning(), event.to_string());
         }
     }
 }

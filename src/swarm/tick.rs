@@ -91,7 +91,7 @@ impl Swarm {
                 self.flown[i].commanded(sp.thrust_norm * tilt_rad(&q).cos());
             }
         }
-        self.drain_link_events(now);
+        // The links' events are drained by `handle_timeout` right after.
     }
 
     /// Whether vehicle `i` flies on our commands in the air now.

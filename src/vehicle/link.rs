@@ -190,6 +190,11 @@ impl VehicleLink {
         self.queue(&msg);
     }
 
+    /// Whether a datagram is waiting in [`VehicleLink::poll_transmit`].
+    pub fn has_output(&self) -> bool {
+        !self.outbox.is_empty()
+    }
+
     /// The next datagram to send to the vehicle.
     pub fn poll_transmit(&mut self) -> Option<Vec<u8>> {
         self.outbox.pop_front()
@@ -202,18 +207,25 @@ impl VehicleLink {
 
     /// When [`VehicleLink::handle_timeout`] must next be called.
     pub fn poll_timeout(&self) -> SimTime {
-        let mut next = self
-            .state
-            .last_heard
-            .map_or(SimTime::from_millis(100), |t| t + self.cfg.link_timeout)
-            .min(self.next_heartbeat);
+        // The link timeout only matters where `handle_timeout` acts on it.
+        let watched = !matches!(
+            self.phase,
+            Phase::Lost | Phase::Failed | Phase::Discovering | Phase::Done | Phase::Overridden
+        );
+        let mut next = match self.state.last_heard {
+            Some(t) if watched => t + self.cfg.link_timeout,
+            _ => SimTime::MAX,
+        }
+        .min(self.next_heartbeat);
         if self.streams() {
             next = next.min(self.next_setpoint);
         }
         if let Some(p) = self.pending {
             next = next.min(p.deadline);
         }
-        if let Phase::Streaming(since) = self.phase {
+        if let Phase::Streaming(since) = self.phase
+            && self.state.origin.is_some()
+        {
             next = next.min(since + self.cfg.pre_stream);
         }
         if self.phase == Phase::Discovering && !self.never_heard_reported {

@@ -14,6 +14,9 @@ impl SimTime {
     /// The start.
     pub const ZERO: Self = Self(0);
 
+    /// Never: later than any time.
+    pub const MAX: Self = Self(u64::MAX);
+
     /// From microseconds.
     pub const fn from_micros(us: u64) -> Self {
         Self(us)
