@@ -38,8 +38,12 @@ impl Config {
         let mut sockets = Vec::new();
         let mut by_name = HashMap::new();
         for (j, n) in self.network.iter().enumerate() {
-            if n.name.trim().is_empty() {
-                p.push(format!("network[{j}].name must not be empty"));
+            let plain = |c: char| c.is_ascii_alphanumeric() || c == '-' || c == '_';
+            if n.name.is_empty() || !n.name.chars().all(plain) {
+                p.push(format!(
+                    "network[{j}].name must be letters, digits, '-' or '_' (it names files), got \"{}\"",
+                    n.name
+                ));
             } else if by_name.insert(n.name.as_str(), sockets.len()).is_some() {
                 p.push(format!("network[{j}].name \"{}\" is used twice", n.name));
             }

@@ -229,6 +229,7 @@ impl Config {
                     own_ids: (s.gcs_system_id, s.gcs_component_id),
                     retake_offboard: s.retake_offboard,
                     state_timeout: timing.state_timeout,
+                    network: v.network.clone(),
                     ..LinkConfig::new(v.system_id)
                 })
                 .collect(),

@@ -12,6 +12,7 @@
 //! A disk error never stops a flight: the first one is kept, recording stops, and
 //! [`Recorder::finish`] reports it.
 
+mod fixed;
 pub mod metrics;
 pub mod trace;
 
@@ -48,6 +49,8 @@ pub struct Recorder {
     trace: Trace,
     last_tick: u64,
     error: Option<io::Error>,
+    /// One CSV line being built (reused: no allocation per row).
+    line: Vec<u8>,
 }
 
 impl Recorder {
@@ -64,7 +67,7 @@ impl Recorder {
         let mut csv = Vec::new();
         for cfg in &swarm.setup().links {
             let mut w = BufWriter::new(File::create(
-                dir.join(format!("vehicle-{}.csv", cfg.system_id)),
+                dir.join(format!("vehicle-{}.csv", cfg.file_label())),
             )?);
             writeln!(w, "{CSV_HEADER}")?;
             csv.push(w);
@@ -80,6 +83,7 @@ impl Recorder {
             trace: Trace::new(TRACE_PERIOD),
             last_tick: 0,
             error: None,
+            line: Vec::with_capacity(256),
         })
     }
 
@@ -166,29 +170,36 @@ impl Recorder {
                 .state()
                 .last_heard
                 .map_or(f64::NAN, |t| (now - t).as_secs_f64() * 1e3);
-            writeln!(
-                w,
-                "{:.4},{phase},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.5},{:.5},\
-                 {:.4},{:.4},{:.4},{:.5},{:.5},{:.4},{:.1}",
-                now.as_secs_f64(),
-                link.phase().name(),
-                s.pos_enu_m.x,
-                s.pos_enu_m.y,
-                s.pos_enu_m.z,
-                s.vel_enu_mps.x,
-                s.vel_enu_mps.y,
-                s.vel_enu_mps.z,
-                roll,
-                pitch,
-                yaw,
-                c.x,
-                c.y,
-                c.z,
-                sp_roll,
-                sp_pitch,
-                sp.thrust_norm,
-                age_ms
-            )?;
+            let line = &mut self.line;
+            line.clear();
+            fixed::push(line, now.as_secs_f64(), 4);
+            line.push(b',');
+            line.extend_from_slice(phase.as_bytes());
+            line.push(b',');
+            line.extend_from_slice(link.phase().name().as_bytes());
+            for (x, decimals) in [
+                (s.pos_enu_m.x, 4),
+                (s.pos_enu_m.y, 4),
+                (s.pos_enu_m.z, 4),
+                (s.vel_enu_mps.x, 4),
+                (s.vel_enu_mps.y, 4),
+                (s.vel_enu_mps.z, 4),
+                (roll, 5),
+                (pitch, 5),
+                (yaw, 5),
+                (c.x, 4),
+                (c.y, 4),
+                (c.z, 4),
+                (sp_roll, 5),
+                (sp_pitch, 5),
+                (sp.thrust_norm, 4),
+                (age_ms, 1),
+            ] {
+                line.push(b',');
+                fixed::push(line, x, decimals);
+            }
+            line.push(b'\n');
+            w.write_all(line)?;
         }
         Ok(())
     }

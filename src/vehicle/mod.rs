@@ -107,6 +107,20 @@ pub struct LinkConfig {
     pub retake_offboard: bool,
     /// MAVLink 2 signing of this link (default none: unsigned frames both ways).
     pub signing: Option<LinkSigning>,
+    /// The MAVLink network the vehicle is reached on (system ids repeat across
+    /// networks): part of its name in files.
+    pub network: Option<String>,
+}
+
+impl LinkConfig {
+    /// The vehicle's name in file names: `<system id>`, or `<network>-<system id>` on a
+    /// network.
+    pub fn file_label(&self) -> String {
+        match &self.network {
+            Some(network) => format!("{network}-{}", self.system_id),
+            None => self.system_id.to_string(),
+        }
+    }
 }
 
 /// How one link signs: every frame it sends is signed, and only authentic, fresh signed
@@ -138,6 +152,7 @@ impl LinkConfig {
             max_attempts: 4,
             link_timeout: Duration::from_millis(1500),
             discovery_warning: Duration::from_secs(10),
+            network: None,
             state_timeout: Duration::from_millis(300),
             retake_offboard: false,
             signing: None,
