@@ -167,9 +167,36 @@ pub(crate) async fn bind_all(transport: &TransportPlan) -> anyhow::Result<Vec<Ud
                 transport.routes.iter().position(|r| r.socket == s).map_or(0, |i| i + 1)
             ),
         })?;
+        if plan.network.is_some() {
+            grow_receive_buffer(&socket, bind);
+        }
         sockets.push(socket);
     }
     Ok(sockets)
+}
+
+/// What a network socket asks the kernel to buffer: about two control periods of a
+/// thousand vehicles' telemetry, so a burst (every vehicle's streams falling due
+/// together) is not dropped while the swarm is busy. Linux caps it at
+/// `net.core.rmem_max`.
+const NETWORK_RECEIVE_BUFFER: usize = 4 << 20;
+
+/// Asks for [`NETWORK_RECEIVE_BUFFER`]; says so when the kernel grants less.
+fn grow_receive_buffer(socket: &UdpSocket, bind: std::net::SocketAddr) {
+    let socket = socket2::SockRef::from(socket);
+    if let Err(e) = socket.set_recv_buffer_size(NETWORK_RECEIVE_BUFFER) {
+        tracing::warn!(%bind, error = %e, "receive buffer not enlarged");
+    }
+    // Linux reports twice what it grants (its bookkeeping overhead).
+    match socket.recv_buffer_size() {
+        Ok(granted) if granted / 2 < NETWORK_RECEIVE_BUFFER => tracing::info!(
+            %bind,
+            granted = granted / 2,
+            wanted = NETWORK_RECEIVE_BUFFER,
+            "receive buffer capped by the kernel (net.core.rmem_max): large swarms may lose telemetry in bursts"
+        ),
+        _ => {}
+    }
 }
 
 struct FlyObserver {

@@ -96,6 +96,10 @@ struct Slot {
     alive: bool,
     /// Datagrams the socket could not take at once.
     dropped_sends: u64,
+    /// How long before the shard's start the vehicle booted: vehicles started together
+    /// would send every stream in the same millisecond (a thousand datagrams at once);
+    /// PX4 instances boot apart, and so do these.
+    boot_offset: std::time::Duration,
 }
 
 /// A datagram received on one link of one vehicle.
@@ -109,13 +113,13 @@ struct Received {
 /// Largest datagram read.
 const MAX_DATAGRAM: usize = 2048;
 
-/// Runs a shard of vehicles until `shutdown` turns true. `controls` carries
-/// `(index in vehicles, request)`.
+/// Runs a shard of vehicles, each with its boot offset, until `shutdown` turns true.
+/// `controls` carries `(index in vehicles, request)`.
 ///
 /// # Errors
 /// A socket receive error other than a transient one.
-pub async fn run_fleet(
-    vehicles: Vec<FleetVehicle>,
+async fn run_fleet(
+    vehicles: Vec<(std::time::Duration, FleetVehicle)>,
     clock: SimClock,
     mut controls: mpsc::Receiver<(usize, VehicleControl)>,
     mut shutdown: watch::Receiver<bool>,
@@ -123,7 +127,7 @@ pub async fn run_fleet(
     let (tx, mut rx) = mpsc::channel::<Received>(4096);
     let mut receivers = JoinSet::new();
     let mut slots: Vec<Slot> = Vec::with_capacity(vehicles.len());
-    for (s, v) in vehicles.into_iter().enumerate() {
+    for (s, (boot_offset, v)) in vehicles.into_iter().enumerate() {
         let mut sockets = Vec::new();
         let ids: Vec<LinkId> = v.links.iter().map(|l| l.id).collect();
         let defaults: Vec<SocketAddr> = v.links.iter().map(|l| l.default_peer).collect();
@@ -167,6 +171,7 @@ pub async fn run_fleet(
             status: v.status,
             alive: true,
             dropped_sends: 0,
+            boot_offset,
         });
     }
     drop(tx);
@@ -180,8 +185,9 @@ pub async fn run_fleet(
             }
             Some((s, request)) = controls.recv() => {
                 if let Some(slot) = slots.get_mut(s) {
-                    slot.control(request, clock.now());
-                    slot.flush(clock.now());
+                    let now = slot.time(clock.now());
+                    slot.control(request, now);
+                    slot.flush(now);
                 }
             }
             received = rx.recv() => {
@@ -190,6 +196,7 @@ pub async fn run_fleet(
                 let mut next = Some(first);
                 while let Some(r) = next {
                     if let Some(slot) = slots.get_mut(r.slot) {
+                        let now = slot.time(now);
                         slot.inbound(now, r.link, r.from, &r.bytes);
                         slot.flush(now);
                     }
@@ -206,6 +213,7 @@ pub async fn run_fleet(
                     if !slot.alive {
                         continue;
                     }
+                    let now = slot.time(now);
                     slot.vehicle.handle_timeout(now);
                     slot.deliver_delayed(now);
                     slot.flush(now);
@@ -281,12 +289,13 @@ pub fn spawn_shards(
     shutdown: &watch::Receiver<bool>,
 ) -> Shards {
     let shards = shards.clamp(1, vehicles.len().max(1));
-    let mut fleets: Vec<Vec<FleetVehicle>> = (0..shards).map(|_| Vec::new()).collect();
+    let mut fleets: Vec<Vec<(std::time::Duration, FleetVehicle)>> =
+        (0..shards).map(|_| Vec::new()).collect();
     let mut placed = Vec::with_capacity(vehicles.len());
     for (i, v) in vehicles.into_iter().enumerate() {
         let shard = i % shards;
         placed.push((shard, fleets[shard].len()));
-        fleets[shard].push(v);
+        fleets[shard].push((spread(i), v));
     }
     let mut senders = Vec::new();
     let mut tasks = Vec::new();
@@ -304,7 +313,19 @@ pub fn spawn_shards(
     }
 }
 
+/// Vehicle `i`'s boot offset in [0, 1 s): the golden-ratio sequence, so that the phases
+/// of every stream period (20 ms … 5 s) are spread evenly over any number of vehicles.
+fn spread(i: usize) -> std::time::Duration {
+    let golden = 0.618_033_988_749_894_9;
+    std::time::Duration::from_micros(((i as f64 * golden).fract() * 1e6) as u64)
+}
+
 impl Slot {
+    /// The vehicle's time when the shard's clock says `now`.
+    fn time(&self, now: SimTime) -> SimTime {
+        now + self.boot_offset
+    }
+
     fn control(&mut self, request: VehicleControl, now: SimTime) {
         let sysid = self.vehicle.system_id();
         match request {

@@ -13,7 +13,7 @@ use std::net::{IpAddr, SocketAddr};
 use tokio::net::UdpSocket;
 use tokio::time::Instant;
 
-pub use crate::fleet::{FleetVehicle, LinkSocket, Shards, VehicleControl, run_fleet, spawn_shards};
+pub use crate::fleet::{FleetVehicle, LinkSocket, Shards, VehicleControl, spawn_shards};
 pub use crate::link_faults::LinkFaults;
 
 use crate::autopilot::LinkId;

@@ -9,6 +9,7 @@
 
 use std::io;
 use std::net::SocketAddr;
+use std::ops::Range;
 use std::sync::Arc;
 
 use ringswarm_wire::time::SimTime;
@@ -36,6 +37,57 @@ pub enum DriverCommand {
 /// Largest datagram read.
 const MAX_DATAGRAM: usize = 2048;
 
+/// Batches received and not yet handled by the swarm, over all sockets.
+const RECEIVE_QUEUE: usize = 1024;
+
+/// At most this many datagrams per batch.
+const BATCH: usize = 64;
+
+/// Datagrams read from one socket in one go: one allocation and one hand-over for up to
+/// [`BATCH`] of them, instead of one each.
+struct Batch {
+    socket: usize,
+    datagrams: Vec<(SocketAddr, Range<usize>)>,
+    bytes: Vec<u8>,
+}
+
+/// Waits for a datagram on `socket`, then takes whatever else is already there.
+///
+/// # Errors
+/// A receive error other than an ICMP "port unreachable" for an earlier send (a vehicle
+/// not listening yet), which is not ours.
+async fn receive_batch(socket_index: usize, socket: &UdpSocket) -> io::Result<Batch> {
+    let mut buf = [0u8; MAX_DATAGRAM];
+    let mut batch = Batch {
+        socket: socket_index,
+        datagrams: Vec::new(),
+        bytes: Vec::new(),
+    };
+    let keep = |batch: &mut Batch, n: usize, from: SocketAddr, buf: &[u8]| {
+        let start = batch.bytes.len();
+        batch.bytes.extend_from_slice(&buf[..n]);
+        batch.datagrams.push((from, start..start + n));
+    };
+    loop {
+        match socket.recv_from(&mut buf).await {
+            Ok((n, from)) => {
+                keep(&mut batch, n, from, &buf);
+                break;
+            }
+            Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
+            Err(e) => return Err(e),
+        }
+    }
+    while batch.datagrams.len() < BATCH {
+        match socket.try_recv_from(&mut buf) {
+            Ok((n, from)) => keep(&mut batch, n, from, &buf),
+            Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
+            Err(_) => break, // WouldBlock: nothing more for now
+        }
+    }
+    Ok(batch)
+}
+
 /// Runs `swarm` over `sockets` (bound as `router`'s plan says) until the swarm has
 /// landed every vehicle, or `commands` says [`DriverCommand::Stop`]; returns the swarm
 /// and the observer. The observer sees every datagram (a network datagram once per
@@ -54,15 +106,14 @@ pub async fn run_swarm<O: Observer>(
     let start = Instant::now();
     let now = || SimTime::from_micros(start.elapsed().as_micros() as u64);
     let sockets: Vec<Arc<UdpSocket>> = sockets.into_iter().map(Arc::new).collect();
-    let (tx, mut rx) = mpsc::channel::<(usize, SocketAddr, Vec<u8>)>(1024);
+    let (tx, mut rx) = mpsc::channel::<Batch>(RECEIVE_QUEUE);
     let mut receivers = JoinSet::new();
     for (s, socket) in sockets.iter().enumerate() {
         let (socket, tx) = (Arc::clone(socket), tx.clone());
         receivers.spawn(async move {
-            let mut buf = [0u8; MAX_DATAGRAM];
             loop {
-                let (n, from) = socket.recv_from(&mut buf).await?;
-                if tx.send((s, from, buf[..n].to_vec())).await.is_err() {
+                let batch = receive_batch(s, &socket).await?;
+                if tx.send(batch).await.is_err() {
                     return Ok::<(), io::Error>(());
                 }
             }
@@ -72,7 +123,11 @@ pub async fn run_swarm<O: Observer>(
     let mut unsent = vec![0u64; swarm.links().len()];
     drop(tx);
     loop {
-        let deadline = start + std::time::Duration::from_micros(swarm.poll_timeout().as_micros());
+        // Timers to the next whole millisecond (as the lockstep driver steps): a thousand
+        // links with deadlines scattered over a control period wake the swarm at most
+        // once per millisecond, not once per link.
+        let due_us = swarm.poll_timeout().as_micros().div_ceil(1000) * 1000;
+        let deadline = start + std::time::Duration::from_micros(due_us);
         tokio::select! {
             changed = commands.changed() => {
                 let command = if changed.is_err() { DriverCommand::Stop } else { *commands.borrow() };
@@ -83,9 +138,14 @@ pub async fn run_swarm<O: Observer>(
                 }
             }
             received = rx.recv() => match received {
-                Some((socket, from, bytes)) => {
-                    let t = now();
-                    router.route_inbound(socket, from, &bytes, &mut pieces);
+                Some(first) => {
+                  let t = now();
+                  let mut next = Some(first);
+                  // Everything that has arrived, then one round of sends.
+                  while let Some(batch) = next.take() {
+                   for (from, datagram) in &batch.datagrams {
+                    let (from, bytes) = (*from, &batch.bytes[datagram.clone()]);
+                    router.route_inbound(batch.socket, from, bytes, &mut pieces);
                     for (i, range) in pieces.drain(..) {
                         let piece = &bytes[range];
                         observer.datagram(t, i, false, piece);
@@ -100,6 +160,9 @@ pub async fn run_swarm<O: Observer>(
                             );
                         }
                     }
+                   }
+                    next = rx.try_recv().ok();
+                  }
                 }
                 None => break,
             },
