@@ -468,3 +468,17 @@ fn network_mistakes_are_all_named() {
     assert!(!err.contains("vehicle[2].system_id"), "{err}");
     assert!(!err.contains("vehicle[5].system_id"), "{err}");
 }
+
+#[test]
+fn the_shipped_500_vehicle_ring_validates_on_two_networks() {
+    let config = load("ring-500.toml");
+    let setup = config.validate().unwrap();
+    assert_eq!(setup.ring.agents(), 500);
+    let plan = config.transport_plan().unwrap();
+    assert_eq!(plan.sockets.len(), 2);
+    // Vehicle 251 is system id 1 again, on the second network.
+    assert_eq!((plan.routes[250].socket, plan.routes[250].system_id), (1, 1));
+    // Its files are told apart by network: vehicle-n0-1.csv and vehicle-n1-1.csv.
+    assert_eq!(setup.links[0].file_label(), "n0-1");
+    assert_eq!(setup.links[250].file_label(), "n1-1");
+}
