@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Writes a coordinator config for a large ring: N ideal quadrotors (N even) hovering on a
 circle at 50 m, spaced `--spacing` metres apart, on ceil(N/250) MAVLink networks (system
-ids 1..250 on each, ports 14600, 14601, ...), so that `ringswarm sitl --config F` and
+ids 1..250 on each, or 1..--per-network; ports 14600, 14601, ...), so that `ringswarm sitl --config F` and
 `ringswarm fly --config F` fly it on one machine.
 
 Velocities: every vehicle 1 m/s east, odd agents (paper numbering) 0.2 m/s south, even
@@ -12,7 +12,7 @@ Gains: Yu's bound grows as m^2 (docs/math.md); beta = sqrt(1.25 * bound) with al
 flown at the time scale that keeps the fastest mode within the bandwidth gate for the
 ideal frame at 50 Hz (omega * T <= 0.5). `ringswarm analyze -m M -k 1` gives the bound.
 
-    python3 scripts/ring_config.py 1000 --yu-bound 48852.97 > ring-1000.toml
+    python3 scripts/ring_config.py 1000 --yu-bound 48850.26 > ring-1000.toml
 """
 
 import argparse
@@ -27,6 +27,7 @@ def main():
     ap.add_argument("--duration", type=float, default=60.0, help="seconds of consensus flight")
     ap.add_argument("--rate", type=float, default=50.0, help="control rate (Hz)")
     ap.add_argument("--port", type=int, default=14600, help="first network's port")
+    ap.add_argument("--per-network", type=int, default=250, help="vehicles per network (system ids 1..this on each)")
     a = ap.parse_args()
     n = a.vehicles
     if n < 2 or n % 2:
@@ -35,7 +36,10 @@ def main():
     fastest = 3.0 * beta  # |s| of the fastest mode is about beta * max|mu| = 3 beta (k = 1)
     time_scale = min(1.0, 0.45 * a.rate / fastest)
     radius = a.spacing * n / (2.0 * math.pi)
-    networks = (n + 249) // 250
+    per = a.per_network
+    if not 1 <= per <= 250:
+        raise SystemExit(f"--per-network must be 1..250 (PX4's system ids), got {per}")
+    networks = (n + per - 1) // per
     out = [
         f"# {n} ideal quadrotors (m = {n // 2}) on a circle of radius {radius:.1f} m at 50 m,",
         f"# {networks} MAVLink network(s). Written by scripts/ring_config.py {n} --yu-bound {a.yu_bound}.",
@@ -77,8 +81,8 @@ def main():
         north = -0.2 if i % 2 == 0 else 0.2
         out += [
             "[[vehicle]]",
-            f"system_id = {i % 250 + 1}",
-            f'network = "n{i // 250}"',
+            f"system_id = {i % per + 1}",
+            f'network = "n{i // per}"',
             'profile = "ideal"',
             "mass_kg = 1.0",
             "hover_throttle = 0.2",
