@@ -34,6 +34,19 @@ def run_dir(tmp_path_factory):
     return out
 
 
+@pytest.fixture(scope="module")
+def tlog(run_dir):
+    """Every message of the run's .tlog, read once for the tests that need it (pure-Python
+    parsing of a 167 s run is the slow part)."""
+    log = mavutil.mavlink_connection(str(run_dir / "traffic.tlog"), dialect="common")
+    messages = []
+    while True:
+        m = log.recv_msg()
+        if m is None:
+            return messages
+        messages.append(m)
+
+
 def test_summary_matches_the_independent_prediction(run_dir):
     summary = json.loads((run_dir / "summary.json").read_text())
     expected = ref.final_velocity(np.array(V0, dtype=float), 5.0)
@@ -46,14 +59,10 @@ def test_summary_matches_the_independent_prediction(run_dir):
     assert summary["final_phase"] == "landing"
 
 
-def test_tlog_setpoints_are_well_formed_and_at_250_hz(run_dir):
-    log = mavutil.mavlink_connection(str(run_dir / "traffic.tlog"), dialect="common")
+def test_tlog_setpoints_are_well_formed_and_at_250_hz(tlog):
     counts = Counter()
     stamps = defaultdict(list)
-    while True:
-        m = log.recv_msg()
-        if m is None:
-            break
+    for m in tlog:
         kind = m.get_type()
         counts[kind] += 1
         if kind != "SET_ATTITUDE_TARGET":
@@ -80,15 +89,11 @@ def test_tlog_setpoints_are_well_formed_and_at_250_hz(run_dir):
 FIGURES = ["trajectories-3d", "paths-xy", "altitude", "velocity", "attitude", "commands"]
 
 
-def test_the_coordinator_heartbeat_is_in_the_tlog_at_one_hertz(run_dir):
+def test_the_coordinator_heartbeat_is_in_the_tlog_at_one_hertz(run_dir, tlog):
     """Six vehicle links, each with a 1 Hz GCS heartbeat from the coordinator's own ids
     (253/190); the tlog is stamped with the run's start plus virtual time."""
-    log = mavutil.mavlink_connection(str(run_dir / "traffic.tlog"), dialect="common")
     stamps = []
-    while True:
-        m = log.recv_msg()
-        if m is None:
-            break
+    for m in tlog:
         if m.get_type() == "HEARTBEAT" and m.type == mavutil.mavlink.MAV_TYPE_GCS:
             assert (m.get_srcSystem(), m.get_srcComponent()) == (253, 190)
             assert m.autopilot == mavutil.mavlink.MAV_AUTOPILOT_INVALID
