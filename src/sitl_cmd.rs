@@ -62,8 +62,16 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
         .map(SigningKey::read)
         .transpose()
         .map_err(anyhow::Error::msg)?;
-    for cfg in &mut setup.vehicles {
-        cfg.signing = boot_key(&args.state_dir, cfg.system_id, key.as_ref())?;
+    let (placements, labels) = match placements {
+        Some((p, l)) => (Some(p), l),
+        None => (None, setup.vehicles.iter().map(|v| v.system_id.to_string()).collect()),
+    };
+    let key_files: Vec<PathBuf> = labels
+        .iter()
+        .map(|label| keystore::key_path(&args.state_dir, label))
+        .collect();
+    for (cfg, path) in setup.vehicles.iter_mut().zip(&key_files) {
+        cfg.signing = boot_key(path, key.as_ref())?;
     }
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
@@ -84,7 +92,7 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
             })
             .collect::<anyhow::Result<Vec<_>>>()?,
     };
-    let result = runtime.block_on(serve(args, setup, placements));
+    let result = runtime.block_on(serve(args, setup, placements, key_files));
     // The stdin reader is a blocking read that only ends with the next line; do not wait
     // for it (every vehicle task has already been awaited).
     runtime.shutdown_background();
@@ -94,13 +102,8 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
 /// The key vehicle `system_id` boots with: `key` when given (stored, with a clock that
 /// starts at the later of the wall clock and the stored one), else whatever its store
 /// holds from an earlier SETUP_SIGNING or `--signing-key`.
-fn boot_key(
-    state_dir: &Path,
-    system_id: u8,
-    key: Option<&SigningKey>,
-) -> anyhow::Result<Option<StoredKey>> {
-    let path = keystore::key_path(state_dir, system_id);
-    let stored = keystore::load(&path).map_err(anyhow::Error::msg)?;
+fn boot_key(path: &Path, key: Option<&SigningKey>) -> anyhow::Result<Option<StoredKey>> {
+    let stored = keystore::load(path).map_err(anyhow::Error::msg)?;
     let Some(key) = key else {
         return Ok(stored);
     };
@@ -109,7 +112,7 @@ fn boot_key(
         key: key.clone(),
         timestamp: stored_clock.max(timestamp_now()),
     };
-    keystore::save(&path, Some(&fresh)).map_err(anyhow::Error::msg)?;
+    keystore::save(path, Some(&fresh)).map_err(anyhow::Error::msg)?;
     Ok(Some(fresh))
 }
 
@@ -118,7 +121,7 @@ fn boot_key(
 /// the same file reaches them (its own sockets or its `[[network]]`s), so that
 /// `ringswarm sitl --config F` and `ringswarm fly --config F` go together; a coordinator
 /// file's `[security] signing_key_file` comes back with it.
-type Emulated = (SitlConfig, Option<PathBuf>, Option<Vec<Placement>>);
+type Emulated = (SitlConfig, Option<PathBuf>, Option<(Vec<Placement>, Vec<String>)>);
 
 fn sitl_config(text: &str) -> Result<Emulated, String> {
     let is_coordinator = text
@@ -130,13 +133,25 @@ fn sitl_config(text: &str) -> Result<Emulated, String> {
     let config = crate::config::Config::from_toml(text)?;
     let (world, vehicles) = config.emulator()?;
     let placements = config.emulator_placements()?;
+    let labels = config
+        .vehicle
+        .iter()
+        .map(|v| {
+            // The same name the coordinator gives the vehicle's files.
+            crate::vehicle::LinkConfig {
+                network: v.network.clone(),
+                ..crate::vehicle::LinkConfig::new(v.system_id)
+            }
+            .file_label()
+        })
+        .collect();
     let sitl = SitlConfig {
         world,
         faults: LinkFaults::default(),
         fault_seed: 1,
         vehicles,
     };
-    Ok((sitl, config.security.signing_key_file, Some(placements)))
+    Ok((sitl, config.security.signing_key_file, Some((placements, labels))))
 }
 
 /// The configuration the flags describe: N vehicles of one profile on the ground, 5 m
@@ -192,6 +207,7 @@ async fn serve(
     args: &SitlArgs,
     setup: SitlConfig,
     placements: Vec<Placement>,
+    key_files: Vec<PathBuf>,
 ) -> anyhow::Result<()> {
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let clock = SimClock::new(args.speed);
@@ -201,10 +217,10 @@ async fn serve(
     let verbose = n <= STATUS_LINES_UP_TO;
     println!("ringswarm sitl: {n} vehicle(s), {}x real time", args.speed);
     let mut fleet = Vec::with_capacity(n);
-    for (i, (cfg, placement)) in setup.vehicles.into_iter().zip(placements).enumerate() {
+    let vehicles = setup.vehicles.into_iter().zip(placements).zip(key_files);
+    for (i, ((cfg, placement), key_file)) in vehicles.enumerate() {
         let system_id = cfg.system_id;
         let profile = cfg.profile.name;
-        let key_file = keystore::key_path(&args.state_dir, system_id);
         if cfg.signing.is_some() && verbose {
             println!(
                 "  vehicle {system_id}: MAVLink 2 signing on (key stored in {}): unsigned frames refused but HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION",

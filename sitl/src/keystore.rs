@@ -21,10 +21,11 @@ pub struct StoredKey {
 /// Length of PX4's key file.
 const FILE_LEN: usize = 40;
 
-/// The key file of vehicle `system_id` under `state_dir`.
-pub fn key_path(state_dir: &Path, system_id: u8) -> PathBuf {
+/// The key file of vehicle `label` under `state_dir`: its system id, or
+/// `<network>-<system id>` where networks repeat ids.
+pub fn key_path(state_dir: &Path, label: &str) -> PathBuf {
     state_dir
-        .join(format!("vehicle-{system_id}"))
+        .join(format!("vehicle-{label}"))
         .join("mavlink")
         .join("mavlink-signing-key.bin")
 }
