@@ -91,7 +91,7 @@ mod tests {
     #[test]
     fn a_key_round_trips_in_px4s_40_byte_format_and_blank_means_none() {
         let dir = std::env::temp_dir().join(format!("ringswarm-keystore-{}", std::process::id()));
-        let path = key_path(&dir, 7);
+        let path = key_path(&dir, "7");
         assert!(path.ends_with("vehicle-7/mavlink/mavlink-signing-key.bin"));
         assert_eq!(load(&path), Ok(None), "no file, no key");
         let stored = StoredKey {
