@@ -16,7 +16,8 @@ fn lockstep(toml: &str) -> Lockstep {
 }
 
 /// `n` ideal vehicles on a circle of radius 3n m at 50 m, drifting east at 2 m/s, asked
-/// for a polygon of radius 2n m; k = 1, alpha = 1 and beta 25 % above Yu's bound.
+/// for a polygon of radius 2n m; k = 1, alpha = 1 and beta 25 % above Yu's bound; on
+/// MAVLink networks of 250 (system ids 1..=250 on each).
 fn ring(n: usize, rate_hz: f64) -> String {
     let ring = ringswarm::consensus::RingDigraph::for_agents(n, 1.0).expect("even n");
     let report = ringswarm::consensus::analyze(&ring, None).expect("analysis");
@@ -32,11 +33,20 @@ fn ring(n: usize, rate_hz: f64) -> String {
         let r = 3.0 * n as f64;
         let _ = write!(
             s,
-            "[[vehicle]]\nsystem_id = {}\nprofile = \"ideal\"\nmass_kg = 1.0\nhover_throttle = 0.2\n\
-             start_enu_m = [{}, {}, 50.0]\nstart_velocity_enu_mps = [2.0, 0.0, 0.0]\nin_air = true\n",
-            i + 1,
+            "[[vehicle]]\nsystem_id = {}\nnetwork = \"n{}\"\nprofile = \"ideal\"\nmass_kg = 1.0\n\
+             hover_throttle = 0.2\nstart_enu_m = [{}, {}, 50.0]\n\
+             start_velocity_enu_mps = [2.0, 0.0, 0.0]\nin_air = true\n",
+            i % 250 + 1,
+            i / 250,
             r * a.cos(),
             r * a.sin()
+        );
+    }
+    for j in 0..n.div_ceil(250) {
+        let _ = write!(
+            s,
+            "[[network]]\nname = \"n{j}\"\nbind = \"0.0.0.0:{}\"\n",
+            14600 + j
         );
     }
     s
@@ -44,13 +54,13 @@ fn ring(n: usize, rate_hz: f64) -> String {
 
 fn main() {
     let sim1 = include_str!("../config/paper-sim1.toml");
-    let seconds = 61.2; // handshake (1.2 s) + the paper's 60 s
-    let end = SimTime::from_micros((seconds * 1e6) as u64);
+    let full = 61.2; // handshake (1.2 s) + the paper's 60 s
     println!(
         "| case | vehicles | control | simulated s | wall s | x real time | µs per vehicle per simulated ms |"
     );
     println!("|---|---|---|---|---|---|---|");
-    let row = |name: &str, toml: &str, record: bool| {
+    let row = |name: &str, toml: &str, record: bool, seconds: f64| {
+        let end = SimTime::from_micros((seconds * 1e6) as u64);
         let mut run = lockstep(toml);
         let n = run.vehicles().len();
         let rate = 1.0 / run.swarm().setup().control_interval.as_secs_f64();
@@ -79,12 +89,15 @@ fn main() {
         let _ = std::fs::remove_dir_all(&dir);
         print_row(name, n, rate, seconds, wall);
     };
-    row("paper-sim1", sim1, false);
-    row("paper-sim1 + run directory", sim1, true);
-    row("ring of 6", &ring(6, 250.0), false);
-    row("ring of 16", &ring(16, 250.0), false);
-    row("ring of 64", &ring(64, 250.0), false);
-    row("ring of 64, 50 Hz", &ring(64, 50.0), false);
+    row("paper-sim1", sim1, false, full);
+    row("paper-sim1 + run directory", sim1, true, full);
+    row("ring of 6", &ring(6, 250.0), false, full);
+    row("ring of 16", &ring(16, 250.0), false, full);
+    row("ring of 64", &ring(64, 250.0), false, full);
+    row("ring of 64, 50 Hz", &ring(64, 50.0), false, full);
+    row("ring of 250, 50 Hz", &ring(250, 50.0), false, 20.0);
+    row("ring of 1000, 50 Hz", &ring(1000, 50.0), false, 5.0);
+    row("ring of 1000, 50 Hz + run directory", &ring(1000, 50.0), true, 5.0);
 }
 
 fn print_row(name: &str, n: usize, rate: f64, seconds: f64, wall: Duration) {
