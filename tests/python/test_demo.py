@@ -19,6 +19,7 @@ import pytest
 from pymavlink import mavutil
 
 import ringswarm_ref as ref
+from tlog import read_tlog
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = os.environ.get("RINGSWARM_BIN", str(ROOT / "target" / "debug" / "ringswarm"))
@@ -38,13 +39,7 @@ def run_dir(tmp_path_factory):
 def tlog(run_dir):
     """Every message of the run's .tlog, read once for the tests that need it (pure-Python
     parsing of a 167 s run is the slow part)."""
-    log = mavutil.mavlink_connection(str(run_dir / "traffic.tlog"), dialect="common")
-    messages = []
-    while True:
-        m = log.recv_msg()
-        if m is None:
-            return messages
-        messages.append(m)
+    return read_tlog(run_dir / "traffic.tlog")
 
 
 def test_summary_matches_the_independent_prediction(run_dir):

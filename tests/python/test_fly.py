@@ -21,6 +21,7 @@ import pytest
 from pymavlink import mavutil
 
 import ringswarm_ref as ref
+from tlog import read_tlog
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = os.environ.get("RINGSWARM_BIN", str(ROOT / "target" / "debug" / "ringswarm"))
@@ -68,16 +69,6 @@ def test_the_law_converges_and_every_vehicle_lands(run_dir):
     assert summary["final_phase"] == "landing"
     # Cross-check the prediction's basis: the slowest mode is what the docstring says.
     assert ref.closed_loop_abscissa(2, 1.0, 0.6, 1.2) == pytest.approx(-0.6, abs=1e-9)
-
-
-def read_tlog(path):
-    log = mavutil.mavlink_connection(str(path), dialect="common")
-    messages = []
-    while True:
-        msg = log.recv_match()
-        if msg is None:
-            return messages
-        messages.append(msg)
 
 
 def test_the_tlog_holds_every_setpoint_well_formed_at_the_configured_rate(run_dir):
