@@ -97,7 +97,12 @@ fn main() {
     row("ring of 64, 50 Hz", &ring(64, 50.0), false, full);
     row("ring of 250, 50 Hz", &ring(250, 50.0), false, 20.0);
     row("ring of 1000, 50 Hz", &ring(1000, 50.0), false, 5.0);
-    row("ring of 1000, 50 Hz + run directory", &ring(1000, 50.0), true, 5.0);
+    row(
+        "ring of 1000, 50 Hz + run directory",
+        &ring(1000, 50.0),
+        true,
+        5.0,
+    );
 }
 
 fn print_row(name: &str, n: usize, rate: f64, seconds: f64, wall: Duration) {

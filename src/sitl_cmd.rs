@@ -64,7 +64,14 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
         .map_err(anyhow::Error::msg)?;
     let (placements, labels) = match placements {
         Some((p, l)) => (Some(p), l),
-        None => (None, setup.vehicles.iter().map(|v| v.system_id.to_string()).collect()),
+        None => (
+            None,
+            setup
+                .vehicles
+                .iter()
+                .map(|v| v.system_id.to_string())
+                .collect(),
+        ),
     };
     let key_files: Vec<PathBuf> = labels
         .iter()
@@ -121,7 +128,11 @@ fn boot_key(path: &Path, key: Option<&SigningKey>) -> anyhow::Result<Option<Stor
 /// the same file reaches them (its own sockets or its `[[network]]`s), so that
 /// `ringswarm sitl --config F` and `ringswarm fly --config F` go together; a coordinator
 /// file's `[security] signing_key_file` comes back with it.
-type Emulated = (SitlConfig, Option<PathBuf>, Option<(Vec<Placement>, Vec<String>)>);
+type Emulated = (
+    SitlConfig,
+    Option<PathBuf>,
+    Option<(Vec<Placement>, Vec<String>)>,
+);
 
 fn sitl_config(text: &str) -> Result<Emulated, String> {
     let is_coordinator = text
@@ -151,7 +162,11 @@ fn sitl_config(text: &str) -> Result<Emulated, String> {
         fault_seed: 1,
         vehicles,
     };
-    Ok((sitl, config.security.signing_key_file, Some((placements, labels))))
+    Ok((
+        sitl,
+        config.security.signing_key_file,
+        Some((placements, labels)),
+    ))
 }
 
 /// The configuration the flags describe: N vehicles of one profile on the ground, 5 m

@@ -477,7 +477,10 @@ fn the_shipped_500_vehicle_ring_validates_on_two_networks() {
     let plan = config.transport_plan().unwrap();
     assert_eq!(plan.sockets.len(), 2);
     // Vehicle 251 is system id 1 again, on the second network.
-    assert_eq!((plan.routes[250].socket, plan.routes[250].system_id), (1, 1));
+    assert_eq!(
+        (plan.routes[250].socket, plan.routes[250].system_id),
+        (1, 1)
+    );
     // Its files are told apart by network: vehicle-n0-1.csv and vehicle-n1-1.csv.
     assert_eq!(setup.links[0].file_label(), "n0-1");
     assert_eq!(setup.links[250].file_label(), "n1-1");
