@@ -2,6 +2,8 @@
 //! networks whose system ids overlap (1, 2, 3 on each), routed by the same router as over
 //! UDP, flies exactly as with one socket per vehicle.
 
+mod common;
+
 use ringswarm::config::Config;
 use ringswarm::driver::lockstep::Lockstep;
 use ringswarm::vehicle::Phase;
@@ -41,13 +43,9 @@ fn run(text: &str, seconds: u64) -> Lockstep {
 }
 
 fn states(run: &Lockstep) -> Vec<[u64; 6]> {
-    run.vehicles()
-        .iter()
-        .map(|v| {
-            let s = v.status();
-            let (p, u) = (s.pos_world_ned_m, s.vel_ned_mps);
-            [p.x, p.y, p.z, u.x, u.y, u.z].map(f64::to_bits)
-        })
+    common::vehicle_states(run)
+        .into_iter()
+        .map(|s| s.map(f64::to_bits))
         .collect()
 }
 

@@ -37,17 +37,6 @@ impl Observer for Census {
     }
 }
 
-fn positions(run: &Lockstep) -> Vec<[f64; 6]> {
-    run.vehicles()
-        .iter()
-        .map(|v| {
-            let s = v.status();
-            let (p, u) = (s.pos_world_ned_m, s.vel_ned_mps);
-            [p.x, p.y, p.z, u.x, u.y, u.z]
-        })
-        .collect()
-}
-
 #[test]
 fn signed_flight_is_the_unsigned_flight_bit_for_bit_and_every_frame_is_signed() {
     let key = SigningKey::from_bytes([0x5A; 32]);
@@ -62,7 +51,10 @@ fn signed_flight_is_the_unsigned_flight_bit_for_bit_and_every_frame_is_signed() 
     let mut plain = build(None, &[None, None, None, None, None, None]);
     plain.run_until(end, |_| {});
     // Signing changes the bytes, never the flight: the same trajectory to the bit.
-    let (a, b) = (positions(&signed), positions(&plain));
+    let (a, b) = (
+        common::vehicle_states(&signed),
+        common::vehicle_states(&plain),
+    );
     assert!(
         a.iter()
             .zip(&b)

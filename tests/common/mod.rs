@@ -1,5 +1,8 @@
 //! What several integration tests build the same way.
 
+// Each test crate that includes this module uses part of it.
+#![allow(dead_code)]
+
 use ringswarm::config::Config;
 use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
 use ringswarm::swarm::Swarm;
@@ -36,4 +39,16 @@ pub fn signed_paper_sim1(
         })
         .collect();
     Lockstep::new(Swarm::new(setup), vehicles, LinkConditions::default())
+}
+
+/// Each emulated vehicle's true position and velocity (NED), to compare runs bit for bit.
+pub fn vehicle_states(run: &Lockstep) -> Vec<[f64; 6]> {
+    run.vehicles()
+        .iter()
+        .map(|v| {
+            let s = v.status();
+            let (p, u) = (s.pos_world_ned_m, s.vel_ned_mps);
+            [p.x, p.y, p.z, u.x, u.y, u.z]
+        })
+        .collect()
 }
