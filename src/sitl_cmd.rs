@@ -63,15 +63,8 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
         .transpose()
         .map_err(anyhow::Error::msg)?;
     let (placements, labels) = match placements {
-        Some((p, l)) => (Some(p), l),
-        None => (
-            None,
-            setup
-                .vehicles
-                .iter()
-                .map(|v| v.system_id.to_string())
-                .collect(),
-        ),
+        Some(from_config) => from_config,
+        None => px4_layout(&setup, args.host)?,
     };
     let key_files: Vec<PathBuf> = labels
         .iter()
@@ -84,26 +77,37 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("start the tokio runtime")?;
-    let placements = match placements {
-        Some(p) => p,
-        None => (0..setup.vehicles.len())
-            .map(|i| {
-                u16::try_from(i)
-                    .ok()
-                    .filter(|i| {
-                        i.checked_add(ringswarm_wire::px4::GCS_LISTEN_PORT)
-                            .is_some()
-                    })
-                    .map(|i| Placement::Ports(px4_ports(i, args.host)))
-                    .with_context(|| format!("no PX4 port for instance {i}"))
-            })
-            .collect::<anyhow::Result<Vec<_>>>()?,
-    };
     let result = runtime.block_on(serve(args, setup, placements, key_files));
     // The stdin reader is a blocking read that only ends with the next line; do not wait
     // for it (every vehicle task has already been awaited).
     runtime.shutdown_background();
     result
+}
+
+/// PX4 SITL's layout for the vehicles of `setup` on `host` (instance `i` on 14580+i and
+/// 18570+i), each named by its system id.
+fn px4_layout(
+    setup: &SitlConfig,
+    host: std::net::IpAddr,
+) -> anyhow::Result<(Vec<Placement>, Vec<String>)> {
+    let placements = (0..setup.vehicles.len())
+        .map(|i| {
+            u16::try_from(i)
+                .ok()
+                .filter(|i| {
+                    i.checked_add(ringswarm_wire::px4::GCS_LISTEN_PORT)
+                        .is_some()
+                })
+                .map(|i| Placement::Ports(px4_ports(i, host)))
+                .with_context(|| format!("no PX4 port for instance {i}"))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let labels = setup
+        .vehicles
+        .iter()
+        .map(|v| v.system_id.to_string())
+        .collect();
+    Ok((placements, labels))
 }
 
 /// The key vehicle `system_id` boots with: `key` when given (stored, with a clock that
