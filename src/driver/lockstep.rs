@@ -20,7 +20,7 @@ use std::collections::HashMap;
 use std::net::{IpAddr, SocketAddr};
 use std::ops::Range;
 
-use super::Observer;
+use super::{Inbound, Observer};
 use crate::link::router::{Router, TransportPlan};
 use crate::swarm::Swarm;
 
@@ -257,20 +257,12 @@ impl Lockstep {
             return;
         };
         let (socket, from) = (r.socket_of[j], r.addresses[j]);
-        let mut pieces = std::mem::take(&mut r.pieces);
-        r.router.route_inbound(socket, from, bytes, &mut pieces);
-        for (i, range) in pieces.drain(..) {
-            let piece = &bytes[range];
-            observer.datagram(now, i, false, piece);
-            if self.swarm.handle_datagram(now, i, piece)
-                && let Some(r) = self.routing.as_mut()
-            {
-                r.router.vouched(i, from, now);
-            }
-        }
-        if let Some(r) = self.routing.as_mut() {
-            r.pieces = pieces; // keeps its capacity: no allocation per datagram
-        }
+        let mut inbound = Inbound {
+            swarm: &mut self.swarm,
+            router: &mut r.router,
+            pieces: &mut r.pieces,
+        };
+        inbound.deliver(socket, from, bytes, now, observer);
     }
 
     fn is_silenced(&self, i: usize) -> bool {

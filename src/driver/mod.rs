@@ -2,15 +2,61 @@
 //!
 //! - [`lockstep`]: the coordinator and N emulated vehicles in one process, virtual time,
 //!   encoded MAVLink frames in between, seeded latency and loss. Deterministic.
-//! - [`udp`]: tokio, one socket per vehicle, for real PX4 or `ringswarm sitl` vehicles.
+//! - [`udp`]: tokio, a socket per vehicle or per MAVLink network, for real PX4 or
+//!   `ringswarm sitl` vehicles.
+//!
+//! Both hand received datagrams to the swarm through one [`Inbound`] (router, links,
+//! address learning) when they route.
 
 #[cfg(feature = "emulator")]
 pub mod lockstep;
 pub mod udp;
 
+use std::net::SocketAddr;
+use std::ops::Range;
+
 use ringswarm_wire::time::SimTime;
 
+use crate::link::router::Router;
 use crate::swarm::Swarm;
+
+/// The way in for a received datagram, the same in every driver that routes: the router
+/// splits it, each piece goes to its vehicle's link, and a frame a link takes may teach
+/// the router the vehicle's address.
+pub(crate) struct Inbound<'a> {
+    pub(crate) swarm: &'a mut Swarm,
+    pub(crate) router: &'a mut Router,
+    /// Reused: the pieces of one datagram (no allocation per datagram).
+    pub(crate) pieces: &'a mut Vec<(usize, Range<usize>)>,
+}
+
+impl Inbound<'_> {
+    /// Hands `bytes`, received on `socket` from `from` at `t`, to the swarm.
+    pub(crate) fn deliver<O: Observer>(
+        &mut self,
+        socket: usize,
+        from: SocketAddr,
+        bytes: &[u8],
+        t: SimTime,
+        observer: &mut O,
+    ) {
+        self.router.route_inbound(socket, from, bytes, self.pieces);
+        for (i, range) in self.pieces.drain(..) {
+            let piece = &bytes[range];
+            observer.datagram(t, i, false, piece);
+            if self.swarm.handle_datagram(t, i, piece)
+                && let Some(learned) = self.router.vouched(i, from, t)
+            {
+                tracing::info!(
+                    vehicle = i,
+                    before = ?learned.before,
+                    address = %learned.now,
+                    "vehicle address learned from its frames"
+                );
+            }
+        }
+    }
+}
 
 /// What a driver reports while it runs: every datagram (both directions, as sent or as
 /// received) and the swarm after every change. A plain `FnMut(&Swarm, SimTime)` closure is

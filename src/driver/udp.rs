@@ -18,7 +18,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 use tokio::time::Instant;
 
-use super::Observer;
+use super::{Inbound, Observer};
 use crate::link::router::Router;
 use crate::swarm::Swarm;
 
@@ -88,40 +88,6 @@ async fn receive_batch(socket_index: usize, socket: &UdpSocket) -> io::Result<Ba
     Ok(batch)
 }
 
-/// What a received batch goes through.
-struct Inbound<'a> {
-    swarm: &'a mut Swarm,
-    router: &'a mut Router,
-    /// Reused: the pieces of one datagram.
-    pieces: &'a mut Vec<(usize, Range<usize>)>,
-}
-
-impl Inbound<'_> {
-    /// Hands every datagram of `batch`, split by the router, to the vehicles' links; a
-    /// frame a link takes may teach the router the vehicle's address.
-    fn deliver<O: Observer>(&mut self, batch: &Batch, t: SimTime, observer: &mut O) {
-        for (from, datagram) in &batch.datagrams {
-            let (from, bytes) = (*from, &batch.bytes[datagram.clone()]);
-            self.router
-                .route_inbound(batch.socket, from, bytes, self.pieces);
-            for (i, range) in self.pieces.drain(..) {
-                let piece = &bytes[range];
-                observer.datagram(t, i, false, piece);
-                if self.swarm.handle_datagram(t, i, piece)
-                    && let Some(learned) = self.router.vouched(i, from, t)
-                {
-                    tracing::info!(
-                        vehicle = i,
-                        before = ?learned.before,
-                        address = %learned.now,
-                        "vehicle address learned from its frames"
-                    );
-                }
-            }
-        }
-    }
-}
-
 /// Runs `swarm` over `sockets` (bound as `router`'s plan says) until the swarm has
 /// landed every vehicle, or `commands` says [`DriverCommand::Stop`]; returns the swarm
 /// and the observer. The observer sees every datagram (a network datagram once per
@@ -178,7 +144,10 @@ pub async fn run_swarm<O: Observer>(
                     let mut next = Some(first);
                     while let Some(batch) = next.take() {
                         let mut inbound = Inbound { swarm: &mut swarm, router: &mut router, pieces: &mut pieces };
-                        inbound.deliver(&batch, t, &mut observer);
+                        for (from, datagram) in &batch.datagrams {
+                            let bytes = &batch.bytes[datagram.clone()];
+                            inbound.deliver(batch.socket, *from, bytes, t, &mut observer);
+                        }
                         next = rx.try_recv().ok();
                     }
                 }
