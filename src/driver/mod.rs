@@ -5,7 +5,7 @@
 //! - [`udp`]: tokio, a socket per vehicle or per MAVLink network, for real PX4 or
 //!   `ringswarm sitl` vehicles.
 //!
-//! Both hand received datagrams to the swarm through one [`Inbound`] (router, links,
+//! Both hand received datagrams to the swarm through one `Inbound` (router, links,
 //! address learning) when they route.
 
 #[cfg(feature = "emulator")]
