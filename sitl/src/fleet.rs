@@ -248,9 +248,9 @@ async fn run_fleet(
 /// Running shards: their tasks and, per vehicle in the order given, how to reach it.
 pub struct Shards {
     /// One task per shard.
-    pub tasks: Vec<tokio::task::JoinHandle<io::Result<()>>>,
+    tasks: Vec<tokio::task::JoinHandle<io::Result<()>>>,
     /// Per vehicle: its shard's control channel and its index there.
-    pub controls: Vec<(mpsc::Sender<(usize, VehicleControl)>, usize)>,
+    controls: Vec<(mpsc::Sender<(usize, VehicleControl)>, usize)>,
 }
 
 impl Shards {
