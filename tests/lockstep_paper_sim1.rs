@@ -159,3 +159,26 @@ fn the_swarm_reaches_the_predicted_velocity_in_formation_at_50_m_within_40_s() {
         );
     }
 }
+
+#[test]
+fn in_lockstep_every_tick_is_on_time_and_states_are_at_most_one_period_old() {
+    let mut run = build(LinkConditions::default());
+    run.run_until(SimTime::from_millis(10_000), |_| {});
+    let t = run.swarm().timing();
+    // 250 Hz for 10 s: ticks at 0, 4, …, 10 000 ms.
+    assert_eq!(t.lateness.samples, 2501);
+    assert_eq!(t.control_period_ms, 4.0);
+    // Virtual time waits for the swarm: no tick is late but by the 1 ms step of the
+    // lockstep at most (the first, due at 0).
+    assert_eq!(t.late_ticks, 0);
+    assert_eq!(t.lateness.p99_ms, Some(0.0));
+    assert!(t.lateness.max_ms.is_some_and(|m| m <= 1.0), "{t:?}");
+    // LOCAL_POSITION_NED is asked for at the control rate: every tick sees a report sent
+    // less than one period (4 ms) before, and since both periods are equal each
+    // vehicle's report is always the same age.
+    let age = t.state_age;
+    assert!(age.samples >= 6 * 2000, "{t:?}");
+    let max = age.max_ms.expect("ages");
+    assert!(max < 4.0, "{t:?}");
+    assert_eq!(age.p50_ms, Some(max), "{t:?}");
+}

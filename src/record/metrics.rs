@@ -5,6 +5,7 @@ use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 use serde::Serialize;
 
+use crate::swarm::timing::TimingReport;
 use crate::swarm::{Swarm, SwarmPhase};
 
 /// Largest horizontal distance of any `pᵢ − dᵢ` from their mean (m): zero when the
@@ -168,6 +169,8 @@ pub struct Summary {
     pub failure: Option<String>,
     /// Warnings in `events.csv`.
     pub warnings: usize,
+    /// The control loop's punctuality (in lockstep every tick is on time).
+    pub timing: TimingReport,
 }
 
 impl Summary {
@@ -197,6 +200,7 @@ impl Summary {
             final_phase: swarm.phase().name().to_owned(),
             failure: swarm.failure().map(ToString::to_string),
             warnings: swarm.events().iter().filter(|e| e.warning).count(),
+            timing: swarm.timing(),
         }
     }
 }

@@ -39,6 +39,7 @@ mod phases;
 mod plan;
 mod setup;
 mod tick;
+pub mod timing;
 
 use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
@@ -174,6 +175,7 @@ pub struct Swarm {
     hold_points: Vec<Option<Vector2<f64>>>,
     control_ticks: u64,
     plan: Option<PlanDecision>,
+    timing: timing::TickTiming,
 }
 
 /// The finest a link timer is looked at again when it stays due: the emulator's and the
@@ -219,6 +221,7 @@ impl Swarm {
             })
             .collect();
         let flown_models = setup.models.clone();
+        let setup_interval = setup.control_interval;
         Self {
             w,
             setup,
@@ -251,7 +254,14 @@ impl Swarm {
             hold_points: vec![None; n],
             control_ticks: 0,
             plan: None,
+            timing: timing::TickTiming::new(setup_interval),
         }
+    }
+
+    /// The control loop's punctuality so far: tick lateness and the age of the states
+    /// flown on.
+    pub fn timing(&self) -> timing::TimingReport {
+        self.timing.report()
     }
 
     /// The phase.
@@ -425,6 +435,7 @@ impl Swarm {
     /// Runs the control tick and the links' timers due at `now`.
     pub fn handle_timeout(&mut self, now: SimTime) {
         if now >= self.next_control {
+            self.timing.tick(self.next_control, now);
             self.control(now);
             // A fixed schedule: lateness of one wake-up does not slow the rate down, and
             // a long stall restarts the schedule instead of bursting.

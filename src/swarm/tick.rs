@@ -22,6 +22,11 @@ impl Swarm {
     pub(super) fn control(&mut self, now: SimTime) {
         self.control_ticks += 1;
         for i in 0..self.links.len() {
+            if self.links[i].phase() == Phase::Flying
+                && let Some(at) = self.links[i].state().last_position
+            {
+                self.timing.state_age(at, now);
+            }
             self.states[i] = if self.links[i].state_fresh(now) {
                 self.common_state(i)
             } else {
