@@ -280,6 +280,7 @@ async fn serve(
     let mut every =
         tokio::time::interval(Duration::from_millis(if interactive { 250 } else { 5000 }));
     let mut drawn = 0;
+    let mut tally = SetpointTally::default();
     // One listener for the whole run: a future made anew on every turn of the loop would
     // miss a Ctrl-C that arrives while the loop body runs.
     let ctrl_c = tokio::signal::ctrl_c();
@@ -300,7 +301,7 @@ async fn serve(
                 let lines: Vec<String> = if verbose {
                     statuses.iter().map(|s| status_line(&s.borrow(), now_s)).collect()
                 } else {
-                    vec![fleet_line(&statuses, now_s)]
+                    vec![fleet_line(&statuses, now_s, &mut tally)]
                 };
                 let mut out = std::io::stdout().lock();
                 if interactive && drawn > 0 {
@@ -395,13 +396,26 @@ pub(crate) fn cores() -> usize {
     std::thread::available_parallelism().map_or(1, usize::from)
 }
 
-/// One line for a large fleet: how many are armed, in each mode, heard from.
-fn fleet_line(statuses: &[watch::Receiver<VehicleStatus>], now_s: f64) -> String {
+/// Offboard setpoints each vehicle had taken at the previous fleet line.
+#[derive(Default)]
+struct SetpointTally {
+    at_s: f64,
+    taken: Vec<u64>,
+}
+
+/// One line for a large fleet: how many are armed, in each mode, heard from, and the rate
+/// of offboard setpoints each vehicle took since the previous line (lowest and mean).
+fn fleet_line(
+    statuses: &[watch::Receiver<VehicleStatus>],
+    now_s: f64,
+    tally: &mut SetpointTally,
+) -> String {
     let mut armed = 0;
     let mut heard = 0;
     let mut modes: std::collections::BTreeMap<&'static str, usize> = Default::default();
     let mut lowest = f64::INFINITY;
     let mut highest = f64::NEG_INFINITY;
+    let mut taken = Vec::with_capacity(statuses.len());
     for s in statuses {
         let s = s.borrow();
         armed += usize::from(s.armed);
@@ -409,10 +423,25 @@ fn fleet_line(statuses: &[watch::Receiver<VehicleStatus>], now_s: f64) -> String
         *modes.entry(s.mode.name()).or_default() += 1;
         lowest = lowest.min(s.height_m);
         highest = highest.max(s.height_m);
+        taken.push(s.counters.setpoints);
     }
     let modes: Vec<String> = modes.iter().map(|(m, n)| format!("{m} {n}")).collect();
+    let span_s = now_s - tally.at_s;
+    let rates = if tally.taken.len() == taken.len() && span_s > 0.0 {
+        let per: Vec<f64> = taken
+            .iter()
+            .zip(&tally.taken)
+            .map(|(now, then)| now.saturating_sub(*then) as f64 / span_s)
+            .collect();
+        let low = per.iter().copied().fold(f64::INFINITY, f64::min);
+        let mean = per.iter().sum::<f64>() / per.len().max(1) as f64;
+        format!("  setpoints {low:.1} Hz lowest, {mean:.1} Hz mean")
+    } else {
+        String::new()
+    };
+    *tally = SetpointTally { at_s: now_s, taken };
     format!(
-        "  t {now_s:7.1} s  {} vehicles: {armed} armed, offboard link up {heard}, {}  height {lowest:.1}..{highest:.1} m",
+        "  t {now_s:7.1} s  {} vehicles: {armed} armed, offboard link up {heard}, {}  height {lowest:.1}..{highest:.1} m{rates}",
         statuses.len(),
         modes.join(", ")
     )

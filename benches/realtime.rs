@@ -1,0 +1,285 @@
+//! Real time over UDP: `ringswarm sitl --config F` and `ringswarm fly --config F` as two
+//! processes on loopback, a ring of N ideal quadrotors on MAVLink networks of 250, 50 Hz
+//! control with LOCAL_POSITION_NED and ATTITUDE_QUATERNION at 50 Hz.
+//!
+//! `cargo bench --bench realtime [-- N ...]` (default 64 250 500 1000) prints, per N: CPU
+//! per vehicle-tick of each process over a steady window, control ticks started over half
+//! a period late, the age of the flown positions (p50/p99; `summary.json`), the setpoint
+//! rate the emulator took (its fleet line), and the kernel's UDP drops; beside them the
+//! machine's floor, one datagram sent and received on loopback, measured first.
+
+use std::io::{BufRead, BufReader};
+use std::net::UdpSocket;
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+mod common;
+use common::ring;
+
+/// Seconds before the steady window: handshake and the first transients.
+const WARM_UP: Duration = Duration::from_secs(10);
+/// The steady window.
+const WINDOW: Duration = Duration::from_secs(20);
+/// Control rate (Hz).
+const RATE_HZ: f64 = 50.0;
+/// Datagrams per vehicle-tick at this rate: one setpoint, two telemetry messages.
+const DATAGRAMS_PER_TICK: f64 = 3.0;
+
+fn main() {
+    let cases: Vec<usize> = std::env::args()
+        .skip(1)
+        .filter_map(|a| a.parse().ok())
+        .collect();
+    let cases = if cases.is_empty() {
+        vec![64, 250, 500, 1000]
+    } else {
+        cases
+    };
+    let floor_us = udp_floor_us();
+    println!(
+        "UDP loopback floor on this machine: {floor_us:.2} µs per datagram sent and received \
+         ({:.2} µs per vehicle-tick of {DATAGRAMS_PER_TICK} datagrams)\n",
+        floor_us * DATAGRAMS_PER_TICK
+    );
+    println!(
+        "| vehicles | emulator µs/vehicle-tick | coordinator µs/vehicle-tick | both / floor | \
+         late ticks (> T/2) | state age p50 / p99 (ms) | setpoints taken, lowest / mean (Hz) | \
+         UDP drops |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for n in cases {
+        match run_case(n) {
+            Ok(r) => {
+                let per_tick = |cpu_s: f64| cpu_s * 1e6 / (n as f64 * RATE_HZ * r.window_s);
+                let (e, c) = (per_tick(r.emulator_cpu_s), per_tick(r.coordinator_cpu_s));
+                println!(
+                    "| {n} | {e:.2} | {c:.2} | {:.1} | {} of {} ({:.3} %) | {} / {} | {} | {} |",
+                    (e + c) / (floor_us * DATAGRAMS_PER_TICK),
+                    r.late_ticks,
+                    r.ticks,
+                    100.0 * r.late_ticks as f64 / r.ticks.max(1) as f64,
+                    show(r.age_p50_ms),
+                    show(r.age_p99_ms),
+                    r.setpoint_rates
+                        .map_or("—".to_owned(), |(lo, mean)| format!("{lo:.1} / {mean:.1}")),
+                    r.udp_drops,
+                );
+            }
+            Err(e) => println!("| {n} | failed: {e} |||||||"),
+        }
+    }
+}
+
+fn show(v: Option<f64>) -> String {
+    v.map_or("—".to_owned(), |v| format!("{v:.1}"))
+}
+
+struct CaseResult {
+    window_s: f64,
+    emulator_cpu_s: f64,
+    coordinator_cpu_s: f64,
+    ticks: u64,
+    late_ticks: u64,
+    age_p50_ms: Option<f64>,
+    age_p99_ms: Option<f64>,
+    setpoint_rates: Option<(f64, f64)>,
+    udp_drops: u64,
+}
+
+/// Kills a child when dropped (a failed case leaves nothing running).
+struct Running(Child);
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn run_case(n: usize) -> Result<CaseResult, String> {
+    let bin = env!("CARGO_BIN_EXE_ringswarm");
+    let dir = std::env::temp_dir().join(format!("ringswarm-realtime-{}-{n}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let config = dir.join("ring.toml");
+    std::fs::write(&config, ring(n, RATE_HZ)).map_err(|e| e.to_string())?;
+
+    let mut sitl = Running(
+        Command::new(bin)
+            .args(["sitl", "--config"])
+            .arg(&config)
+            .arg("--state-dir")
+            .arg(dir.join("state"))
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .map_err(|e| format!("start sitl: {e}"))?,
+    );
+    let lines = Arc::new(Mutex::new(Vec::<(Instant, String)>::new()));
+    let stdout = sitl.0.stdout.take().ok_or("no sitl stdout")?;
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    {
+        let lines = Arc::clone(&lines);
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if line.starts_with("Ctrl-C stops") {
+                    let _ = ready_tx.send(());
+                }
+                if let Ok(mut l) = lines.lock() {
+                    l.push((Instant::now(), line));
+                }
+            }
+        });
+    }
+    ready_rx
+        .recv_timeout(Duration::from_secs(60))
+        .map_err(|_| "sitl did not start")?;
+    let out = dir.join("run");
+    let fly = Running(
+        Command::new(bin)
+            .args(["fly", "--config"])
+            .arg(&config)
+            .arg("--out")
+            .arg(&out)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .map_err(|e| format!("start fly: {e}"))?,
+    );
+    std::thread::sleep(WARM_UP);
+    let udp_before = udp_counters();
+    let cpu_before = (cpu_s(sitl.0.id())?, cpu_s(fly.0.id())?);
+    let start = Instant::now();
+    std::thread::sleep(WINDOW);
+    let cpu_after = (cpu_s(sitl.0.id())?, cpu_s(fly.0.id())?);
+    let window_s = start.elapsed().as_secs_f64();
+    let udp_after = udp_counters();
+    // Ctrl-C twice: land, then return at once (the summary is written either way).
+    let mut fly = fly;
+    for _ in 0..2 {
+        interrupt(fly.0.id());
+        std::thread::sleep(Duration::from_millis(500));
+    }
+    let waited = Instant::now();
+    loop {
+        if fly.0.try_wait().map_err(|e| e.to_string())?.is_some() {
+            break;
+        }
+        if waited.elapsed() > Duration::from_secs(120) {
+            return Err("fly did not stop".into());
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    interrupt(sitl.0.id());
+    let summary = std::fs::read_to_string(out.join("summary.json"))
+        .map_err(|e| format!("summary.json: {e}"))?;
+    let summary: serde_json::Value = serde_json::from_str(&summary).map_err(|e| e.to_string())?;
+    let timing = &summary["timing"];
+    let setpoint_rates = lines.lock().ok().and_then(|l| {
+        // Fleet lines printed within the window (every 5 s): the lowest rate, the mean.
+        let rates: Vec<(f64, f64)> = l
+            .iter()
+            .filter(|(at, _)| *at > start + Duration::from_secs(5) && *at <= start + WINDOW)
+            .filter_map(|(_, line)| setpoint_rate(line))
+            .collect();
+        (!rates.is_empty()).then(|| {
+            let lowest = rates.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
+            let mean = rates.iter().map(|r| r.1).sum::<f64>() / rates.len() as f64;
+            (lowest, mean)
+        })
+    });
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(CaseResult {
+        window_s,
+        emulator_cpu_s: cpu_after.0 - cpu_before.0,
+        coordinator_cpu_s: cpu_after.1 - cpu_before.1,
+        ticks: timing["lateness"]["samples"].as_u64().unwrap_or(0),
+        late_ticks: timing["late_ticks"].as_u64().unwrap_or(0),
+        age_p50_ms: timing["state_age"]["p50_ms"].as_f64(),
+        age_p99_ms: timing["state_age"]["p99_ms"].as_f64(),
+        setpoint_rates,
+        udp_drops: udp_after.saturating_sub(udp_before),
+    })
+}
+
+/// `(lowest, mean)` from a fleet line's "setpoints L Hz lowest, M Hz mean".
+fn setpoint_rate(line: &str) -> Option<(f64, f64)> {
+    let rest = line.split("setpoints ").nth(1)?;
+    let mut words = rest.split_whitespace();
+    let lowest = words.next()?.parse().ok()?;
+    let mean = words.nth(2)?.parse().ok()?;
+    Some((lowest, mean))
+}
+
+fn interrupt(pid: u32) {
+    let _ = Command::new("kill")
+        .args(["-INT", &pid.to_string()])
+        .status();
+}
+
+/// CPU seconds (user + system, every thread) a process has used, from /proc.
+fn cpu_s(pid: u32) -> Result<f64, String> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .map_err(|e| format!("/proc/{pid}/stat: {e} (Linux only)"))?;
+    let after = stat.rsplit_once(") ").ok_or("odd /proc stat")?.1;
+    let fields: Vec<&str> = after.split_whitespace().collect();
+    let ticks = |i: usize| fields.get(i).and_then(|f| f.parse::<f64>().ok());
+    let (utime, stime) = ticks(11).zip(ticks(12)).ok_or("odd /proc stat")?;
+    Ok((utime + stime) / clock_ticks_per_s())
+}
+
+fn clock_ticks_per_s() -> f64 {
+    Command::new("getconf")
+        .arg("CLK_TCK")
+        .output()
+        .ok()
+        .and_then(|o| String::from_utf8(o.stdout).ok())
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or(100.0)
+}
+
+/// Datagrams the kernel dropped for a full receive or send buffer (all of this network
+/// namespace), from /proc/net/snmp.
+fn udp_counters() -> u64 {
+    let Ok(snmp) = std::fs::read_to_string("/proc/net/snmp") else {
+        return 0;
+    };
+    let udp: Vec<Vec<&str>> = snmp
+        .lines()
+        .filter(|l| l.starts_with("Udp:"))
+        .map(|l| l.split_whitespace().collect())
+        .collect();
+    let [names, values] = udp.as_slice() else {
+        return 0;
+    };
+    names
+        .iter()
+        .zip(values)
+        .filter(|(name, _)| matches!(**name, "RcvbufErrors" | "SndbufErrors"))
+        .filter_map(|(_, v)| v.parse::<u64>().ok())
+        .sum()
+}
+
+/// The machine's floor: µs of CPU to send one 52-byte datagram on loopback and receive
+/// it (one thread, both ends, 64 in flight), the cost no UDP design avoids.
+fn udp_floor_us() -> f64 {
+    let a = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let b = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let to = b.local_addr().expect("addr");
+    let payload = [0u8; 52];
+    let mut buf = [0u8; 2048];
+    let rounds = 4000;
+    let start = Instant::now();
+    for _ in 0..rounds {
+        for _ in 0..64 {
+            a.send_to(&payload, to).expect("send");
+        }
+        for _ in 0..64 {
+            b.recv_from(&mut buf).expect("recv");
+        }
+    }
+    start.elapsed().as_secs_f64() * 1e6 / f64::from(rounds * 64)
+}
