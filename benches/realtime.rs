@@ -62,7 +62,9 @@ fn main() {
                     show(r.age_p50_ms),
                     show(r.age_p99_ms),
                     r.setpoint_rates
-                        .map_or("—".to_owned(), |(lo, mean)| format!("{lo:.1} / {mean:.1}")),
+                        .map_or("—".to_owned(), |(lo, mean)| format!(
+                            "{lo:.1} / {mean:.1}"
+                        )),
                     r.udp_drops,
                 );
             }

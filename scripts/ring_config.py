@@ -47,6 +47,7 @@ def main():
         "",
         "[swarm]",
         f"control_rate_hz = {a.rate}",
+        f"attitude_rate_hz = {min(10.0, a.rate)}",
         f"duration_s = {a.duration}",
         "link_timeout_ms = 1500",
         'end = "hold"',

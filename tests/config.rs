@@ -485,3 +485,43 @@ fn the_shipped_500_vehicle_ring_validates_on_two_networks() {
     assert_eq!(setup.links[0].file_label(), "n0-1");
     assert_eq!(setup.links[250].file_label(), "n1-1");
 }
+
+#[test]
+fn the_attitude_rate_defaults_to_the_control_rate_and_may_be_lower_only() {
+    use std::time::Duration;
+    // paper-sim1 controls at 250 Hz: both streams every 4 ms by default.
+    let setup = Config::from_toml(&with("k = 5.0", "k = 5.0"))
+        .unwrap()
+        .validate()
+        .unwrap();
+    for l in &setup.links {
+        assert_eq!(l.telemetry_interval, Duration::from_millis(4));
+        assert_eq!(l.attitude_interval, Duration::from_millis(4));
+    }
+    let setup = Config::from_toml(&with(
+        "link_timeout_ms = 1500",
+        "link_timeout_ms = 1500\nattitude_rate_hz = 10.0",
+    ))
+    .unwrap()
+    .validate()
+    .unwrap();
+    for l in &setup.links {
+        assert_eq!(l.telemetry_interval, Duration::from_millis(4));
+        assert_eq!(l.attitude_interval, Duration::from_millis(100));
+    }
+    for (bad, shown) in [("300.0", "300"), ("0.5", "0.5"), ("nan", "NaN")] {
+        let err = Config::from_toml(&with(
+            "link_timeout_ms = 1500",
+            &format!("link_timeout_ms = 1500\nattitude_rate_hz = {bad}"),
+        ))
+        .unwrap()
+        .validate()
+        .unwrap_err();
+        assert_eq!(
+            err,
+            format!(
+                "swarm.attitude_rate_hz must be a finite number in [1, 250] Hz (1 Hz up to swarm.control_rate_hz), got {shown}"
+            )
+        );
+    }
+}

@@ -27,13 +27,17 @@ type Filter<'a> = &'a mut dyn FnMut(bool, &MavMessage) -> bool;
 
 impl Harness {
     fn new(expected_system: u8, vehicle_system: u8) -> Self {
+        Self::with_config(LinkConfig::new(expected_system), vehicle_system)
+    }
+
+    fn with_config(cfg: LinkConfig, vehicle_system: u8) -> Self {
         let idle = AttitudeThrust {
             attitude_ned_frd: UnitQuaternion::identity(),
             thrust_norm: 0.5,
             thrust_n: 0.0,
         };
         Self {
-            link: VehicleLink::new(LinkConfig::new(expected_system), idle),
+            link: VehicleLink::new(cfg, idle),
             vehicle: Vehicle::new(
                 VehicleConfig::new(vehicle_system, Profile::x500()),
                 World::default(),
@@ -181,6 +185,41 @@ fn the_link_turns_off_the_streams_it_does_not_read_and_waits_for_the_origin() {
     h.run(Duration::from_secs(1), &mut record);
     assert!(!seen.contains(&30) && !seen.contains(&33), "{seen:?}");
     assert!(seen.iter().filter(|id| **id == 32).count() >= 49);
+}
+
+#[test]
+fn a_lower_attitude_rate_is_asked_for_and_flown_with() {
+    let cfg = LinkConfig {
+        attitude_interval: Duration::from_millis(100),
+        ..LinkConfig::new(1)
+    };
+    let mut h = Harness::with_config(cfg, 1);
+    h.run(Duration::from_secs(3), &mut deliver_all);
+    assert_eq!(h.link.phase(), Phase::Flying);
+    let asked: Vec<(f32, f32)> = h
+        .commands_sent()
+        .iter()
+        .filter_map(|m| match m {
+            MavMessage::COMMAND_LONG(c) if c.command as u32 == 511 => Some((c.param1, c.param2)),
+            _ => None,
+        })
+        .take(2)
+        .collect();
+    assert_eq!(asked, vec![(32.0, 20_000.0), (31.0, 100_000.0)]);
+    // Over 2 s: LOCAL_POSITION_NED every 20 ms, ATTITUDE_QUATERNION every 100 ms (one
+    // more of each when a period boundary falls on both ends).
+    let mut seen = Vec::new();
+    let mut record = |to_vehicle: bool, m: &MavMessage| {
+        if !to_vehicle {
+            seen.push(m.message_id());
+        }
+        true
+    };
+    h.run(Duration::from_secs(2), &mut record);
+    let count = |id: u32| seen.iter().filter(|s| **s == id).count();
+    assert!((100..=101).contains(&count(32)), "{}", count(32));
+    assert!((20..=21).contains(&count(31)), "{}", count(31));
+    assert!(h.link.state().attitude.is_some());
 }
 
 #[test]

@@ -4,13 +4,13 @@ use std::fmt::Write as _;
 
 /// `n` ideal vehicles on a circle of radius 3n m at 50 m, drifting east at 2 m/s, asked
 /// for a polygon of radius 2n m; k = 1, alpha = 1 and beta 25 % above Yu's bound; on
-/// MAVLink networks of 250 (system ids 1..=250 on each).
+/// MAVLink networks of 250 (system ids 1..=250 on each); attitude reports at 10 Hz.
 pub fn ring(n: usize, rate_hz: f64) -> String {
     let ring = ringswarm::consensus::RingDigraph::for_agents(n, 1.0).expect("even n");
     let report = ringswarm::consensus::analyze(&ring, None).expect("analysis");
     let beta = (1.25 * report.yu_bound.unwrap_or(1.0)).sqrt();
     let mut s = format!(
-        "[swarm]\ncontrol_rate_hz = {rate_hz}\nduration_s = 60.0\n[gains]\nk = 1.0\nalpha = 1.0\n\
+        "[swarm]\ncontrol_rate_hz = {rate_hz}\nattitude_rate_hz = 10.0\nduration_s = 60.0\n[gains]\nk = 1.0\nalpha = 1.0\n\
          beta = {beta}\nk_pz = 1.0\nk_vz = 4.0\n[formation]\nkind = \"polygon\"\nradius_m = {}\n\
          altitude_m = 50.0\n[envelope]\nmax_tilt_deg = 45.0\n[emulator]\nground_below_m = 100.0\n",
         2.0 * n as f64
@@ -38,4 +38,3 @@ pub fn ring(n: usize, rate_hz: f64) -> String {
     }
     s
 }
-

@@ -225,6 +225,7 @@ impl Config {
                 .map(|v| LinkConfig {
                     setpoint_interval: timing.control_interval,
                     telemetry_interval: timing.control_interval,
+                    attitude_interval: timing.attitude_interval,
                     link_timeout: timing.link_timeout,
                     own_ids: (s.gcs_system_id, s.gcs_component_id),
                     retake_offboard: s.retake_offboard,
@@ -288,12 +289,26 @@ impl Config {
         if s.gcs_system_id == 0 {
             p.push("swarm.gcs_system_id must be 1..=255, got 0".to_owned());
         }
-        (rate_ok && duration_ok && link_ok && handshake_ok && state_ok).then(|| Timing {
-            control_interval: Duration::from_secs_f64(1.0 / s.control_rate_hz),
-            duration: Duration::from_secs_f64(s.duration_s),
-            link_timeout: Duration::from_millis(s.link_timeout_ms),
-            handshake_timeout: Duration::from_secs_f64(s.handshake_timeout_s),
-            state_timeout: Duration::from_millis(s.state_timeout_ms),
+        let attitude_ok = match s.attitude_rate_hz {
+            Some(hz) => p.within(
+                "swarm.attitude_rate_hz",
+                hz,
+                1.0,
+                if rate_ok { s.control_rate_hz } else { 250.0 },
+                " Hz (1 Hz up to swarm.control_rate_hz)",
+            ),
+            None => true,
+        };
+        let attitude_hz = s.attitude_rate_hz.unwrap_or(s.control_rate_hz);
+        (rate_ok && duration_ok && link_ok && handshake_ok && state_ok && attitude_ok).then(|| {
+            Timing {
+                control_interval: Duration::from_secs_f64(1.0 / s.control_rate_hz),
+                attitude_interval: Duration::from_secs_f64(1.0 / attitude_hz),
+                duration: Duration::from_secs_f64(s.duration_s),
+                link_timeout: Duration::from_millis(s.link_timeout_ms),
+                handshake_timeout: Duration::from_secs_f64(s.handshake_timeout_s),
+                state_timeout: Duration::from_millis(s.state_timeout_ms),
+            }
         })
     }
 
@@ -427,6 +442,7 @@ impl Config {
 /// The validated times of `[swarm]`.
 struct Timing {
     control_interval: Duration,
+    attitude_interval: Duration,
     duration: Duration,
     link_timeout: Duration,
     handshake_timeout: Duration,

@@ -88,8 +88,10 @@ pub struct LinkConfig {
     pub heartbeat_interval: Duration,
     /// Period of the setpoint stream.
     pub setpoint_interval: Duration,
-    /// Period asked for LOCAL_POSITION_NED and ATTITUDE_QUATERNION.
+    /// Period asked for LOCAL_POSITION_NED.
     pub telemetry_interval: Duration,
+    /// Period asked for ATTITUDE_QUATERNION.
+    pub attitude_interval: Duration,
     /// How long to stream before arming (PX4 wants more than 1 s).
     pub pre_stream: Duration,
     /// How long to wait for an acknowledgement before resending.
@@ -147,6 +149,7 @@ impl LinkConfig {
             heartbeat_interval: Duration::from_secs(1),
             setpoint_interval: Duration::from_millis(20),
             telemetry_interval: Duration::from_millis(20),
+            attitude_interval: Duration::from_millis(20),
             pre_stream: Duration::from_millis(1200),
             ack_timeout: Duration::from_millis(500),
             max_attempts: 4,

@@ -112,10 +112,10 @@ impl VehicleLink {
         self.phase = Phase::Streaming(now);
         self.pending = None;
         self.next_setpoint = now;
-        let interval_us = self.cfg.telemetry_interval.as_micros() as f32;
+        let us = |d: std::time::Duration| d.as_micros() as f32;
         let streams = [
-            (LOCAL_POSITION_NED, interval_us),
-            (ATTITUDE_QUATERNION, interval_us),
+            (LOCAL_POSITION_NED, us(self.cfg.telemetry_interval)),
+            (ATTITUDE_QUATERNION, us(self.cfg.attitude_interval)),
         ];
         let off = UNREAD_FAST_STREAMS.map(|id| (id, STREAM_OFF));
         for (id, interval) in streams.into_iter().chain(off) {
