@@ -170,6 +170,8 @@ struct Stream {
 struct Link {
     encoder: Encoder,
     streams: Vec<Stream>,
+    /// No stream is due before this (a lower bound: the table is scanned only then).
+    streams_due: SimTime,
     last_heard: Option<SimTime>,
 }
 
@@ -262,6 +264,7 @@ impl Vehicle {
         let links = [LinkId::Offboard, LinkId::Gcs].map(|_| Link {
             encoder: Encoder::new(cfg.system_id, 1),
             streams: telemetry::default_streams(cfg.fast_rate_hz),
+            streams_due: SimTime::ZERO,
             last_heard: None,
         });
         let rng = ChaCha8Rng::seed_from_u64(cfg.seed);
@@ -340,6 +343,7 @@ impl Vehicle {
             for stream in &mut link.streams {
                 stream.next_due = now;
             }
+            link.streams_due = now;
         }
     }
 
@@ -549,7 +553,11 @@ impl Vehicle {
         let hover = p.mass_kg * GRAVITY_MPS2;
         let hover_current_a = 7.5 * p.mass_kg;
         self.battery.current_a = if self.armed {
-            0.5 + hover_current_a * (thrust / hover).max(0.0).powf(1.5)
+            {
+                // (thrust / hover)^1.5, without powf at 1 kHz.
+                let r = (thrust / hover).max(0.0);
+                0.5 + hover_current_a * r * r.sqrt()
+            }
         } else {
             0.3
         };

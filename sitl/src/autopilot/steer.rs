@@ -19,8 +19,10 @@ impl Vehicle {
             self.pos_ctrl_active = false;
             return None;
         }
-        let idle = AttitudeCommand::Attitude {
-            setpoint: AttitudeSetpoint::idle(self.yaw_rad()),
+        // Level at idle thrust, holding the heading (computed only when flown: the
+        // heading costs three inverse trigonometric functions).
+        let idle = |v: &Self| AttitudeCommand::Attitude {
+            setpoint: AttitudeSetpoint::idle(v.yaw_rad()),
             yawspeed_ff_rps: f64::NAN,
         };
         let trajectory = if self.mode == FlightMode::Offboard {
@@ -70,7 +72,7 @@ impl Vehicle {
         };
         let Some(sp) = trajectory else {
             self.pos_ctrl_active = false;
-            return Some(idle);
+            return Some(idle(self));
         };
         if !self.pos_ctrl_active {
             self.pos_ctrl.reset();

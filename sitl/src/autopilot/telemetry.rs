@@ -117,21 +117,28 @@ impl Vehicle {
             }
         }
         for link in [LinkId::Offboard, LinkId::Gcs] {
+            if self.links[link as usize].streams_due > now {
+                continue;
+            }
+            let mut earliest = SimTime::MAX;
             for i in 0..self.links[link as usize].streams.len() {
                 let stream = self.links[link as usize].streams[i];
                 let Some(interval) = stream.interval else {
                     continue;
                 };
                 if stream.next_due > now {
+                    earliest = earliest.min(stream.next_due);
                     continue;
                 }
                 if let Some(msg) = self.build(now, stream.msg_id) {
                     self.send(link, &msg);
                 }
                 let next = stream.next_due + interval;
-                self.links[link as usize].streams[i].next_due =
-                    if next <= now { now + interval } else { next };
+                let next = if next <= now { now + interval } else { next };
+                self.links[link as usize].streams[i].next_due = next;
+                earliest = earliest.min(next);
             }
+            self.links[link as usize].streams_due = earliest;
         }
     }
 
@@ -163,6 +170,8 @@ impl Vehicle {
         let stream = &mut streams[index];
         stream.interval = interval.unwrap_or(stream.default_interval);
         stream.next_due = now;
+        let link = &mut self.links[link as usize];
+        link.streams_due = link.streams_due.min(now);
         true
     }
 
