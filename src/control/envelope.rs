@@ -53,6 +53,8 @@ impl SaturationMode {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Envelope {
     max_tilt_rad: f64,
+    /// `tan(max_tilt_rad)`, computed once.
+    tan_max_tilt: f64,
     min_thrust_norm: f64,
     max_thrust_norm: f64,
     xy_margin_norm: f64,
@@ -94,6 +96,7 @@ impl Envelope {
         }
         Ok(Self {
             max_tilt_rad,
+            tan_max_tilt: max_tilt_rad.tan(),
             min_thrust_norm,
             max_thrust_norm,
             xy_margin_norm: 0.0,
@@ -182,7 +185,7 @@ impl Envelope {
         let f_z = u_z_mps2 + GRAVITY_MPS2;
         let f_max = self.max_thrust_norm * model.max_specific_thrust_mps2();
         let by_thrust = (f_max * f_max - f_z * f_z).max(0.0).sqrt();
-        (f_z * self.max_tilt_rad.tan()).max(0.0).min(by_thrust)
+        (f_z * self.tan_max_tilt).max(0.0).min(by_thrust)
     }
 }
 
@@ -210,6 +213,22 @@ pub fn saturate(
     models: &[VehicleModel],
     w: &[f64],
     accel_enu_mps2: &mut [Vector3<f64>],
+) -> Result<SaturationSummary, ControlError> {
+    saturate_with(mode, envelope, models, w, accel_enu_mps2, &mut Vec::new())
+}
+
+/// [`saturate`] with a buffer for each vehicle's horizontal box, kept between calls so
+/// that a control tick allocates nothing.
+///
+/// # Errors
+/// As [`saturate`].
+pub fn saturate_with(
+    mode: SaturationMode,
+    envelope: &Envelope,
+    models: &[VehicleModel],
+    w: &[f64],
+    accel_enu_mps2: &mut [Vector3<f64>],
+    boxes: &mut Vec<Vector2<f64>>,
 ) -> Result<SaturationSummary, ControlError> {
     let n = accel_enu_mps2.len();
     for (what, got) in [("vehicle models", models.len()), ("weights w", w.len())] {
@@ -259,12 +278,19 @@ pub fn saturate(
             }
         }
         SaturationMode::Conserve => {
-            let boxes = |i: usize, u: &Vector3<f64>| axis_box(u.xy(), radius(i, u));
+            // The boxes do not depend on the shift: computed once, not per bisection step.
+            boxes.clear();
+            boxes.extend(
+                accel_enu_mps2
+                    .iter()
+                    .enumerate()
+                    .map(|(i, u)| axis_box(u.xy(), radius(i, u))),
+            );
             for axis in 0..2 {
-                summary.lambda[axis] = conserving_shift(accel_enu_mps2, w, axis, &boxes);
+                summary.lambda[axis] = conserving_shift(accel_enu_mps2, w, axis, boxes);
             }
             for (i, u) in accel_enu_mps2.iter_mut().enumerate() {
-                let b = boxes(i, u);
+                let b = boxes[i];
                 let shifted = Vector2::new(
                     (u.x - summary.lambda.x * w[i]).clamp(-b.x, b.x),
                     (u.y - summary.lambda.y * w[i]).clamp(-b.y, b.y),
@@ -292,20 +318,13 @@ fn axis_box(u: Vector2<f64>, a_h: f64) -> Vector2<f64> {
 
 /// The `λ` with `Σ wᵢ clip(uᵢ − λwᵢ, ±bᵢ) = Σ wᵢ uᵢ` on one axis, by bisection and a final
 /// exact step on the linear piece that holds the root.
-fn conserving_shift(
-    accel: &[Vector3<f64>],
-    w: &[f64],
-    axis: usize,
-    boxes: &impl Fn(usize, &Vector3<f64>) -> Vector2<f64>,
-) -> f64 {
+fn conserving_shift(accel: &[Vector3<f64>], w: &[f64], axis: usize, boxes: &[Vector2<f64>]) -> f64 {
     let sum = |lambda: f64| -> f64 {
         accel
             .iter()
-            .enumerate()
-            .map(|(i, u)| {
-                let b = boxes(i, u)[axis];
-                w[i] * (u[axis] - lambda * w[i]).clamp(-b, b)
-            })
+            .zip(boxes)
+            .zip(w)
+            .map(|((u, b), wi)| wi * (u[axis] - lambda * wi).clamp(-b[axis], b[axis]))
             .sum()
     };
     // The nominal law gives Σ wᵢuᵢ = 0 up to rounding; keeping the nominal sum (rather
@@ -319,7 +338,7 @@ fn conserving_shift(
         .iter()
         .enumerate()
         .filter(|(i, _)| w[*i] != 0.0)
-        .map(|(i, u)| (u[axis].abs() + boxes(i, u)[axis]) / w[i].abs())
+        .map(|(i, u)| (u[axis].abs() + boxes[i][axis]) / w[i].abs())
         .fold(0.0, f64::max);
     let (mut lo, mut hi) = (-reach, reach);
     let (mut s_lo, mut s_hi) = (sum(lo), sum(hi));

@@ -176,6 +176,8 @@ pub struct Swarm {
     control_ticks: u64,
     plan: Option<PlanDecision>,
     timing: timing::TickTiming,
+    /// Each vehicle's horizontal box in the saturation, kept between ticks.
+    boxes: Vec<Vector2<f64>>,
 }
 
 /// The finest a link timer is looked at again when it stays due: the emulator's and the
@@ -255,6 +257,7 @@ impl Swarm {
             control_ticks: 0,
             plan: None,
             timing: timing::TickTiming::new(setup_interval),
+            boxes: Vec::with_capacity(n),
         }
     }
 

@@ -7,7 +7,7 @@ use ringswarm_wire::time::SimTime;
 
 use super::{Swarm, SwarmPhase};
 use crate::consensus::HorizontalState;
-use crate::control::{attitude_thrust_from_acceleration, enu_to_ned, saturate, tilt_rad};
+use crate::control::{attitude_thrust_from_acceleration, enu_to_ned, saturate_with, tilt_rad};
 use crate::swarm::SetpointKind;
 use crate::vehicle::{Phase, Setpoint};
 
@@ -57,12 +57,13 @@ impl Swarm {
             self.commands[i] = Vector3::new(self.accel[i].x, self.accel[i].y, u_z) + drag;
         }
         self.isolate_non_finite(now, "the law's command");
-        if let Ok(summary) = saturate(
+        if let Ok(summary) = saturate_with(
             saturation,
             &self.setup.envelope,
             &self.flown_models,
             &self.w,
             &mut self.commands,
+            &mut self.boxes,
         ) && matches!(self.phase, SwarmPhase::Consensus(_))
         {
             self.consensus_ticks += 1;
