@@ -37,9 +37,33 @@ pub fn altitude_error_m(z_m: &[f64], altitude_m: f64) -> f64 {
 
 /// Smallest distance between two vehicles (m); infinite with fewer than two.
 pub fn min_separation_m(pos_m: &[Vector3<f64>]) -> f64 {
+    min_separation_in_place(&mut pos_m.to_vec())
+}
+
+/// [`min_separation_m`] of `pos_m`, which it reorders: a sweep along the axis of widest
+/// spread, sorted, comparing each point only with those closer along that axis than the
+/// best distance so far (O(N log N) for a spread-out swarm, not N²/2 distances).
+fn min_separation_in_place(pos_m: &mut [Vector3<f64>]) -> f64 {
+    let spread = |axis: usize| {
+        let (lo, hi) = pos_m
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p[axis]), hi.max(p[axis]))
+            });
+        hi - lo
+    };
+    let axis = (0..3)
+        .max_by(|a, b| spread(*a).total_cmp(&spread(*b)))
+        .unwrap_or(0);
+    pos_m.sort_unstable_by(|a, b| a[axis].total_cmp(&b[axis]));
     let mut min = f64::INFINITY;
     for (i, a) in pos_m.iter().enumerate() {
         for b in &pos_m[i + 1..] {
+            // Sorted: every later point is at least this far along the axis (a NaN
+            // compares false and is measured, and its NaN distance is ignored by min).
+            if b[axis] - a[axis] >= min {
+                break;
+            }
             min = min.min((a - b).norm());
         }
     }
@@ -69,6 +93,8 @@ pub struct RunTracker {
     pos: Vec<Vector3<f64>>,
     xy: Vec<Vector2<f64>>,
     z: Vec<f64>,
+    /// A copy of the positions for the separation sweep, which reorders it.
+    sweep: Vec<Vector3<f64>>,
 }
 
 impl RunTracker {
@@ -81,6 +107,7 @@ impl RunTracker {
             pos: Vec::with_capacity(n),
             xy: Vec::with_capacity(n),
             z: Vec::with_capacity(n),
+            sweep: Vec::with_capacity(n),
         }
     }
 
@@ -104,7 +131,10 @@ impl RunTracker {
         let setup = swarm.setup();
         let airborne = !matches!(swarm.phase(), SwarmPhase::Landing(_));
         if airborne {
-            self.min_separation_m = self.min_separation_m.min(min_separation_m(&self.pos));
+            self.sweep.clear();
+            self.sweep.extend_from_slice(&self.pos);
+            let min = min_separation_in_place(&mut self.sweep);
+            self.min_separation_m = self.min_separation_m.min(min);
         }
         let snapshot = Snapshot {
             t_s: now.as_secs_f64(),
@@ -230,5 +260,41 @@ mod tests {
         assert_eq!(min_separation_m(&p), 5.0);
         assert_eq!(min_separation_m(&p[..1]), f64::INFINITY);
         assert_eq!(altitude_error_m(&[49.0, 50.5, 47.5], 50.0), 2.5);
+    }
+
+    #[test]
+    fn the_sweep_finds_the_same_separation_as_every_pair() {
+        use rand::{Rng, SeedableRng};
+        let brute = |p: &[Vector3<f64>]| {
+            let mut min = f64::INFINITY;
+            for (i, a) in p.iter().enumerate() {
+                for b in &p[i + 1..] {
+                    min = min.min((a - b).norm());
+                }
+            }
+            min
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for n in [2, 3, 10, 200] {
+            for spread in [1.0, 1000.0] {
+                let p: Vec<Vector3<f64>> = (0..n)
+                    .map(|_| {
+                        Vector3::new(
+                            rng.random_range(-spread..spread),
+                            rng.random_range(-spread..spread),
+                            rng.random_range(40.0..60.0),
+                        )
+                    })
+                    .collect();
+                assert_eq!(min_separation_m(&p), brute(&p), "n {n}, spread {spread}");
+                // Every point on one line along y (x and z equal): the sweep goes along y.
+                let line: Vec<Vector3<f64>> =
+                    p.iter().map(|q| Vector3::new(1.0, q.y, 50.0)).collect();
+                assert_eq!(min_separation_m(&line), brute(&line));
+            }
+        }
+        // Two vehicles at the same point.
+        let same = [Vector3::new(1.0, 2.0, 3.0); 2];
+        assert_eq!(min_separation_m(&same), 0.0);
     }
 }
