@@ -396,11 +396,11 @@ pub(crate) fn cores() -> usize {
     std::thread::available_parallelism().map_or(1, usize::from)
 }
 
-/// Offboard setpoints each vehicle had taken at the previous fleet line.
+/// Offboard setpoints each vehicle had taken at the previous fleet line, with the
+/// vehicle's time of that count.
 #[derive(Default)]
 struct SetpointTally {
-    at_s: f64,
-    taken: Vec<u64>,
+    taken: Vec<(f64, u64)>,
 }
 
 /// One line for a large fleet: how many are armed, in each mode, heard from, and the rate
@@ -423,23 +423,28 @@ fn fleet_line(
         *modes.entry(s.mode.name()).or_default() += 1;
         lowest = lowest.min(s.height_m);
         highest = highest.max(s.height_m);
-        taken.push(s.counters.setpoints);
+        taken.push((s.at.as_secs_f64(), s.counters.setpoints));
     }
     let modes: Vec<String> = modes.iter().map(|(m, n)| format!("{m} {n}")).collect();
-    let span_s = now_s - tally.at_s;
-    let rates = if tally.taken.len() == taken.len() && span_s > 0.0 {
+    let rates = if tally.taken.len() == taken.len() {
+        // Each vehicle's count over its own clock between its two snapshots.
         let per: Vec<f64> = taken
             .iter()
             .zip(&tally.taken)
-            .map(|(now, then)| now.saturating_sub(*then) as f64 / span_s)
+            .filter(|((t1, _), (t0, _))| t1 > t0)
+            .map(|((t1, n1), (t0, n0))| n1.saturating_sub(*n0) as f64 / (t1 - t0))
             .collect();
         let low = per.iter().copied().fold(f64::INFINITY, f64::min);
         let mean = per.iter().sum::<f64>() / per.len().max(1) as f64;
-        format!("  setpoints {low:.1} Hz lowest, {mean:.1} Hz mean")
+        if per.is_empty() {
+            String::new()
+        } else {
+            format!("  setpoints {low:.1} Hz lowest, {mean:.1} Hz mean")
+        }
     } else {
         String::new()
     };
-    *tally = SetpointTally { at_s: now_s, taken };
+    *tally = SetpointTally { taken };
     format!(
         "  t {now_s:7.1} s  {} vehicles: {armed} armed, offboard link up {heard}, {}  height {lowest:.1}..{highest:.1} m{rates}",
         statuses.len(),
@@ -464,4 +469,44 @@ fn status_line(s: &VehicleStatus, now_s: f64) -> String {
         link(s.last_heard[0]),
         link(s.last_heard[1]),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ringswarm_wire::time::SimTime;
+
+    #[test]
+    fn the_fleet_line_shows_each_vehicle_s_setpoint_rate_over_its_own_clock() {
+        let vehicle = Vehicle::new(VehicleConfig::new(1, Profile::ideal()), World::default())
+            .expect("vehicle");
+        let status = |at_ms: u64, setpoints: u64| {
+            let mut s = vehicle.status();
+            s.at = SimTime::from_millis(at_ms);
+            s.counters.setpoints = setpoints;
+            s
+        };
+        let (a_tx, a) = watch::channel(status(1_000, 0));
+        let (b_tx, b) = watch::channel(status(1_300, 10));
+        let fleet = [a, b];
+        let mut tally = SetpointTally::default();
+        // The first line has nothing to compare with.
+        assert!(!fleet_line(&fleet, 1.0, &mut tally).contains("setpoints"));
+        // Vehicle a: 250 setpoints in 5 s, 50 Hz; b: 240 in 4.8 s (its snapshot came
+        // 200 ms before the line), also 50 Hz, then 100 in 5 s: 20 Hz.
+        a_tx.send_replace(status(6_000, 250));
+        b_tx.send_replace(status(6_100, 250));
+        let line = fleet_line(&fleet, 6.0, &mut tally);
+        assert!(
+            line.ends_with("setpoints 50.0 Hz lowest, 50.0 Hz mean"),
+            "{line}"
+        );
+        a_tx.send_replace(status(11_000, 500));
+        b_tx.send_replace(status(11_100, 350));
+        let line = fleet_line(&fleet, 11.0, &mut tally);
+        assert!(
+            line.ends_with("setpoints 20.0 Hz lowest, 35.0 Hz mean"),
+            "{line}"
+        );
+    }
 }
