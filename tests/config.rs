@@ -489,26 +489,27 @@ fn the_shipped_500_vehicle_ring_validates_on_two_networks() {
 #[test]
 fn the_attitude_rate_defaults_to_the_control_rate_and_may_be_lower_only() {
     use std::time::Duration;
-    // paper-sim1 controls at 250 Hz: both streams every 4 ms by default.
-    let setup = Config::from_toml(&with("k = 5.0", "k = 5.0"))
+    let intervals = |attitude_line: &str| {
+        let setup = Config::from_toml(&with(
+            "link_timeout_ms = 1500",
+            &format!("link_timeout_ms = 1500\n{attitude_line}"),
+        ))
         .unwrap()
         .validate()
         .unwrap();
-    for l in &setup.links {
-        assert_eq!(l.telemetry_interval, Duration::from_millis(4));
-        assert_eq!(l.attitude_interval, Duration::from_millis(4));
-    }
-    let setup = Config::from_toml(&with(
-        "link_timeout_ms = 1500",
-        "link_timeout_ms = 1500\nattitude_rate_hz = 10.0",
-    ))
-    .unwrap()
-    .validate()
-    .unwrap();
-    for l in &setup.links {
-        assert_eq!(l.telemetry_interval, Duration::from_millis(4));
-        assert_eq!(l.attitude_interval, Duration::from_millis(100));
-    }
+        setup
+            .links
+            .iter()
+            .map(|l| (l.telemetry_interval, l.attitude_interval))
+            .collect::<Vec<_>>()
+    };
+    // paper-sim1 controls at 250 Hz: both streams every 4 ms by default; 10 Hz is 100 ms.
+    let ms = Duration::from_millis;
+    assert_eq!(intervals(""), vec![(ms(4), ms(4)); 6]);
+    assert_eq!(
+        intervals("attitude_rate_hz = 10.0"),
+        vec![(ms(4), ms(100)); 6]
+    );
     for (bad, shown) in [("300.0", "300"), ("0.5", "0.5"), ("nan", "NaN")] {
         let err = Config::from_toml(&with(
             "link_timeout_ms = 1500",

@@ -88,6 +88,32 @@ impl Harness {
             .collect()
     }
 
+    /// `(message id, interval µs)` of every SET_MESSAGE_INTERVAL sent, in order.
+    fn intervals_asked(&self) -> Vec<(f32, f32)> {
+        self.commands_sent()
+            .iter()
+            .filter_map(|m| match m {
+                MavMessage::COMMAND_LONG(c) if c.command as u32 == 511 => {
+                    Some((c.param1, c.param2))
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Runs for `d`, delivering everything; the ids of the messages the vehicle sent.
+    fn ids_sent_by_vehicle(&mut self, d: Duration) -> Vec<u32> {
+        let mut seen = Vec::new();
+        let mut record = |to_vehicle: bool, m: &MavMessage| {
+            if !to_vehicle {
+                seen.push(m.message_id());
+            }
+            true
+        };
+        self.run(d, &mut record);
+        seen
+    }
+
     fn flying_at(&self) -> Option<SimTime> {
         self.events
             .iter()
@@ -157,16 +183,8 @@ fn the_link_turns_off_the_streams_it_does_not_read_and_waits_for_the_origin() {
     assert_eq!(requests(&h), 5);
     // ATTITUDE (30) and GLOBAL_POSITION_INT (33) off on this link (interval −1); the two
     // it reads at the control rate (20 ms).
-    let intervals: Vec<(f32, f32)> = h
-        .commands_sent()
-        .iter()
-        .filter_map(|m| match m {
-            MavMessage::COMMAND_LONG(c) if c.command as u32 == 511 => Some((c.param1, c.param2)),
-            _ => None,
-        })
-        .collect();
     assert_eq!(
-        intervals,
+        h.intervals_asked(),
         vec![
             (32.0, 20_000.0),
             (31.0, 20_000.0),
@@ -175,14 +193,7 @@ fn the_link_turns_off_the_streams_it_does_not_read_and_waits_for_the_origin() {
         ]
     );
     // And the vehicle stopped sending them.
-    let mut seen = Vec::new();
-    let mut record = |to_vehicle: bool, m: &MavMessage| {
-        if !to_vehicle {
-            seen.push(m.message_id());
-        }
-        true
-    };
-    h.run(Duration::from_secs(1), &mut record);
+    let seen = h.ids_sent_by_vehicle(Duration::from_secs(1));
     assert!(!seen.contains(&30) && !seen.contains(&33), "{seen:?}");
     assert!(seen.iter().filter(|id| **id == 32).count() >= 49);
 }
@@ -196,26 +207,13 @@ fn a_lower_attitude_rate_is_asked_for_and_flown_with() {
     let mut h = Harness::with_config(cfg, 1);
     h.run(Duration::from_secs(3), &mut deliver_all);
     assert_eq!(h.link.phase(), Phase::Flying);
-    let asked: Vec<(f32, f32)> = h
-        .commands_sent()
-        .iter()
-        .filter_map(|m| match m {
-            MavMessage::COMMAND_LONG(c) if c.command as u32 == 511 => Some((c.param1, c.param2)),
-            _ => None,
-        })
-        .take(2)
-        .collect();
-    assert_eq!(asked, vec![(32.0, 20_000.0), (31.0, 100_000.0)]);
+    assert_eq!(
+        h.intervals_asked()[..2],
+        [(32.0, 20_000.0), (31.0, 100_000.0)]
+    );
     // Over 2 s: LOCAL_POSITION_NED every 20 ms, ATTITUDE_QUATERNION every 100 ms (one
     // more of each when a period boundary falls on both ends).
-    let mut seen = Vec::new();
-    let mut record = |to_vehicle: bool, m: &MavMessage| {
-        if !to_vehicle {
-            seen.push(m.message_id());
-        }
-        true
-    };
-    h.run(Duration::from_secs(2), &mut record);
+    let seen = h.ids_sent_by_vehicle(Duration::from_secs(2));
     let count = |id: u32| seen.iter().filter(|s| **s == id).count();
     assert!((100..=101).contains(&count(32)), "{}", count(32));
     assert!((20..=21).contains(&count(31)), "{}", count(31));
