@@ -1,7 +1,9 @@
 //! The tokio UDP driver of many vehicles: one task steps a whole shard of vehicles on a
-//! common 1 ms tick, and one light receive task per socket hands datagrams over through
-//! a channel. A thousand vehicles cost a few tasks' worth of timer wake-ups, not a
-//! thousand; run one shard per core.
+//! common 1 ms tick and, on the same tick, reads every socket the reactor found readable
+//! (a socket with nothing to read costs a flag check, not a system call). A thousand
+//! vehicles cost one task's timer wake-ups per shard, not a task and a channel hop per
+//! datagram; run one shard per core. A datagram waits at most one tick, as it would for
+//! the next 1 ms physics step anyway.
 //!
 //! Each vehicle has one or two links (offboard and GCS), each its own socket. Which peer
 //! a link answers follows PX4's `mavlink_receiver.cpp` ([`Partner`]): the default address
@@ -19,14 +21,12 @@ use std::collections::VecDeque;
 use std::io;
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Duration;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tokio::net::UdpSocket;
 use tokio::sync::{mpsc, watch};
-use tokio::task::JoinSet;
 use tokio::time::MissedTickBehavior;
 
 use crate::autopilot::{LinkId, Vehicle, VehicleEvent, VehicleStatus};
@@ -84,7 +84,7 @@ struct Delayed {
 /// A vehicle while the shard runs.
 struct Slot {
     vehicle: Vehicle,
-    sockets: Vec<Arc<UdpSocket>>,
+    sockets: Vec<UdpSocket>,
     ids: Vec<LinkId>,
     default_peers: Vec<SocketAddr>,
     partners: Vec<Partner>,
@@ -102,62 +102,23 @@ struct Slot {
     boot_offset: std::time::Duration,
 }
 
-/// A datagram received on one link of one vehicle.
-struct Received {
-    slot: usize,
-    link: usize,
-    from: SocketAddr,
-    bytes: Vec<u8>,
-}
-
 /// Largest datagram read.
 const MAX_DATAGRAM: usize = 2048;
 
 /// Runs a shard of vehicles, each with its boot offset, until `shutdown` turns true.
 /// `controls` carries `(index in vehicles, request)`.
-///
-/// # Errors
-/// A socket receive error other than a transient one.
 async fn run_fleet(
     vehicles: Vec<(std::time::Duration, FleetVehicle)>,
     clock: SimClock,
     mut controls: mpsc::Receiver<(usize, VehicleControl)>,
     mut shutdown: watch::Receiver<bool>,
-) -> io::Result<()> {
-    let (tx, mut rx) = mpsc::channel::<Received>(4096);
-    let mut receivers = JoinSet::new();
+) {
     let mut slots: Vec<Slot> = Vec::with_capacity(vehicles.len());
-    for (s, (boot_offset, v)) in vehicles.into_iter().enumerate() {
-        let mut sockets = Vec::new();
+    for (boot_offset, v) in vehicles {
         let ids: Vec<LinkId> = v.links.iter().map(|l| l.id).collect();
         let defaults: Vec<SocketAddr> = v.links.iter().map(|l| l.default_peer).collect();
         let faults: Vec<LinkFaults> = v.links.iter().map(|l| l.faults).collect();
-        for (link, l) in v.links.into_iter().enumerate() {
-            let socket = Arc::new(l.socket);
-            sockets.push(Arc::clone(&socket));
-            let tx = tx.clone();
-            receivers.spawn(async move {
-                let mut buf = [0u8; MAX_DATAGRAM];
-                loop {
-                    let (n, from) = match socket.recv_from(&mut buf).await {
-                        Ok(got) => got,
-                        // ICMP port unreachable from an earlier send (nobody listening
-                        // at the default peer yet) surfaces here on some systems.
-                        Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
-                        Err(e) => return Err(e),
-                    };
-                    let received = Received {
-                        slot: s,
-                        link,
-                        from,
-                        bytes: buf[..n].to_vec(),
-                    };
-                    if tx.send(received).await.is_err() {
-                        return Ok::<(), io::Error>(());
-                    }
-                }
-            });
-        }
+        let sockets = v.links.into_iter().map(|l| l.socket).collect();
         slots.push(Slot {
             vehicle: v.vehicle,
             sockets,
@@ -174,7 +135,7 @@ async fn run_fleet(
             boot_offset,
         });
     }
-    drop(tx);
+    let mut buf = vec![0u8; MAX_DATAGRAM];
     let mut tick = tokio::time::interval(Duration::from_millis(1));
     tick.set_missed_tick_behavior(MissedTickBehavior::Skip);
     let mut last_status = SimTime::ZERO;
@@ -190,19 +151,6 @@ async fn run_fleet(
                     slot.flush(now);
                 }
             }
-            received = rx.recv() => {
-                let Some(first) = received else { break };
-                let now = clock.now();
-                let mut next = Some(first);
-                while let Some(r) = next {
-                    if let Some(slot) = slots.get_mut(r.slot) {
-                        let now = slot.time(now);
-                        slot.inbound(now, r.link, r.from, &r.bytes);
-                        slot.flush(now);
-                    }
-                    next = rx.try_recv().ok();
-                }
-            }
             _ = tick.tick() => {
                 let now = clock.now();
                 let publish = now.saturating_since(last_status) >= Duration::from_millis(100);
@@ -210,10 +158,11 @@ async fn run_fleet(
                     last_status = now;
                 }
                 for slot in &mut slots {
+                    let now = slot.time(now);
+                    slot.receive(now, &mut buf);
                     if !slot.alive {
                         continue;
                     }
-                    let now = slot.time(now);
                     slot.vehicle.handle_timeout(now);
                     slot.deliver_delayed(now);
                     slot.flush(now);
@@ -224,7 +173,6 @@ async fn run_fleet(
             }
         }
     }
-    receivers.abort_all();
     for slot in &slots {
         if slot.alive {
             store_key(slot.key_file.as_deref(), &slot.vehicle);
@@ -237,18 +185,12 @@ async fn run_fleet(
             );
         }
     }
-    while let Some(joined) = receivers.join_next().await {
-        if let Ok(Err(err)) = joined {
-            return Err(err);
-        }
-    }
-    Ok(())
 }
 
 /// Running shards: their tasks and, per vehicle in the order given, how to reach it.
 pub struct Shards {
     /// One task per shard.
-    tasks: Vec<tokio::task::JoinHandle<io::Result<()>>>,
+    tasks: Vec<tokio::task::JoinHandle<()>>,
     /// Per vehicle: its shard's control channel and its index there.
     controls: Vec<(mpsc::Sender<(usize, VehicleControl)>, usize)>,
 }
@@ -271,10 +213,10 @@ impl Shards {
     /// Waits for every shard.
     ///
     /// # Errors
-    /// The first shard's error, or a shard that panicked.
+    /// A shard that panicked.
     pub async fn join(self) -> io::Result<()> {
         for task in self.tasks {
-            task.await.map_err(io::Error::other)??;
+            task.await.map_err(io::Error::other)?;
         }
         Ok(())
     }
@@ -346,6 +288,30 @@ impl Slot {
                     .collect();
                 self.vehicle.reboot(now);
                 tracing::info!(sysid, "vehicle restarted");
+            }
+        }
+    }
+
+    /// Reads whatever has arrived on the vehicle's sockets (a socket the reactor has not
+    /// seen readable is skipped without a system call) and hands it to the vehicle; a
+    /// powered-off vehicle's datagrams are read and dropped. A socket error is logged and
+    /// that socket left until the next tick: one vehicle's socket never stops the shard.
+    fn receive(&mut self, now: SimTime, buf: &mut [u8]) {
+        for link in 0..self.sockets.len() {
+            loop {
+                let (n, from) = match self.sockets[link].try_recv_from(buf) {
+                    Ok(got) => got,
+                    Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                    // ICMP port unreachable from an earlier send (nobody listening at the
+                    // default peer yet) surfaces here on some systems.
+                    Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
+                    Err(e) => {
+                        tracing::warn!(sysid = self.vehicle.system_id(), error = %e, "receive failed");
+                        break;
+                    }
+                };
+                self.inbound(now, link, from, &buf[..n]);
+                self.flush(now);
             }
         }
     }
