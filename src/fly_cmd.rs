@@ -67,7 +67,9 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| default_run_dir(&args.config));
-    let runtime = tokio::runtime::Builder::new_multi_thread()
+    // One thread: the coordinator is one control loop, and receive tasks on other
+    // threads would hand it every batch across threads (a wake-up each).
+    let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .context("start the tokio runtime")?;
