@@ -181,20 +181,29 @@ fn the_link_turns_off_the_streams_it_does_not_read_and_waits_for_the_origin() {
     assert_eq!(h.link.phase(), Phase::Flying);
     // The answer to the 3 s request came: no more requests after it.
     assert_eq!(requests(&h), 5);
-    // ATTITUDE (30) and GLOBAL_POSITION_INT (33) off on this link (interval −1); the two
-    // it reads at the control rate (20 ms).
-    assert_eq!(
-        h.intervals_asked(),
-        vec![
-            (32.0, 20_000.0),
-            (31.0, 20_000.0),
-            (30.0, -1.0),
-            (33.0, -1.0)
-        ]
-    );
-    // And the vehicle stopped sending them.
+    // The two streams it reads at the control rate (20 ms), then every stream of PX4's
+    // onboard link it does not read off on this link (interval −1).
+    let asked = h.intervals_asked();
+    assert_eq!(asked[..2], [(32.0, 20_000.0), (31.0, 20_000.0)]);
+    let off: Vec<f32> = asked[2..].iter().map(|(id, _)| *id).collect();
+    assert!(asked[2..].iter().all(|(_, interval)| *interval == -1.0));
+    for id in [30.0, 33.0, 105.0, 331.0, 1.0, 24.0, 147.0, 242.0] {
+        assert!(off.contains(&id), "{id} not turned off: {off:?}");
+    }
+    // None of them is one it reads.
+    for id in [0.0, 31.0, 32.0, 49.0, 77.0, 245.0] {
+        assert!(!off.contains(&id), "{id} turned off");
+    }
+    // And the vehicle stopped sending the ones it has: over a second only heartbeats,
+    // the two asked for, EXTENDED_SYS_STATE (5 Hz), GPS_GLOBAL_ORIGIN (0.2 Hz) and the
+    // acknowledgements remain.
     let seen = h.ids_sent_by_vehicle(Duration::from_secs(1));
-    assert!(!seen.contains(&30) && !seen.contains(&33), "{seen:?}");
+    for id in &seen {
+        assert!(
+            [0, 31, 32, 49, 77, 245, 42].contains(id),
+            "{id} still sent: {seen:?}"
+        );
+    }
     assert!(seen.iter().filter(|id| **id == 32).count() >= 49);
 }
 

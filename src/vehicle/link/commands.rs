@@ -20,10 +20,19 @@ pub(super) const MODE_ACK_SETTLE: Duration = Duration::from_millis(100);
 const LOCAL_POSITION_NED: f32 = 32.0;
 const ATTITUDE_QUATERNION: f32 = 31.0;
 const GPS_GLOBAL_ORIGIN: f32 = 49.0;
-/// Fast streams of PX4's onboard link the coordinator does not read (ATTITUDE,
-/// GLOBAL_POSITION_INT): turned off on its link (interval −1), which halves what a large
-/// swarm sends it. A ground station on another link keeps its own streams.
-const UNREAD_FAST_STREAMS: [f32; 2] = [30.0, 33.0];
+/// Streams of PX4's onboard link (`mavlink_main.cpp`, MAVLINK_MODE_ONBOARD) the
+/// coordinator does not read, turned off on its link (interval −1): every one of them is
+/// a datagram the vehicle sends and the coordinator parses for nothing, and together they
+/// are most of what a large swarm would send it. ATTITUDE (100 Hz on PX4's onboard link)
+/// and GLOBAL_POSITION_INT (50) first, then HIGHRES_IMU (50), ODOMETRY (30), RC_CHANNELS
+/// (20), the 10 Hz ones (ALTITUDE, DISTANCE_SENSOR, ATTITUDE_TARGET, SERVO_OUTPUT_RAW,
+/// VFR_HUD, POSITION_TARGET_LOCAL_NED and _GLOBAL_INT, NAV_CONTROLLER_OUTPUT), and
+/// SYS_STATUS, GPS_RAW_INT, BATTERY_STATUS, HOME_POSITION. A stream the autopilot does
+/// not have is refused harmlessly; a ground station on another link keeps its own.
+const UNREAD_STREAMS: [f32; 17] = [
+    30.0, 33.0, 105.0, 331.0, 65.0, 141.0, 132.0, 83.0, 36.0, 74.0, 85.0, 87.0, 62.0, 1.0, 24.0,
+    147.0, 242.0,
+];
 /// SET_MESSAGE_INTERVAL's "stop this stream".
 const STREAM_OFF: f32 = -1.0;
 
@@ -117,7 +126,7 @@ impl VehicleLink {
             (LOCAL_POSITION_NED, us(self.cfg.telemetry_interval)),
             (ATTITUDE_QUATERNION, us(self.cfg.attitude_interval)),
         ];
-        let off = UNREAD_FAST_STREAMS.map(|id| (id, STREAM_OFF));
+        let off = UNREAD_STREAMS.map(|id| (id, STREAM_OFF));
         for (id, interval) in streams.into_iter().chain(off) {
             self.send_command(
                 MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
