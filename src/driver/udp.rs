@@ -43,6 +43,9 @@ const RECEIVE_QUEUE: usize = 1024;
 /// At most this many datagrams per batch.
 const BATCH: usize = 64;
 
+/// At most this many datagrams sent per turn of the loop (about a millisecond of sends).
+const SEND_BUDGET: usize = 500;
+
 /// Datagrams read from one socket in one go: one allocation and one hand-over for up to
 /// [`BATCH`] of them, instead of one each.
 struct Batch {
@@ -127,8 +130,17 @@ pub async fn run_swarm<O: Observer>(
         // links with deadlines scattered over a control period wake the swarm at most
         // once per millisecond, not once per link.
         let due_us = swarm.poll_timeout().as_micros().div_ceil(1000) * 1000;
-        let deadline = start + std::time::Duration::from_micros(due_us);
+        // Output left over from the last round goes on at once (after a tick that fell
+        // due meanwhile).
+        let deadline = if swarm.has_output() {
+            Instant::now()
+        } else {
+            start + std::time::Duration::from_micros(due_us)
+        };
         tokio::select! {
+            // The control schedule first: a burst of datagrams (a thousand vehicles'
+            // default streams at start) must not hold a tick back.
+            biased;
             changed = commands.changed() => {
                 let command = if changed.is_err() { DriverCommand::Stop } else { *commands.borrow() };
                 match command {
@@ -137,9 +149,11 @@ pub async fn run_swarm<O: Observer>(
                     DriverCommand::Stop => break,
                 }
             }
+            _ = tokio::time::sleep_until(deadline) => swarm.handle_timeout(now()),
             received = rx.recv() => match received {
                 Some(first) => {
-                    // Everything that has arrived, then one round of sends.
+                    // What has arrived, then one round of sends; no further than the next
+                    // deadline, which the loop then serves before the rest.
                     let t = now();
                     let mut next = Some(first);
                     while let Some(batch) = next.take() {
@@ -148,14 +162,22 @@ pub async fn run_swarm<O: Observer>(
                             let bytes = &batch.bytes[datagram.clone()];
                             inbound.deliver(batch.socket, *from, bytes, t, &mut observer);
                         }
+                        if Instant::now() >= deadline {
+                            break;
+                        }
                         next = rx.try_recv().ok();
                     }
                 }
                 None => break,
             },
-            _ = tokio::time::sleep_until(deadline) => swarm.handle_timeout(now()),
         }
-        while let Some((i, bytes)) = swarm.poll_transmit() {
+        // At most SEND_BUDGET datagrams a round: a thousand vehicles discovered together
+        // queue some twenty thousand (heartbeats, stream settings), tens of milliseconds
+        // of system calls that must not hold the next control tick back.
+        for _ in 0..SEND_BUDGET {
+            let Some((i, bytes)) = swarm.poll_transmit() else {
+                break;
+            };
             observer.datagram(now(), i, true, &bytes);
             let Some((socket, to)) = router.destination(i) else {
                 // A network vehicle not heard from yet: nowhere to send.

@@ -413,6 +413,12 @@ impl Swarm {
             })
     }
 
+    /// Whether some link may have a datagram queued ([`Swarm::poll_transmit`] may still
+    /// find none).
+    pub fn has_output(&self) -> bool {
+        !self.ready.is_empty()
+    }
+
     /// The next datagram and the vehicle it is for (round robin over the links).
     pub fn poll_transmit(&mut self) -> Option<(usize, Vec<u8>)> {
         let n = self.links.len();

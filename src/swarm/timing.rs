@@ -114,6 +114,8 @@ pub struct TickTiming {
     state_age: Histogram,
     /// Ticks that started more than half a period late (counted exactly).
     late: u64,
+    /// When the latest tick started (scheduled time, s), and how late.
+    worst: Option<(SimTime, Duration)>,
 }
 
 impl TickTiming {
@@ -124,6 +126,7 @@ impl TickTiming {
             lateness: Histogram::new(),
             state_age: Histogram::new(),
             late: 0,
+            worst: None,
         }
     }
 
@@ -131,6 +134,9 @@ impl TickTiming {
     pub fn tick(&mut self, due: SimTime, now: SimTime) {
         let late = now.saturating_since(due);
         self.late += u64::from(late > self.period / 2);
+        if self.worst.is_none_or(|(_, worst)| late > worst) {
+            self.worst = Some((due, late));
+        }
         self.lateness.record(late);
     }
 
@@ -152,6 +158,7 @@ impl TickTiming {
         TimingReport {
             control_period_ms: self.period.as_secs_f64() * 1e3,
             late_ticks: late,
+            latest_tick_due_s: self.worst.map(|(due, _)| due.as_secs_f64()),
             late_fraction: if self.lateness.total() == 0 {
                 0.0
             } else {
@@ -185,6 +192,8 @@ pub struct TimingReport {
     pub late_ticks: u64,
     /// `late_ticks` over all ticks.
     pub late_fraction: f64,
+    /// When the latest tick was due (s since start): where to look for what held it up.
+    pub latest_tick_due_s: Option<f64>,
     /// How long after its schedule each control tick started.
     pub lateness: Quantiles,
     /// Age of each flying vehicle's latest position report at each tick (the report's
@@ -275,6 +284,7 @@ mod tests {
         assert_eq!(r.late_ticks, 2);
         assert!((r.late_fraction - 2.0 / 7.0).abs() < 1e-12);
         assert_eq!(r.lateness.max_ms, Some(40.0));
+        assert_eq!(r.latest_tick_due_s, Some(1.0));
         assert_eq!(r.control_period_ms, 20.0);
         assert_eq!(r.state_age.p50_ms, None);
     }
