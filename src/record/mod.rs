@@ -9,15 +9,16 @@
 //! <dir>/summary.json        the flight's figures (see [`metrics::Summary`])
 //! ```
 //!
-//! A disk error never stops a flight: the first one is kept, recording stops, and
-//! [`Recorder::finish`] reports it.
+//! The files are written by a thread of their own (`sink.rs`): the control loop formats
+//! rows into memory and never waits for the disk. A disk error never stops a flight: the
+//! first one is kept, recording stops, and [`Recorder::finish`] reports it.
 
 mod fixed;
 pub mod metrics;
+mod sink;
 pub mod trace;
 
-use std::fs::File;
-use std::io::{self, BufWriter, Write};
+use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
 use ringswarm_wire::time::SimTime;
@@ -25,7 +26,13 @@ use ringswarm_wire::time::SimTime;
 use crate::link::raw_frames;
 use crate::swarm::Swarm;
 use metrics::{RunTracker, Summary};
+use sink::Sinks;
 use trace::Trace;
+
+/// The files' places in [`Sinks`]: the tlog, the events, then one CSV per vehicle.
+const TLOG: usize = 0;
+const EVENTS: usize = 1;
+const FIRST_CSV: usize = 2;
 
 /// How often the in-memory trace (for the plots) samples the swarm.
 pub const TRACE_PERIOD: std::time::Duration = std::time::Duration::from_millis(50);
@@ -40,9 +47,9 @@ sp_thrust_norm,last_heard_age_ms";
 #[derive(Debug)]
 pub struct Recorder {
     dir: PathBuf,
-    tlog: Option<BufWriter<File>>,
-    csv: Vec<BufWriter<File>>,
-    events: Option<BufWriter<File>>,
+    /// `None` once recording has stopped on an error.
+    sinks: Option<Sinks>,
+    vehicles: usize,
     events_written: usize,
     epoch_us: u64,
     tracker: RunTracker,
@@ -61,22 +68,24 @@ impl Recorder {
     /// The directory or a file cannot be created.
     pub fn create(dir: &Path, swarm: &Swarm, epoch_us: u64) -> io::Result<Self> {
         std::fs::create_dir_all(dir)?;
-        let tlog = BufWriter::new(File::create(dir.join("traffic.tlog"))?);
-        let mut events = BufWriter::new(File::create(dir.join("events.csv"))?);
-        writeln!(events, "t_s,system_id,level,event")?;
-        let mut csv = Vec::new();
+        // Chunks of about a second of rows (a CSV row is ~150 bytes; a thousand vehicles'
+        // telemetry is ~6 MB/s of tlog).
+        let mut files = vec![
+            (dir.join("traffic.tlog"), 256 * 1024),
+            (dir.join("events.csv"), 4096),
+        ];
         for cfg in &swarm.setup().links {
-            let mut w = BufWriter::new(File::create(
-                dir.join(format!("vehicle-{}.csv", cfg.file_label())),
-            )?);
-            writeln!(w, "{CSV_HEADER}")?;
-            csv.push(w);
+            files.push((dir.join(format!("vehicle-{}.csv", cfg.file_label())), 8192));
+        }
+        let mut sinks = Sinks::create(files)?;
+        writeln!(sinks.buffer(EVENTS), "t_s,system_id,level,event")?;
+        for i in 0..swarm.links().len() {
+            writeln!(sinks.buffer(FIRST_CSV + i), "{CSV_HEADER}")?;
         }
         Ok(Self {
             dir: dir.to_owned(),
-            tlog: Some(tlog),
-            csv,
-            events: Some(events),
+            sinks: Some(sinks),
+            vehicles: swarm.links().len(),
             events_written: 0,
             epoch_us,
             tracker: RunTracker::new(swarm.links().len()),
@@ -101,22 +110,22 @@ impl Recorder {
         if let Err(err) = result {
             tracing::error!(error = %err, dir = %self.dir.display(), "recording stopped");
             self.error.get_or_insert(err);
-            self.tlog = None;
-            self.csv.clear();
-            self.events = None;
+            self.sinks = None;
         }
     }
 
     /// Records a datagram sent or received at `now`, frame by frame.
     pub fn datagram(&mut self, now: SimTime, bytes: &[u8]) {
         let stamp = (self.epoch_us + now.as_micros()).to_be_bytes();
-        let Some(tlog) = self.tlog.as_mut() else {
+        let Some(sinks) = self.sinks.as_mut() else {
             return;
         };
-        let result = raw_frames(bytes).try_for_each(|frame| {
-            tlog.write_all(&stamp)?;
-            tlog.write_all(frame)
-        });
+        let tlog = sinks.buffer(TLOG);
+        for frame in raw_frames(bytes) {
+            tlog.extend_from_slice(&stamp);
+            tlog.extend_from_slice(frame);
+        }
+        let result = sinks.appended(TLOG);
         self.keep(result);
     }
 
@@ -135,9 +144,10 @@ impl Recorder {
     }
 
     fn write_events(&mut self, swarm: &Swarm) -> io::Result<()> {
-        let Some(w) = self.events.as_mut() else {
+        let Some(sinks) = self.sinks.as_mut() else {
             return Ok(());
         };
+        let w = sinks.buffer(EVENTS);
         for e in swarm.events().iter().skip(self.events_written) {
             writeln!(
                 w,
@@ -149,12 +159,15 @@ impl Recorder {
             )?;
         }
         self.events_written = swarm.events().len();
-        Ok(())
+        sinks.appended(EVENTS)
     }
 
     fn write_rows(&mut self, swarm: &Swarm, now: SimTime) -> io::Result<()> {
         let phase = swarm.phase().name();
-        for (i, w) in self.csv.iter_mut().enumerate() {
+        let Some(sinks) = self.sinks.as_mut() else {
+            return Ok(());
+        };
+        for i in 0..self.vehicles {
             let link = &swarm.links()[i];
             let Some(s) = swarm.common_state(i) else {
                 continue;
@@ -199,7 +212,8 @@ impl Recorder {
                 fixed::push(line, x, decimals);
             }
             line.push(b'\n');
-            w.write_all(line)?;
+            sinks.buffer(FIRST_CSV + i).extend_from_slice(line);
+            sinks.appended(FIRST_CSV + i)?;
         }
         Ok(())
     }
@@ -221,14 +235,8 @@ impl Recorder {
         if let Some(err) = self.error.take() {
             return Err(err);
         }
-        if let Some(mut tlog) = self.tlog.take() {
-            tlog.flush()?;
-        }
-        for mut w in self.csv.drain(..) {
-            w.flush()?;
-        }
-        if let Some(mut w) = self.events.take() {
-            w.flush()?;
+        if let Some(sinks) = self.sinks.take() {
+            sinks.finish()?;
         }
         let json = serde_json::to_string_pretty(&summary).map_err(io::Error::other)?;
         std::fs::write(self.dir.join("summary.json"), json + "\n")?;

@@ -1,0 +1,180 @@
+//! Files written by a thread of their own: the control loop appends to in-memory buffers
+//! and hands each full one over through a bounded channel, so it never waits for the
+//! disk. Emptied buffers come back for reuse (no allocation in steady state).
+//!
+//! A write error stops the writer; the next hand-over reports it. A disk that falls so
+//! far behind that the channel is full is reported too, rather than waited for: recording
+//! stops, the flight goes on.
+
+use std::fs::File;
+use std::io::{self, Write};
+use std::path::PathBuf;
+use std::sync::mpsc::{self, Receiver, SyncSender, TrySendError};
+use std::thread::JoinHandle;
+
+/// Full buffers that may wait for the writer.
+const IN_FLIGHT: usize = 1024;
+
+/// The files of a run, each with its buffer.
+#[derive(Debug)]
+pub struct Sinks {
+    buffers: Vec<Vec<u8>>,
+    chunk_bytes: Vec<usize>,
+    tx: Option<SyncSender<(usize, Vec<u8>)>>,
+    spare: Receiver<Vec<u8>>,
+    writer: Option<JoinHandle<io::Result<()>>>,
+}
+
+impl Sinks {
+    /// Creates every file (here, so that a bad path is reported at once) and starts the
+    /// writer; file `i` is handed over in chunks of about `chunk_bytes`.
+    ///
+    /// # Errors
+    /// A file that cannot be created, or a thread that cannot be started.
+    pub fn create(files: Vec<(PathBuf, usize)>) -> io::Result<Self> {
+        let mut opened = Vec::with_capacity(files.len());
+        let mut chunk_bytes = Vec::with_capacity(files.len());
+        for (path, chunk) in files {
+            opened.push(File::create(&path)?);
+            chunk_bytes.push(chunk.max(1));
+        }
+        let (tx, rx) = mpsc::sync_channel::<(usize, Vec<u8>)>(IN_FLIGHT);
+        let (spare_tx, spare) = mpsc::channel();
+        let writer = std::thread::Builder::new()
+            .name("run-directory".into())
+            .spawn(move || {
+                for (i, mut buf) in rx {
+                    if let Some(file) = opened.get_mut(i) {
+                        file.write_all(&buf)?;
+                    }
+                    buf.clear();
+                    // The recorder may be gone (finishing): nothing to give back to.
+                    let _ = spare_tx.send(buf);
+                }
+                opened.iter_mut().try_for_each(File::flush)
+            })?;
+        Ok(Self {
+            buffers: chunk_bytes.iter().map(|c| Vec::with_capacity(*c)).collect(),
+            chunk_bytes,
+            tx: Some(tx),
+            spare,
+            writer: Some(writer),
+        })
+    }
+
+    /// File `i`'s buffer, to append to; call [`Sinks::appended`] after.
+    ///
+    /// # Panics
+    /// Never for an `i` given to [`Sinks::create`]; a wrong index is a programming error.
+    pub fn buffer(&mut self, i: usize) -> &mut Vec<u8> {
+        &mut self.buffers[i]
+    }
+
+    /// Hands file `i`'s buffer to the writer once it holds a chunk.
+    ///
+    /// # Errors
+    /// The writer's error, or the writer too far behind.
+    pub fn appended(&mut self, i: usize) -> io::Result<()> {
+        if self.buffers[i].len() >= self.chunk_bytes[i] {
+            self.hand_over(i)?;
+        }
+        Ok(())
+    }
+
+    fn hand_over(&mut self, i: usize) -> io::Result<()> {
+        let fresh = self
+            .spare
+            .try_recv()
+            .unwrap_or_else(|_| Vec::with_capacity(self.chunk_bytes[i]));
+        let full = std::mem::replace(&mut self.buffers[i], fresh);
+        let Some(tx) = &self.tx else {
+            return Err(io::Error::other("the run directory is closed"));
+        };
+        match tx.try_send((i, full)) {
+            Ok(()) => Ok(()),
+            Err(TrySendError::Full(_)) => Err(io::Error::other(format!(
+                "the disk fell {IN_FLIGHT} chunks behind the flight"
+            ))),
+            Err(TrySendError::Disconnected(_)) => Err(self.writer_error()),
+        }
+    }
+
+    /// The writer's own error, once it has stopped.
+    fn writer_error(&mut self) -> io::Error {
+        self.tx = None;
+        match self.writer.take().map(JoinHandle::join) {
+            Some(Ok(Err(err))) => err,
+            Some(Err(_)) => io::Error::other("the run-directory writer panicked"),
+            _ => io::Error::other("the run-directory writer stopped"),
+        }
+    }
+
+    /// Hands over what is left, waits for the writer and flushes every file.
+    ///
+    /// # Errors
+    /// The writer's first error.
+    pub fn finish(mut self) -> io::Result<()> {
+        for i in 0..self.buffers.len() {
+            if !self.buffers[i].is_empty() {
+                self.hand_over(i)?;
+            }
+        }
+        self.tx = None;
+        match self.writer.take().map(JoinHandle::join) {
+            Some(Ok(result)) => result,
+            Some(Err(_)) => Err(io::Error::other("the run-directory writer panicked")),
+            None => Ok(()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn everything_appended_is_in_the_files_in_order() {
+        let dir = std::env::temp_dir().join(format!("ringswarm-sink-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (a, b) = (dir.join("a"), dir.join("b"));
+        let mut sinks = Sinks::create(vec![(a.clone(), 10), (b.clone(), 1000)]).unwrap();
+        let mut expected_a = Vec::new();
+        for k in 0..500u32 {
+            let line = format!("{k}\n");
+            sinks.buffer(0).extend_from_slice(line.as_bytes());
+            expected_a.extend_from_slice(line.as_bytes());
+            sinks.appended(0).unwrap();
+            sinks.buffer(1).push(b'x');
+            sinks.appended(1).unwrap();
+        }
+        sinks.finish().unwrap();
+        assert_eq!(std::fs::read(&a).unwrap(), expected_a);
+        assert_eq!(std::fs::read(&b).unwrap(), vec![b'x'; 500]);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_file_that_cannot_be_created_is_reported_at_once() {
+        let missing = std::env::temp_dir().join("ringswarm-no-such-dir/x/y");
+        let err = Sinks::create(vec![(missing, 10)]).unwrap_err();
+        assert_eq!(err.kind(), io::ErrorKind::NotFound);
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_write_error_is_reported_by_a_later_hand_over_and_by_finish() {
+        // /dev/full takes every open and fails every write with "no space".
+        let mut sinks = Sinks::create(vec![("/dev/full".into(), 4)]).unwrap();
+        let mut failed = None;
+        for _ in 0..10_000 {
+            sinks.buffer(0).extend_from_slice(b"12345678");
+            if let Err(err) = sinks.appended(0) {
+                failed = Some(err);
+                break;
+            }
+            std::thread::yield_now();
+        }
+        let err = failed.expect("the writer's error came back");
+        assert_eq!(err.kind(), io::ErrorKind::StorageFull, "{err}");
+    }
+}
