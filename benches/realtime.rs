@@ -44,21 +44,23 @@ fn main() {
     );
     println!(
         "| vehicles | emulator µs/vehicle-tick | coordinator µs/vehicle-tick | both / floor | \
-         late ticks (> T/2) | state age p50 / p99 (ms) | setpoints taken, lowest / mean (Hz) | \
+         late ticks (> T/2) | tick lateness p99 / max (ms) | state age p50 / p99 (ms) | setpoints taken, lowest / mean (Hz) | \
          UDP drops |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|");
     for n in cases {
         match run_case(n) {
             Ok(r) => {
                 let per_tick = |cpu_s: f64| cpu_s * 1e6 / (n as f64 * RATE_HZ * r.window_s);
                 let (e, c) = (per_tick(r.emulator_cpu_s), per_tick(r.coordinator_cpu_s));
                 println!(
-                    "| {n} | {e:.2} | {c:.2} | {:.1} | {} of {} ({:.3} %) | {} / {} | {} | {} |",
+                    "| {n} | {e:.2} | {c:.2} | {:.1} | {} of {} ({:.3} %) | {} / {} | {} / {} | {} | {} |",
                     (e + c) / (floor_us * DATAGRAMS_PER_TICK),
                     r.late_ticks,
                     r.ticks,
                     100.0 * r.late_ticks as f64 / r.ticks.max(1) as f64,
+                    show(r.late_p99_ms),
+                    show(r.late_max_ms),
                     show(r.age_p50_ms),
                     show(r.age_p99_ms),
                     r.setpoint_rates
@@ -68,7 +70,7 @@ fn main() {
                     r.udp_drops,
                 );
             }
-            Err(e) => println!("| {n} | failed: {e} |||||||"),
+            Err(e) => println!("| {n} | failed: {e} ||||||||"),
         }
     }
 }
@@ -83,6 +85,8 @@ struct CaseResult {
     coordinator_cpu_s: f64,
     ticks: u64,
     late_ticks: u64,
+    late_p99_ms: Option<f64>,
+    late_max_ms: Option<f64>,
     age_p50_ms: Option<f64>,
     age_p99_ms: Option<f64>,
     setpoint_rates: Option<(f64, f64)>,
@@ -193,6 +197,9 @@ fn run_case(n: usize) -> Result<CaseResult, String> {
             (lowest, mean)
         })
     });
+    if let Some(at) = timing["latest_tick_due_s"].as_f64() {
+        eprintln!("{n} vehicles: the latest tick was due at {at:.2} s");
+    }
     let _ = std::fs::remove_dir_all(&dir);
     Ok(CaseResult {
         window_s,
@@ -200,6 +207,8 @@ fn run_case(n: usize) -> Result<CaseResult, String> {
         coordinator_cpu_s: cpu_after.1 - cpu_before.1,
         ticks: timing["lateness"]["samples"].as_u64().unwrap_or(0),
         late_ticks: timing["late_ticks"].as_u64().unwrap_or(0),
+        late_p99_ms: timing["lateness"]["p99_ms"].as_f64(),
+        late_max_ms: timing["lateness"]["max_ms"].as_f64(),
         age_p50_ms: timing["state_age"]["p50_ms"].as_f64(),
         age_p99_ms: timing["state_age"]["p99_ms"].as_f64(),
         setpoint_rates,
