@@ -20,6 +20,9 @@ const STX_V2: u8 = 0xFD;
 const INCOMPAT_SIGNED: u8 = 0x01;
 /// Length of the MAVLink 2 signature trailer.
 const SIGNATURE_LEN: usize = 13;
+/// The longest MAVLink 2 frame: start byte, 9-byte header, 255-byte payload, checksum,
+/// signature. A buffer of this capacity takes any frame without growing.
+pub const MAX_FRAME_LEN: usize = 1 + 9 + 255 + 2 + SIGNATURE_LEN;
 
 /// A decoded frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -84,33 +87,64 @@ pub fn decode_datagram_with(
     bytes: &[u8],
     key: Option<&SigningKey>,
 ) -> Vec<Result<Frame, FrameError>> {
-    let mut out = Vec::new();
-    let mut at = 0;
-    while at < bytes.len() {
-        let start = bytes[at..]
+    frames(bytes, key).collect()
+}
+
+/// The frames of one datagram, decoded one by one as they are asked for (nothing is
+/// allocated), signatures checked against `key`; what [`decode_datagram_with`] collects.
+pub fn frames<'a>(bytes: &'a [u8], key: Option<&'a SigningKey>) -> Frames<'a> {
+    Frames {
+        bytes,
+        key,
+        at: 0,
+        pending: None,
+    }
+}
+
+/// The iterator of [`frames`].
+#[derive(Debug)]
+pub struct Frames<'a> {
+    bytes: &'a [u8],
+    key: Option<&'a SigningKey>,
+    at: usize,
+    /// A frame found after garbage, given out after the garbage's error.
+    pending: Option<Result<Frame, FrameError>>,
+}
+
+impl Iterator for Frames<'_> {
+    type Item = Result<Frame, FrameError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if let Some(frame) = self.pending.take() {
+            return Some(frame);
+        }
+        let bytes = self.bytes;
+        if self.at >= bytes.len() {
+            return None;
+        }
+        let start = bytes[self.at..]
             .iter()
             .position(|b| *b == STX_V1 || *b == STX_V2);
-        match start {
+        let skipped = match start {
             None => {
-                out.push(Err(FrameError::Garbage {
-                    skipped: bytes.len() - at,
-                }));
-                break;
+                let skipped = bytes.len() - self.at;
+                self.at = bytes.len();
+                return Some(Err(FrameError::Garbage { skipped }));
             }
-            Some(0) => {}
-            Some(skipped) => {
-                out.push(Err(FrameError::Garbage { skipped }));
-                at += skipped;
-            }
+            Some(skipped) => skipped,
+        };
+        self.at += skipped;
+        let (result, consumed) = decode_frame(&bytes[self.at..], self.key);
+        self.at = match consumed {
+            Some(n) => self.at + n,
+            None => bytes.len(),
+        };
+        if skipped > 0 {
+            self.pending = Some(result);
+            return Some(Err(FrameError::Garbage { skipped }));
         }
-        let (result, consumed) = decode_frame(&bytes[at..], key);
-        out.push(result);
-        match consumed {
-            Some(n) => at += n,
-            None => break,
-        }
+        Some(result)
     }
-    out
 }
 
 /// The complete frames of a datagram as raw bytes (what a `.tlog` records), skipping
@@ -266,10 +300,9 @@ impl Encoder {
 
     /// One unsigned MAVLink 2 frame.
     pub fn encode(&mut self, msg: &MavMessage) -> Vec<u8> {
-        let header = self.next_header();
-        let mut raw = MAVLinkV2MessageRaw::new();
-        raw.serialize_message(header, msg);
-        raw.raw_bytes().to_vec()
+        let mut out = Vec::new();
+        self.encode_into(msg, None, &mut out);
+        out
     }
 
     /// One MAVLink 2 frame signed with `signing`'s key and next timestamp, from link
@@ -280,17 +313,9 @@ impl Encoder {
         signing: &mut Signing,
         link_id: u8,
     ) -> Vec<u8> {
-        let header = self.next_header();
-        let mut raw = MAVLinkV2MessageRaw::new();
-        raw.serialize_message_for_signing(header, msg);
-        *raw.signature_link_id_mut() = link_id;
-        let timestamp = signing.take_timestamp().to_le_bytes();
-        raw.signature_timestamp_bytes_mut()
-            .copy_from_slice(&timestamp[..6]);
-        let mut value = [0u8; 6];
-        raw.calculate_signature(signing.key().bytes(), &mut value);
-        raw.signature_value_mut().copy_from_slice(&value);
-        raw.raw_bytes().to_vec()
+        let mut out = Vec::new();
+        self.encode_into(msg, Some((signing, link_id)), &mut out);
+        out
     }
 
     /// One frame, signed when `signing` is given.
@@ -299,10 +324,35 @@ impl Encoder {
         msg: &MavMessage,
         signing: Option<(&mut Signing, u8)>,
     ) -> Vec<u8> {
+        let mut out = Vec::new();
+        self.encode_into(msg, signing, &mut out);
+        out
+    }
+
+    /// One frame, signed when `signing` is given, appended to `out` (a buffer kept for
+    /// reuse allocates nothing).
+    pub fn encode_into(
+        &mut self,
+        msg: &MavMessage,
+        signing: Option<(&mut Signing, u8)>,
+        out: &mut Vec<u8>,
+    ) {
+        let header = self.next_header();
+        let mut raw = MAVLinkV2MessageRaw::new();
         match signing {
-            Some((signing, link_id)) => self.encode_signed(msg, signing, link_id),
-            None => self.encode(msg),
+            Some((signing, link_id)) => {
+                raw.serialize_message_for_signing(header, msg);
+                *raw.signature_link_id_mut() = link_id;
+                let timestamp = signing.take_timestamp().to_le_bytes();
+                raw.signature_timestamp_bytes_mut()
+                    .copy_from_slice(&timestamp[..6]);
+                let mut value = [0u8; 6];
+                raw.calculate_signature(signing.key().bytes(), &mut value);
+                raw.signature_value_mut().copy_from_slice(&value);
+            }
+            None => raw.serialize_message(header, msg),
         }
+        out.extend_from_slice(raw.raw_bytes());
     }
 
     fn next_header(&mut self) -> MavHeader {
