@@ -41,28 +41,30 @@ impl LinkFaults {
     }
 
     /// The delays of the copies of one datagram that survive the faults, drawn from
-    /// `rng` (empty: lost; two: duplicated). A clean link draws nothing.
-    pub fn copies(&self, rng: &mut impl Rng) -> Vec<Duration> {
-        if self.is_clean() {
-            return vec![Duration::ZERO];
-        }
-        if rng.random::<f64>() < self.loss {
-            return Vec::new();
-        }
-        let copies = if rng.random::<f64>() < self.duplicate {
-            2
-        } else {
+    /// `rng` (empty: lost; two: duplicated). A clean link draws nothing; nothing is
+    /// allocated.
+    pub fn copies(&self, rng: &mut impl Rng) -> std::iter::Take<std::array::IntoIter<Duration, 2>> {
+        let mut delays = [Duration::ZERO; 2];
+        let n = if self.is_clean() {
             1
-        };
-        (0..copies)
-            .map(|_| {
+        } else if rng.random::<f64>() < self.loss {
+            0
+        } else {
+            let copies = if rng.random::<f64>() < self.duplicate {
+                2
+            } else {
+                1
+            };
+            for delay in delays.iter_mut().take(copies) {
                 let jitter = if self.jitter.is_zero() {
                     Duration::ZERO
                 } else {
                     self.jitter.mul_f64(rng.random::<f64>())
                 };
-                self.latency + jitter
-            })
-            .collect()
+                *delay = self.latency + jitter;
+            }
+            copies
+        };
+        delays.into_iter().take(n)
     }
 }
