@@ -159,14 +159,16 @@ async fn run_fleet(
                 }
                 for slot in &mut slots {
                     let now = slot.time(now);
-                    slot.receive(now, &mut buf);
-                    if !slot.alive {
-                        continue;
+                    // The step first, then what arrived during it (taken at the next step,
+                    // as the physics would anyway): a vehicle's first frames go out
+                    // before anything it hears can choose whom it answers.
+                    if slot.alive {
+                        slot.vehicle.handle_timeout(now);
+                        slot.deliver_delayed(now);
+                        slot.flush(now);
                     }
-                    slot.vehicle.handle_timeout(now);
-                    slot.deliver_delayed(now);
-                    slot.flush(now);
-                    if publish {
+                    slot.receive(now, &mut buf);
+                    if slot.alive && publish {
                         slot.status.send_replace(slot.vehicle.status());
                     }
                 }
@@ -374,21 +376,22 @@ impl Slot {
             }
         }
         while let Some(tx) = self.vehicle.poll_transmit() {
-            let Some(link) = self.ids.iter().position(|id| *id == tx.link) else {
-                continue; // a link this vehicle does not serve
-            };
-            for copy in self.faults[link].copies(&mut self.rng) {
-                if copy.is_zero() {
-                    self.send(link, &tx.bytes);
-                } else {
-                    self.delayed.push_back(Delayed {
-                        due: now + copy,
-                        link,
-                        from: None,
-                        bytes: tx.bytes.clone(),
-                    });
+            // A link this vehicle does not serve sends nothing.
+            if let Some(link) = self.ids.iter().position(|id| *id == tx.link) {
+                for copy in self.faults[link].copies(&mut self.rng) {
+                    if copy.is_zero() {
+                        self.send(link, &tx.bytes);
+                    } else {
+                        self.delayed.push_back(Delayed {
+                            due: now + copy,
+                            link,
+                            from: None,
+                            bytes: tx.bytes.clone(),
+                        });
+                    }
                 }
             }
+            self.vehicle.recycle(tx.bytes);
         }
     }
 

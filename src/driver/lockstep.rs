@@ -194,6 +194,8 @@ impl Lockstep {
             while let Some(tx) = self.vehicles[i].poll_transmit() {
                 if tx.link == LinkId::Offboard {
                     self.send(false, i, tx.bytes);
+                } else {
+                    self.vehicles[i].recycle(tx.bytes);
                 }
             }
             // Nothing here stores keys or shows mode changes: drop the events, so that
@@ -208,7 +210,10 @@ impl Lockstep {
             observer.datagram(now, i, true, &bytes);
             match self.vehicle_reached_by(i) {
                 Some(j) => self.send(true, j, bytes),
-                None => self.unsent += 1,
+                None => {
+                    self.unsent += 1;
+                    self.swarm.recycle(i, bytes);
+                }
             }
         }
         self.deliver(now, observer);
@@ -273,15 +278,39 @@ impl Lockstep {
 
     fn send(&mut self, to_vehicle: bool, index: usize, bytes: Vec<u8>) {
         if self.is_silenced(index) {
+            self.recycle(to_vehicle, index, bytes);
             return;
         }
-        for delay in self.conditions.faults.copies(&mut self.rng) {
-            self.in_flight.push_back(InFlight {
-                due: self.now + delay,
-                to_vehicle,
-                index,
-                bytes: bytes.clone(),
-            });
+        let mut copies = self.conditions.faults.copies(&mut self.rng);
+        let mut bytes = Some(bytes);
+        while let Some(delay) = copies.next() {
+            // The last copy takes the buffer itself: a clean link copies nothing.
+            let copy = if copies.len() == 0 {
+                bytes.take()
+            } else {
+                bytes.clone()
+            };
+            if let Some(bytes) = copy {
+                self.in_flight.push_back(InFlight {
+                    due: self.now + delay,
+                    to_vehicle,
+                    index,
+                    bytes,
+                });
+            }
+        }
+        // Lost on the way: back to where it came from.
+        if let Some(bytes) = bytes {
+            self.recycle(to_vehicle, index, bytes);
+        }
+    }
+
+    /// Gives a delivered (or lost) datagram's buffer back to its sender.
+    fn recycle(&mut self, to_vehicle: bool, index: usize, bytes: Vec<u8>) {
+        if to_vehicle {
+            self.swarm.recycle(index, bytes);
+        } else if let Some(v) = self.vehicles.get_mut(index) {
+            v.recycle(bytes);
         }
     }
 
@@ -300,6 +329,7 @@ impl Lockstep {
             } else {
                 self.deliver_to_swarm(now, d.index, &d.bytes, observer);
             }
+            self.recycle(d.to_vehicle, d.index, d.bytes);
         }
     }
 }

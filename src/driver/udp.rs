@@ -179,14 +179,16 @@ pub async fn run_swarm<O: Observer>(
                 break;
             };
             observer.datagram(now(), i, true, &bytes);
-            let Some((socket, to)) = router.destination(i) else {
+            match router.destination(i) {
+                Some((socket, to)) => {
+                    if let Err(err) = sockets[socket].send_to(&bytes, to).await {
+                        tracing::warn!(vehicle = i, error = %err, "send failed");
+                    }
+                }
                 // A network vehicle not heard from yet: nowhere to send.
-                unsent[i] += 1;
-                continue;
-            };
-            if let Err(err) = sockets[socket].send_to(&bytes, to).await {
-                tracing::warn!(vehicle = i, error = %err, "send failed");
+                None => unsent[i] += 1,
             }
+            swarm.recycle(i, bytes);
         }
         observer.swarm(&swarm, now());
         if swarm.is_finished() {

@@ -12,5 +12,6 @@ pub use convert::{
     set_position_target_acceleration,
 };
 pub use ringswarm_wire::codec::{
-    Encoder, Frame, FrameError, decode_datagram, decode_datagram_with, frame_system_id, raw_frames,
+    Encoder, Frame, FrameError, decode_datagram, decode_datagram_with, frame_system_id, frames,
+    raw_frames,
 };

@@ -45,7 +45,7 @@ use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 
 use std::cmp::Reverse;
-use std::collections::{BTreeSet, BinaryHeap};
+use std::collections::{BinaryHeap, VecDeque};
 use std::fmt;
 use std::time::Duration;
 
@@ -151,10 +151,12 @@ pub struct Swarm {
     w: Vec<f64>,
     saturated_ticks: u64,
     consensus_ticks: u64,
-    next_link: usize,
-    /// Links that may have output queued, served in cyclic order from `next_link`: a
-    /// datagram costs O(log N), not a scan of every link.
-    ready: BTreeSet<usize>,
+    /// Links that may have output queued, each once, served in turn (one datagram a
+    /// turn): a datagram costs O(1), not a scan of every link, and nothing is allocated
+    /// (the queue holds at most every link once).
+    ready: VecDeque<usize>,
+    /// Whether a link is in `ready`.
+    queued: Vec<bool>,
     /// Link deadlines, earliest first: `(deadline, link)`; an entry whose deadline is not
     /// `scheduled[link]` any more is stale and skipped. A timer event visits the links
     /// that are due, not all of them.
@@ -238,8 +240,8 @@ impl Swarm {
             states: vec![None; n],
             saturated_ticks: 0,
             consensus_ticks: 0,
-            next_link: 0,
-            ready: BTreeSet::new(),
+            ready: VecDeque::with_capacity(n),
+            queued: vec![false; n],
             timers: (0..n).map(|i| Reverse((SimTime::ZERO, i))).collect(),
             scheduled: vec![SimTime::ZERO; n],
             log: EventLog::default(),
@@ -419,24 +421,28 @@ impl Swarm {
         !self.ready.is_empty()
     }
 
+    /// Gives a sent datagram's buffer back to link `i` (any link will do: the buffer is
+    /// only memory) so that the next frame reuses it.
+    pub fn recycle(&mut self, i: usize, bytes: Vec<u8>) {
+        let n = self.links.len();
+        if n > 0 {
+            self.links[i % n].recycle(bytes);
+        }
+    }
+
     /// The next datagram and the vehicle it is for (round robin over the links).
     pub fn poll_transmit(&mut self) -> Option<(usize, Vec<u8>)> {
-        let n = self.links.len();
         loop {
-            let i = self
-                .ready
-                .range(self.next_link..)
-                .next()
-                .or_else(|| self.ready.iter().next())
-                .copied()?;
+            let i = self.ready.pop_front()?;
             let Some(bytes) = self.links[i].poll_transmit() else {
-                self.ready.remove(&i);
+                self.queued[i] = false;
                 continue;
             };
-            if !self.links[i].has_output() {
-                self.ready.remove(&i);
+            if self.links[i].has_output() {
+                self.ready.push_back(i);
+            } else {
+                self.queued[i] = false;
             }
-            self.next_link = (i + 1) % n;
             return Some((i, bytes));
         }
     }
@@ -493,8 +499,9 @@ impl Swarm {
         let Some(link) = self.links.get(i) else {
             return;
         };
-        if link.has_output() {
-            self.ready.insert(i);
+        if link.has_output() && !self.queued[i] {
+            self.queued[i] = true;
+            self.ready.push_back(i);
         }
         let t = link.poll_timeout();
         if t != self.scheduled[i] {

@@ -11,7 +11,7 @@ use ringswarm_wire::time::SimTime;
 use super::telemetry::{OriginVerdict, PositionVerdict, TelemetryGate};
 use super::{LinkConfig, LinkEvent, Phase, Setpoint, VehicleState};
 use crate::link::{
-    AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, decode_datagram_with, gcs_heartbeat, inbound,
+    AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, frames, gcs_heartbeat, inbound,
     set_attitude_target, set_position_target_acceleration,
 };
 
@@ -19,6 +19,9 @@ mod commands;
 mod signer;
 
 use signer::Signer;
+
+/// Buffers kept for reuse by [`VehicleLink::recycle`] (more than a tick's worth).
+const SPARE_BUFFERS: usize = 32;
 
 /// A command waiting for its acknowledgement.
 #[derive(Debug, Clone, Copy)]
@@ -44,6 +47,8 @@ pub struct VehicleLink {
     encoder: Encoder,
     signer: Option<Signer>,
     outbox: VecDeque<Vec<u8>>,
+    /// Sent datagrams' buffers given back by the driver.
+    spare: Vec<Vec<u8>>,
     events: VecDeque<LinkEvent>,
     ignored_frames: u64,
     wrong_system: Option<u8>,
@@ -79,6 +84,7 @@ impl VehicleLink {
             pending: None,
             encoder,
             outbox: VecDeque::new(),
+            spare: Vec::new(),
             events: VecDeque::new(),
             ignored_frames: 0,
             wrong_system: None,
@@ -115,11 +121,24 @@ impl VehicleLink {
 
     /// Encodes `msg` (signed when the link signs) and queues it.
     fn queue(&mut self, msg: &MavMessage) {
-        let bytes = match self.signer.as_mut() {
-            Some(signer) => signer.encode(&mut self.encoder, msg),
-            None => self.encoder.encode(msg),
-        };
+        let mut bytes = self
+            .spare
+            .pop()
+            .unwrap_or_else(|| Vec::with_capacity(ringswarm_wire::codec::MAX_FRAME_LEN));
+        bytes.clear();
+        match self.signer.as_mut() {
+            Some(signer) => signer.encode_into(&mut self.encoder, msg, &mut bytes),
+            None => self.encoder.encode_into(msg, None, &mut bytes),
+        }
         self.outbox.push_back(bytes);
+    }
+
+    /// Gives a sent datagram's buffer back for the next one: a driver that does so makes
+    /// the link allocate nothing per frame in steady state.
+    pub fn recycle(&mut self, bytes: Vec<u8>) {
+        if self.spare.len() < SPARE_BUFFERS {
+            self.spare.push(bytes);
+        }
     }
 
     /// Position reports and origins refused by the telemetry gate.
@@ -288,7 +307,7 @@ impl VehicleLink {
         self.clock(now);
         let mut taken = false;
         let key = self.signer.as_ref().map(|s| s.key().clone());
-        for frame in decode_datagram_with(bytes, key.as_ref()) {
+        for frame in frames(bytes, key.as_ref()) {
             let Ok(frame) = frame else {
                 self.ignored_frames += 1;
                 continue;

@@ -16,7 +16,7 @@ use mavlink::dialects::common::{
 use super::commands::Command;
 use super::offboard::{self, AttitudeTarget, OffboardTarget, PositionTarget, Refusal};
 use super::{LinkId, Vehicle};
-use crate::codec::decode_datagram_with;
+use crate::codec::frames;
 use crate::time::SimTime;
 
 impl Vehicle {
@@ -29,7 +29,7 @@ impl Vehicle {
     pub fn handle_datagram(&mut self, now: SimTime, link: LinkId, bytes: &[u8]) -> bool {
         let key = self.signing.as_ref().map(|s| s.key().clone());
         let mut vouched = false;
-        for frame in decode_datagram_with(bytes, key.as_ref()) {
+        for frame in frames(bytes, key.as_ref()) {
             match frame {
                 Ok(frame) => {
                     if !self.admit(&frame) {

@@ -77,6 +77,9 @@ pub enum LinkId {
     Gcs = 1,
 }
 
+/// Buffers kept for reuse by [`Vehicle::recycle`] (more than a step's worth of frames).
+const SPARE_BUFFERS: usize = 32;
+
 /// Bytes to send on a link.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Transmit {
@@ -218,6 +221,8 @@ pub struct Vehicle {
     /// MAVLink 2 signing, once a key is set.
     signing: Option<ringswarm_wire::signing::Signing>,
     outbox: VecDeque<Transmit>,
+    /// Sent datagrams' buffers given back by the driver ([`Vehicle::recycle`]).
+    spare: Vec<Vec<u8>>,
     events: VecDeque<VehicleEvent>,
     last_step: SimTime,
     boot_at: SimTime,
@@ -317,6 +322,7 @@ impl Vehicle {
                 .as_ref()
                 .map(|s| ringswarm_wire::signing::Signing::new(s.key.clone(), s.timestamp)),
             outbox: VecDeque::new(),
+            spare: Vec::new(),
             events: VecDeque::new(),
             last_step: SimTime::ZERO,
             boot_at: SimTime::ZERO,
@@ -365,6 +371,14 @@ impl Vehicle {
     /// The next frame to send, if any.
     pub fn poll_transmit(&mut self) -> Option<Transmit> {
         self.outbox.pop_front()
+    }
+
+    /// Gives a sent frame's buffer back for the next one: a driver that does so makes
+    /// the vehicle allocate nothing per frame in steady state.
+    pub fn recycle(&mut self, bytes: Vec<u8>) {
+        if self.spare.len() < SPARE_BUFFERS {
+            self.spare.push(bytes);
+        }
     }
 
     /// The next event, if any.

@@ -86,9 +86,14 @@ impl Vehicle {
             .signing
             .as_mut()
             .map(|s| (s, Self::signing_link_id(link)));
-        let bytes = self.links[link as usize]
+        let mut bytes = self
+            .spare
+            .pop()
+            .unwrap_or_else(|| Vec::with_capacity(crate::codec::MAX_FRAME_LEN));
+        bytes.clear();
+        self.links[link as usize]
             .encoder
-            .encode_maybe_signed(msg, signing);
+            .encode_into(msg, signing, &mut bytes);
         self.outbox.push_back(Transmit { link, bytes });
     }
 

@@ -50,9 +50,14 @@ impl Signer {
             .advance_to(self.timestamp_at_zero + now.as_micros() / 10);
     }
 
-    /// `msg`, signed.
-    pub(super) fn encode(&mut self, encoder: &mut Encoder, msg: &MavMessage) -> Vec<u8> {
-        encoder.encode_signed(msg, &mut self.signing, self.link_id)
+    /// `msg`, signed, appended to `out`.
+    pub(super) fn encode_into(
+        &mut self,
+        encoder: &mut Encoder,
+        msg: &MavMessage,
+        out: &mut Vec<u8>,
+    ) {
+        encoder.encode_into(msg, Some((&mut self.signing, self.link_id)), out);
     }
 
     /// Whether a frame from the vehicle's address (from `system_id` or not) is taken: no
