@@ -417,11 +417,11 @@ fn a_vehicle_never_heard_makes_demo_exit_3_naming_it_and_warnings_show_without_r
     );
     let events = std::fs::read_to_string(dir.join("run/events.csv")).unwrap();
     assert!(
-        events.starts_with("t_s,system_id,level,event\n"),
+        events.starts_with("t_s,system_id,network,level,event\n"),
         "{events}"
     );
     assert!(
-        events.contains("3.0000,,warning,\"handshake not complete after 3.0 s: vehicle 4 not flying (never heard)"),
+        events.contains("3.0000,,,warning,\"handshake not complete after 3.0 s: vehicle 4 not flying (never heard)"),
         "{events}"
     );
     let summary: serde_json::Value =

@@ -84,3 +84,39 @@ fn two_networks_with_overlapping_ids_fly_the_own_socket_flight_bit_for_bit() {
         networked.unsent()
     );
 }
+
+#[test]
+fn events_name_the_network_of_a_vehicle_whose_id_repeats() {
+    let networked = run(&on_two_networks(), 3);
+    let own = run(&paper_sim1_text(), 3);
+    // Every vehicle event of the network flight carries its network: system id 1 on "a"
+    // is vehicle 1, on "b" vehicle 4.
+    let vehicle_events: Vec<_> = networked
+        .swarm()
+        .events()
+        .iter()
+        .filter(|e| e.system_id.is_some())
+        .collect();
+    assert!(!vehicle_events.is_empty());
+    for e in &vehicle_events {
+        assert!(matches!(e.network.as_deref(), Some("a" | "b")), "{e:?}");
+    }
+    for net in ["a", "b"] {
+        assert!(
+            vehicle_events
+                .iter()
+                .any(|e| e.system_id == Some(1) && e.network.as_deref() == Some(net)),
+            "no event of vehicle 1 on {net}"
+        );
+    }
+    // On their own sockets the vehicles have no network; the swarm's events never do.
+    assert!(own.swarm().events().iter().all(|e| e.network.is_none()));
+    assert!(
+        networked
+            .swarm()
+            .events()
+            .iter()
+            .filter(|e| e.system_id.is_none())
+            .all(|e| e.network.is_none())
+    );
+}

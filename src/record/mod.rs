@@ -4,8 +4,9 @@
 //! <dir>/traffic.tlog        every frame sent and received: 8-byte big-endian Unix time (µs)
 //!                           + the raw MAVLink frame (what MAVProxy and QGC write)
 //! <dir>/vehicle-<id>.csv    one row per control tick: state, attitude, command, setpoint
-//! <dir>/events.csv          every event with its time: t_s, system_id (empty for the
-//!                           swarm), level (warning or info), event (quoted text)
+//! <dir>/events.csv          every event with its time: t_s, system_id and network (empty
+//!                           for the swarm; network empty on own sockets), level (warning
+//!                           or info), event (quoted text)
 //! <dir>/summary.json        the flight's figures (see [`metrics::Summary`])
 //! ```
 //!
@@ -78,7 +79,7 @@ impl Recorder {
             files.push((dir.join(format!("vehicle-{}.csv", cfg.file_label())), 8192));
         }
         let mut sinks = Sinks::create(files)?;
-        writeln!(sinks.buffer(EVENTS), "t_s,system_id,level,event")?;
+        writeln!(sinks.buffer(EVENTS), "t_s,system_id,network,level,event")?;
         for i in 0..swarm.links().len() {
             writeln!(sinks.buffer(FIRST_CSV + i), "{CSV_HEADER}")?;
         }
@@ -151,9 +152,10 @@ impl Recorder {
         for e in swarm.events().iter().skip(self.events_written) {
             writeln!(
                 w,
-                "{:.4},{},{},\"{}\"",
+                "{:.4},{},{},{},\"{}\"",
                 e.t.as_secs_f64(),
                 e.system_id.map_or(String::new(), |id| id.to_string()),
+                e.network.as_deref().unwrap_or(""),
                 if e.warning { "warning" } else { "info" },
                 e.text.replace('"', "\"\"")
             )?;

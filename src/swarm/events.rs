@@ -5,6 +5,8 @@
 
 use ringswarm_wire::time::SimTime;
 
+use crate::vehicle::LinkConfig;
+
 /// Events kept in memory; later ones are counted, logged, and not kept.
 pub const MAX_KEPT_EVENTS: usize = 100_000;
 
@@ -15,6 +17,9 @@ pub struct SwarmEvent {
     pub t: SimTime,
     /// The vehicle's system id, or `None` for the swarm as a whole.
     pub system_id: Option<u8>,
+    /// The vehicle's MAVLink network (`None` for a vehicle on its own socket, and for the
+    /// swarm): system ids repeat from one network to the next.
+    pub network: Option<String>,
     /// Whether an operator must see it.
     pub warning: bool,
     /// What happened.
@@ -29,19 +34,46 @@ pub(super) struct EventLog {
 }
 
 impl EventLog {
-    /// Logs and keeps an event.
-    pub(super) fn push(&mut self, t: SimTime, system_id: Option<u8>, warning: bool, text: String) {
+    /// Logs and keeps an event of the swarm as a whole.
+    pub(super) fn push(&mut self, t: SimTime, warning: bool, text: String) {
+        self.keep(t, None, None, warning, text);
+    }
+
+    /// Logs and keeps an event of the vehicle on `link`.
+    pub(super) fn push_vehicle(
+        &mut self,
+        t: SimTime,
+        link: &LinkConfig,
+        warning: bool,
+        text: String,
+    ) {
+        self.keep(t, Some(link.system_id), link.network.clone(), warning, text);
+    }
+
+    fn keep(
+        &mut self,
+        t: SimTime,
+        system_id: Option<u8>,
+        network: Option<String>,
+        warning: bool,
+        text: String,
+    ) {
         let secs = t.as_secs_f64();
-        match (warning, system_id) {
-            (true, Some(id)) => tracing::warn!("[{secs:.3} s] vehicle {id}: {text}"),
-            (true, None) => tracing::warn!("[{secs:.3} s] swarm: {text}"),
-            (false, Some(id)) => tracing::info!("[{secs:.3} s] vehicle {id}: {text}"),
-            (false, None) => tracing::info!("[{secs:.3} s] swarm: {text}"),
+        let who = match (system_id, &network) {
+            (Some(id), Some(net)) => format!("vehicle {id} on {net}"),
+            (Some(id), None) => format!("vehicle {id}"),
+            (None, _) => "swarm".to_owned(),
+        };
+        if warning {
+            tracing::warn!("[{secs:.3} s] {who}: {text}");
+        } else {
+            tracing::info!("[{secs:.3} s] {who}: {text}");
         }
         if self.kept.len() < MAX_KEPT_EVENTS {
             self.kept.push(SwarmEvent {
                 t,
                 system_id,
+                network,
                 warning,
                 text,
             });

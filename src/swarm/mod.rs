@@ -335,7 +335,7 @@ impl Swarm {
     pub fn land(&mut self, now: SimTime) {
         if !matches!(self.phase, SwarmPhase::Landing(_)) {
             self.log
-                .push(now, None, false, "landing every vehicle".to_owned());
+                .push(now, false, "landing every vehicle".to_owned());
             self.phase = SwarmPhase::Landing(now);
         }
         for link in &mut self.links {
@@ -516,9 +516,12 @@ impl Swarm {
             return;
         };
         while let Some(event) = link.poll_event() {
-            let id = self.setup.links[i].system_id;
-            self.log
-                .push(now, Some(id), event.is_warning(), event.to_string());
+            self.log.push_vehicle(
+                now,
+                &self.setup.links[i],
+                event.is_warning(),
+                event.to_string(),
+            );
         }
     }
 }

@@ -65,7 +65,6 @@ impl Swarm {
                 } else if now - since >= PLAN_ALTITUDE_WAIT {
                     self.log.push(
                         now,
-                        None,
                         true,
                         format!(
                             "not level at {} m after {} s: planning anyway",
@@ -98,9 +97,9 @@ impl Swarm {
                     self.start_consensus(now);
                 } else if now - since >= timeout {
                     let at = self.states[agent].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
-                    self.log.push(
+                    self.log.push_vehicle(
                         now,
-                        Some(self.setup.links[agent].system_id),
+                        &self.setup.links[agent],
                         true,
                         format!(
                             "re-target stage timed out after {:.1} s at ({:.2}, {:.2}) m/s, planned ({:.2}, {:.2}) m/s: consensus from the velocities now",
@@ -126,7 +125,6 @@ impl Swarm {
                     LossPolicy::Hold => {
                         self.log.push(
                             now,
-                            None,
                             true,
                             "a vehicle is lost: the others brake and hold".to_owned(),
                         );
@@ -136,7 +134,6 @@ impl Swarm {
                     LossPolicy::Land => {
                         self.log.push(
                             now,
-                            None,
                             true,
                             "a vehicle is lost: landing (on_link_loss = land)".to_owned(),
                         );
@@ -178,7 +175,7 @@ impl Swarm {
             not_flying,
             after: now - SimTime::ZERO,
         };
-        self.log.push(now, None, true, failure.to_string());
+        self.log.push(now, true, failure.to_string());
         self.failure = Some(failure);
         self.land(now);
         true
@@ -202,7 +199,7 @@ impl Swarm {
             ),
             None => "consensus started".to_owned(),
         };
-        self.log.push(now, None, false, text);
+        self.log.push(now, false, text);
     }
 
     fn end(&mut self, now: SimTime) {
@@ -210,7 +207,7 @@ impl Swarm {
             EndAction::Land => self.land(now),
             EndAction::Hold => {
                 self.log
-                    .push(now, None, false, "duration over: holding".to_owned());
+                    .push(now, false, "duration over: holding".to_owned());
                 self.hold_points.iter_mut().for_each(|p| *p = None);
                 self.phase = SwarmPhase::Ended(now);
             }

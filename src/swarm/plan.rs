@@ -37,7 +37,6 @@ impl Swarm {
             Err(reason) => {
                 self.log.push(
                     now,
-                    None,
                     true,
                     format!("target velocity not used ({reason}): flying the configured k"),
                 );
@@ -52,7 +51,7 @@ impl Swarm {
                 ),
                 None => format!("plan: k = {k:.6}, no re-target needed"),
             };
-            self.log.push(now, None, false, text);
+            self.log.push(now, false, text);
         }
         let retargeting = matches!(
             decision,

@@ -117,9 +117,9 @@ impl Swarm {
             }
             if !trusted && self.flown[i].trusted() {
                 let (hover, std) = self.flown[i].hover_estimate();
-                self.log.push(
+                self.log.push_vehicle(
                     now,
-                    Some(self.setup.links[i].system_id),
+                    &self.setup.links[i],
                     true,
                     format!(
                         "hover thrust estimated at {hover:.3} ± {std:.3}, not the configured {:.3}: flying the estimate",
@@ -168,12 +168,8 @@ impl Swarm {
             if !self.isolated[i] {
                 self.isolated[i] = true;
                 let reason = format!("{what} is not a finite number: isolated");
-                self.log.push(
-                    now,
-                    Some(self.setup.links[i].system_id),
-                    true,
-                    reason.clone(),
-                );
+                self.log
+                    .push_vehicle(now, &self.setup.links[i], true, reason.clone());
                 self.links[i].hold_on_own(now, &reason);
             }
         }
