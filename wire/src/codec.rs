@@ -318,17 +318,6 @@ impl Encoder {
         out
     }
 
-    /// One frame, signed when `signing` is given.
-    pub fn encode_maybe_signed(
-        &mut self,
-        msg: &MavMessage,
-        signing: Option<(&mut Signing, u8)>,
-    ) -> Vec<u8> {
-        let mut out = Vec::new();
-        self.encode_into(msg, signing, &mut out);
-        out
-    }
-
     /// One frame, signed when `signing` is given, appended to `out` (a buffer kept for
     /// reuse allocates nothing).
     pub fn encode_into(
