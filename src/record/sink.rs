@@ -109,17 +109,20 @@ impl Sinks {
         }
     }
 
-    /// Hands over what is left, waits for the writer and flushes every file.
+    /// Hands over what is left (waiting for room if need be), waits for the writer and
+    /// flushes every file.
     ///
     /// # Errors
     /// The writer's first error.
     pub fn finish(mut self) -> io::Result<()> {
-        for i in 0..self.buffers.len() {
-            if !self.buffers[i].is_empty() {
-                self.hand_over(i)?;
+        // The flight is over: waiting for the disk is fine now.
+        if let Some(tx) = self.tx.take() {
+            for (i, buf) in self.buffers.drain(..).enumerate() {
+                if !buf.is_empty() && tx.send((i, buf)).is_err() {
+                    break; // the writer stopped: its error is below
+                }
             }
         }
-        self.tx = None;
         match self.writer.take().map(JoinHandle::join) {
             Some(Ok(result)) => result,
             Some(Err(_)) => Err(io::Error::other("the run-directory writer panicked")),
@@ -162,7 +165,7 @@ mod tests {
 
     #[cfg(target_os = "linux")]
     #[test]
-    fn a_write_error_is_reported_by_a_later_hand_over_and_by_finish() {
+    fn a_write_error_is_reported_by_a_later_hand_over() {
         // /dev/full takes every open and fails every write with "no space".
         let mut sinks = Sinks::create(vec![("/dev/full".into(), 4)]).unwrap();
         let mut failed = None;
@@ -175,6 +178,18 @@ mod tests {
             std::thread::yield_now();
         }
         let err = failed.expect("the writer's error came back");
+        assert_eq!(err.kind(), io::ErrorKind::StorageFull, "{err}");
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_write_error_of_the_last_chunk_is_reported_by_finish() {
+        let mut sinks = Sinks::create(vec![("/dev/full".into(), 1 << 20)]).unwrap();
+        sinks
+            .buffer(0)
+            .extend_from_slice(b"never handed over before finish");
+        sinks.appended(0).unwrap();
+        let err = sinks.finish().unwrap_err();
         assert_eq!(err.kind(), io::ErrorKind::StorageFull, "{err}");
     }
 }
