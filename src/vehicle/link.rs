@@ -6,10 +6,12 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use mavlink::dialects::common::{MavCmd, MavMessage};
+use ringswarm_wire::codec::FramePool;
 use ringswarm_wire::time::SimTime;
 
 use super::telemetry::{OriginVerdict, PositionVerdict, TelemetryGate};
 use super::{LinkConfig, LinkEvent, Phase, Setpoint, VehicleState};
+
 use crate::link::{
     AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, frames, gcs_heartbeat, inbound,
     set_attitude_target, set_position_target_acceleration,
@@ -19,9 +21,6 @@ mod commands;
 mod signer;
 
 use signer::Signer;
-
-/// Buffers kept for reuse by [`VehicleLink::recycle`] (more than a tick's worth).
-const SPARE_BUFFERS: usize = 32;
 
 /// A command waiting for its acknowledgement.
 #[derive(Debug, Clone, Copy)]
@@ -48,7 +47,7 @@ pub struct VehicleLink {
     signer: Option<Signer>,
     outbox: VecDeque<Vec<u8>>,
     /// Sent datagrams' buffers given back by the driver.
-    spare: Vec<Vec<u8>>,
+    spare: FramePool,
     events: VecDeque<LinkEvent>,
     ignored_frames: u64,
     wrong_system: Option<u8>,
@@ -84,7 +83,7 @@ impl VehicleLink {
             pending: None,
             encoder,
             outbox: VecDeque::new(),
-            spare: Vec::new(),
+            spare: FramePool::default(),
             events: VecDeque::new(),
             ignored_frames: 0,
             wrong_system: None,
@@ -121,11 +120,7 @@ impl VehicleLink {
 
     /// Encodes `msg` (signed when the link signs) and queues it.
     fn queue(&mut self, msg: &MavMessage) {
-        let mut bytes = self
-            .spare
-            .pop()
-            .unwrap_or_else(|| Vec::with_capacity(ringswarm_wire::codec::MAX_FRAME_LEN));
-        bytes.clear();
+        let mut bytes = self.spare.take();
         match self.signer.as_mut() {
             Some(signer) => signer.encode_into(&mut self.encoder, msg, &mut bytes),
             None => self.encoder.encode_into(msg, None, &mut bytes),
@@ -136,9 +131,7 @@ impl VehicleLink {
     /// Gives a sent datagram's buffer back for the next one: a driver that does so makes
     /// the link allocate nothing per frame in steady state.
     pub fn recycle(&mut self, bytes: Vec<u8>) {
-        if self.spare.len() < SPARE_BUFFERS {
-            self.spare.push(bytes);
-        }
+        self.spare.give(bytes);
     }
 
     /// Position reports and origins refused by the telemetry gate.

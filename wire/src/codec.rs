@@ -280,6 +280,36 @@ fn trailer(frame: &[u8], key: Option<&SigningKey>) -> Trailer {
     }
 }
 
+/// Buffers of sent frames kept for the next ones: whoever encodes takes a buffer here and
+/// its driver gives it back once sent, so that steady traffic allocates nothing. At most
+/// [`FramePool::KEPT`] are kept.
+#[derive(Debug, Clone, Default)]
+pub struct FramePool {
+    spare: Vec<Vec<u8>>,
+}
+
+impl FramePool {
+    /// Buffers kept (more than a step's or a tick's worth of frames).
+    pub const KEPT: usize = 32;
+
+    /// An empty buffer that takes any frame without growing.
+    pub fn take(&mut self) -> Vec<u8> {
+        let mut buf = self
+            .spare
+            .pop()
+            .unwrap_or_else(|| Vec::with_capacity(MAX_FRAME_LEN));
+        buf.clear();
+        buf
+    }
+
+    /// A buffer back for reuse.
+    pub fn give(&mut self, buf: Vec<u8>) {
+        if self.spare.len() < Self::KEPT {
+            self.spare.push(buf);
+        }
+    }
+}
+
 /// Encodes messages from one system and component as MAVLink 2, counting sequence numbers.
 #[derive(Debug, Clone)]
 pub struct Encoder {
@@ -358,6 +388,23 @@ impl Encoder {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+
+    #[test]
+    fn the_frame_pool_hands_out_empty_buffers_that_fit_any_frame_and_keeps_a_few() {
+        let mut pool = FramePool::default();
+        let mut buf = pool.take();
+        assert!(buf.is_empty() && buf.capacity() >= MAX_FRAME_LEN);
+        buf.extend_from_slice(b"a sent frame");
+        let at = buf.as_ptr();
+        pool.give(buf);
+        let again = pool.take();
+        assert!(again.is_empty());
+        assert_eq!(again.as_ptr(), at, "the same buffer came back");
+        for _ in 0..FramePool::KEPT + 5 {
+            pool.give(Vec::new());
+        }
+        assert_eq!(pool.spare.len(), FramePool::KEPT);
+    }
     use mavlink::dialects::common::{
         COMMAND_LONG_DATA, HEARTBEAT_DATA, MavAutopilot, MavCmd, MavModeFlag, MavState, MavType,
     };

@@ -77,9 +77,6 @@ pub enum LinkId {
     Gcs = 1,
 }
 
-/// Buffers kept for reuse by [`Vehicle::recycle`] (more than a step's worth of frames).
-const SPARE_BUFFERS: usize = 32;
-
 /// Bytes to send on a link.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Transmit {
@@ -222,7 +219,7 @@ pub struct Vehicle {
     signing: Option<ringswarm_wire::signing::Signing>,
     outbox: VecDeque<Transmit>,
     /// Sent datagrams' buffers given back by the driver ([`Vehicle::recycle`]).
-    spare: Vec<Vec<u8>>,
+    spare: crate::codec::FramePool,
     events: VecDeque<VehicleEvent>,
     last_step: SimTime,
     boot_at: SimTime,
@@ -322,7 +319,7 @@ impl Vehicle {
                 .as_ref()
                 .map(|s| ringswarm_wire::signing::Signing::new(s.key.clone(), s.timestamp)),
             outbox: VecDeque::new(),
-            spare: Vec::new(),
+            spare: crate::codec::FramePool::default(),
             events: VecDeque::new(),
             last_step: SimTime::ZERO,
             boot_at: SimTime::ZERO,
@@ -376,9 +373,7 @@ impl Vehicle {
     /// Gives a sent frame's buffer back for the next one: a driver that does so makes
     /// the vehicle allocate nothing per frame in steady state.
     pub fn recycle(&mut self, bytes: Vec<u8>) {
-        if self.spare.len() < SPARE_BUFFERS {
-            self.spare.push(bytes);
-        }
+        self.spare.give(bytes);
     }
 
     /// The next event, if any.
@@ -567,11 +562,9 @@ impl Vehicle {
         let hover = p.mass_kg * GRAVITY_MPS2;
         let hover_current_a = 7.5 * p.mass_kg;
         self.battery.current_a = if self.armed {
-            {
-                // (thrust / hover)^1.5, without powf at 1 kHz.
-                let r = (thrust / hover).max(0.0);
-                0.5 + hover_current_a * r * r.sqrt()
-            }
+            // (thrust / hover)^1.5, without powf at 1 kHz.
+            let r = (thrust / hover).max(0.0);
+            0.5 + hover_current_a * r * r.sqrt()
         } else {
             0.3
         };

@@ -86,11 +86,7 @@ impl Vehicle {
             .signing
             .as_mut()
             .map(|s| (s, Self::signing_link_id(link)));
-        let mut bytes = self
-            .spare
-            .pop()
-            .unwrap_or_else(|| Vec::with_capacity(crate::codec::MAX_FRAME_LEN));
-        bytes.clear();
+        let mut bytes = self.spare.take();
         self.links[link as usize]
             .encoder
             .encode_into(msg, signing, &mut bytes);
