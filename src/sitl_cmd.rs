@@ -426,23 +426,24 @@ fn fleet_line(
         taken.push((s.at.as_secs_f64(), s.counters.setpoints));
     }
     let modes: Vec<String> = modes.iter().map(|(m, n)| format!("{m} {n}")).collect();
-    let rates = if tally.taken.len() == taken.len() {
-        // Each vehicle's count over its own clock between its two snapshots.
-        let per: Vec<f64> = taken
+    // Each vehicle's count over its own clock between its two snapshots (none on the
+    // first line).
+    let per: Vec<f64> = if tally.taken.len() == taken.len() {
+        taken
             .iter()
             .zip(&tally.taken)
             .filter(|((t1, _), (t0, _))| t1 > t0)
             .map(|((t1, n1), (t0, n0))| n1.saturating_sub(*n0) as f64 / (t1 - t0))
-            .collect();
-        let low = per.iter().copied().fold(f64::INFINITY, f64::min);
-        let mean = per.iter().sum::<f64>() / per.len().max(1) as f64;
-        if per.is_empty() {
-            String::new()
-        } else {
-            format!("  setpoints {low:.1} Hz lowest, {mean:.1} Hz mean")
-        }
+            .collect()
     } else {
+        Vec::new()
+    };
+    let rates = if per.is_empty() {
         String::new()
+    } else {
+        let low = per.iter().copied().fold(f64::INFINITY, f64::min);
+        let mean = per.iter().sum::<f64>() / per.len() as f64;
+        format!("  setpoints {low:.1} Hz lowest, {mean:.1} Hz mean")
     };
     *tally = SetpointTally { taken };
     format!(
