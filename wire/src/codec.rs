@@ -7,8 +7,9 @@
 //! that the caller can count them, and decoding goes on after a bad frame when its length
 //! is known.
 
+use crc::{CRC_16_MCRF4XX, Crc, Table};
 use mavlink::dialects::common::MavMessage;
-use mavlink::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message, calculate_crc};
+use mavlink::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message};
 
 use crate::signing::{Signing, SigningKey, Trailer};
 
@@ -20,9 +21,26 @@ const STX_V2: u8 = 0xFD;
 const INCOMPAT_SIGNED: u8 = 0x01;
 /// Length of the MAVLink 2 signature trailer.
 const SIGNATURE_LEN: usize = 13;
+/// Length of the MAVLink 2 start byte and header.
+const V2_HEADER_LEN: usize = 10;
+/// The longest MAVLink payload.
+const MAX_PAYLOAD_LEN: usize = 255;
+
+/// MAVLink's checksum, CRC-16/MCRF4XX (X.25 without the final inversion), sixteen table
+/// slices at a time: each frame is checksummed once when it is sent and once when it is read.
+const X25: Crc<u16, Table<16>> = Crc::<u16, Table<16>>::new(&CRC_16_MCRF4XX);
+
+/// The checksum of a frame's bytes after the start byte, closed with the message's
+/// `extra_crc` seed byte.
+fn checksum(bytes: &[u8], extra_crc: u8) -> u16 {
+    let mut digest = X25.digest();
+    digest.update(bytes);
+    digest.update(&[extra_crc]);
+    digest.finalize()
+}
 /// The longest MAVLink 2 frame: start byte, 9-byte header, 255-byte payload, checksum,
 /// signature. A buffer of this capacity takes any frame without growing.
-pub const MAX_FRAME_LEN: usize = 1 + 9 + 255 + 2 + SIGNATURE_LEN;
+pub const MAX_FRAME_LEN: usize = V2_HEADER_LEN + MAX_PAYLOAD_LEN + 2 + SIGNATURE_LEN;
 
 /// A decoded frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -236,7 +254,7 @@ fn decode_frame(
     if MavMessage::default_message_from_id(msgid).is_none() {
         return (Err(FrameError::UnknownMessage { msgid }), Some(total));
     }
-    if calculate_crc(&bytes[1..crc_at], MavMessage::extra_crc(msgid)) != received_crc {
+    if checksum(&bytes[1..crc_at], MavMessage::extra_crc(msgid)) != received_crc {
         return (Err(FrameError::BadCrc { msgid }), Some(total));
     }
     let version = if v2 {
@@ -357,20 +375,19 @@ impl Encoder {
         out: &mut Vec<u8>,
     ) {
         let header = self.next_header();
+        let Some((signing, link_id)) = signing else {
+            encode_unsigned(header, msg, out);
+            return;
+        };
         let mut raw = MAVLinkV2MessageRaw::new();
-        match signing {
-            Some((signing, link_id)) => {
-                raw.serialize_message_for_signing(header, msg);
-                *raw.signature_link_id_mut() = link_id;
-                let timestamp = signing.take_timestamp().to_le_bytes();
-                raw.signature_timestamp_bytes_mut()
-                    .copy_from_slice(&timestamp[..6]);
-                let mut value = [0u8; 6];
-                raw.calculate_signature(signing.key().bytes(), &mut value);
-                raw.signature_value_mut().copy_from_slice(&value);
-            }
-            None => raw.serialize_message(header, msg),
-        }
+        raw.serialize_message_for_signing(header, msg);
+        *raw.signature_link_id_mut() = link_id;
+        let timestamp = signing.take_timestamp().to_le_bytes();
+        raw.signature_timestamp_bytes_mut()
+            .copy_from_slice(&timestamp[..6]);
+        let mut value = [0u8; 6];
+        raw.calculate_signature(signing.key().bytes(), &mut value);
+        raw.signature_value_mut().copy_from_slice(&value);
         out.extend_from_slice(raw.raw_bytes());
     }
 
@@ -383,6 +400,33 @@ impl Encoder {
         self.sequence = self.sequence.wrapping_add(1);
         header
     }
+}
+
+/// Appends an unsigned MAVLink 2 frame: the payload serialised in place after the header
+/// (trailing zeros cut, as MAVLink 2 requires), then the checksum.
+fn encode_unsigned(header: MavHeader, msg: &MavMessage, out: &mut Vec<u8>) {
+    let start = out.len();
+    out.resize(start + V2_HEADER_LEN + MAX_PAYLOAD_LEN, 0);
+    let payload_len = msg.ser(MavlinkVersion::V2, &mut out[start + V2_HEADER_LEN..]);
+    let msgid = msg.message_id();
+    let id = msgid.to_le_bytes();
+    out[start..start + V2_HEADER_LEN].copy_from_slice(&[
+        STX_V2,
+        // A payload is at most 255 bytes: the generated serialisers write into 255.
+        payload_len as u8,
+        0, // incompatibility flags: not signed
+        0, // compatibility flags
+        header.sequence,
+        // The encoder's system id is a u8.
+        header.system_id as u8,
+        header.component_id,
+        id[0],
+        id[1],
+        id[2],
+    ]);
+    out.truncate(start + V2_HEADER_LEN + payload_len);
+    let crc = checksum(&out[start + 1..], MavMessage::extra_crc(msgid));
+    out.extend_from_slice(&crc.to_le_bytes());
 }
 
 #[cfg(test)]
@@ -454,8 +498,56 @@ pub(crate) mod tests {
         let payload = [0x00, 0x00, 0x06, 0x00, 0x02, 0x0C, 0x01, 0x03, 0x03];
         assert_eq!(&bytes[..10], &[0xFD, 9, 0, 0, 0, 1, 1, 0, 0, 0]);
         assert_eq!(&bytes[10..19], &payload);
-        let crc = calculate_crc(&bytes[1..19], 50);
+        let crc = mavlink::calculate_crc(&bytes[1..19], 50);
         assert_eq!(&bytes[19..], &crc.to_le_bytes());
+    }
+
+    #[test]
+    fn the_checksum_is_the_mavlink_crates_for_every_length_and_seed() {
+        let bytes: Vec<u8> = (0..300u32).map(|i| (i * 7919 % 251) as u8).collect();
+        for len in 0..bytes.len() {
+            for extra in [0, 50, 137, 255] {
+                assert_eq!(
+                    checksum(&bytes[..len], extra),
+                    mavlink::calculate_crc(&bytes[..len], extra),
+                    "{len} bytes, extra crc {extra}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn frames_are_byte_for_byte_the_mavlink_crates() {
+        let mut statustext = mavlink::dialects::common::STATUSTEXT_DATA::default();
+        statustext.text = [b'x'; 50].into();
+        let messages = [
+            heartbeat(),
+            // An all-zero payload: MAVLink 2 keeps one byte.
+            MavMessage::COMMAND_LONG(COMMAND_LONG_DATA::default()),
+            MavMessage::STATUSTEXT(statustext),
+            MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+                target_system: 3,
+                target_component: 1,
+                command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+                confirmation: 0,
+                param1: 1.0,
+                ..COMMAND_LONG_DATA::default()
+            }),
+        ];
+        let mut enc = Encoder::new(42, 1);
+        for (sequence, msg) in (0u8..).zip(&messages) {
+            let mut ours = vec![0xAA];
+            enc.encode_into(msg, None, &mut ours);
+            let mut raw = MAVLinkV2MessageRaw::new();
+            let header = MavHeader {
+                system_id: 42,
+                component_id: 1,
+                sequence,
+            };
+            raw.serialize_message(header, msg);
+            assert_eq!(&ours[1..], raw.raw_bytes(), "{msg:?}");
+            assert_eq!(ours[0], 0xAA, "appended after what the buffer held");
+        }
     }
 
     #[test]
