@@ -518,8 +518,10 @@ pub(crate) mod tests {
 
     #[test]
     fn frames_are_byte_for_byte_the_mavlink_crates() {
-        let mut statustext = mavlink::dialects::common::STATUSTEXT_DATA::default();
-        statustext.text = [b'x'; 50].into();
+        let statustext = mavlink::dialects::common::STATUSTEXT_DATA {
+            text: [b'x'; 50].into(),
+            ..Default::default()
+        };
         let messages = [
             heartbeat(),
             // An all-zero payload: MAVLink 2 keeps one byte.
