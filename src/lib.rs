@@ -18,6 +18,7 @@
 //! - [`report`]: what the `analyze` and `plan` commands compute and print.
 //! - [`sitl_cmd`]: `ringswarm sitl`, the emulator on real UDP sockets (I/O edge).
 //! - [`config`]: the coordinator's TOML configuration and its validation.
+//! - [`view`]: the live view and the replay in a browser (state, web server).
 //! - [`cli`]: the command line (clap).
 //! - [`error`]: one error enum per layer.
 //!
@@ -54,3 +55,4 @@ pub mod sign_setup_cmd;
 pub mod sitl_cmd;
 pub mod swarm;
 pub mod vehicle;
+pub mod view;

@@ -164,6 +164,19 @@ impl RunTracker {
     }
 }
 
+/// What a traffic mirror carried (`summary.json`'s `mirrors`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MirrorReport {
+    /// Where it sent (`host:port`).
+    pub address: String,
+    /// Datagrams forwarded (every one the coordinator sent or received).
+    pub forwarded_datagrams: u64,
+    /// Datagrams the kernel did not take at once (never waited for).
+    pub not_sent_datagrams: u64,
+    /// Datagrams that came back from the mirror: read and dropped.
+    pub dropped_inbound_datagrams: u64,
+}
+
 /// `summary.json`.
 #[derive(Debug, Clone, Serialize)]
 pub struct Summary {
@@ -201,6 +214,9 @@ pub struct Summary {
     pub warnings: usize,
     /// The control loop's punctuality (in lockstep every tick is on time).
     pub timing: TimingReport,
+    /// What each traffic mirror (`--mirror`) carried; absent without one.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub mirrors: Vec<MirrorReport>,
 }
 
 impl Summary {
@@ -231,6 +247,7 @@ impl Summary {
             failure: swarm.failure().map(ToString::to_string),
             warnings: swarm.events().iter().filter(|e| e.warning).count(),
             timing: swarm.timing(),
+            mirrors: Vec::new(),
         }
     }
 }

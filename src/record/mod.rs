@@ -8,6 +8,9 @@
 //!                           for the swarm; network empty on own sockets), level (warning
 //!                           or info), event (quoted text)
 //! <dir>/summary.json        the flight's figures (see [`metrics::Summary`])
+//! <dir>/setup.json          what the flight was asked (see [`RunSetup`]): each vehicle's
+//!                           system id, network, CSV and place in the formation; what a
+//!                           replay (`ringswarm view`) needs besides the CSVs
 //! ```
 //!
 //! The files are written by a thread of their own (`sink.rs`): the control loop formats
@@ -44,6 +47,64 @@ pub const CSV_HEADER: &str = "t_s,swarm_phase,link_phase,x_m,y_m,z_m,vx_mps,vy_m
 roll_rad,pitch_rad,yaw_rad,cmd_ax_mps2,cmd_ay_mps2,cmd_az_mps2,sp_roll_rad,sp_pitch_rad,\
 sp_thrust_norm,last_heard_age_ms";
 
+/// `setup.json`: what the flight was asked, for a replay.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RunSetup {
+    /// The vehicles in the config's order (the ring's order).
+    pub vehicles: Vec<RunVehicle>,
+    /// The ring gain k.
+    pub k: f64,
+    /// The altitude the swarm holds (m, up).
+    pub altitude_m: f64,
+    /// The control rate (Hz).
+    pub control_rate_hz: f64,
+}
+
+/// One vehicle of [`RunSetup`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RunVehicle {
+    /// MAVLink system id.
+    pub sysid: u8,
+    /// Its MAVLink network, `null` on a socket of its own.
+    pub network: Option<String>,
+    /// Its CSV file in the run directory.
+    pub csv: String,
+    /// Its offset dᵢ in the formation (m, ENU x/y).
+    pub offset_enu_m: [f64; 2],
+    /// Its component wᵢ of the ring's left null vector (its weight in the consensus value).
+    pub weight: f64,
+}
+
+impl RunSetup {
+    /// The swarm's.
+    pub fn of(swarm: &Swarm) -> Self {
+        let setup = swarm.setup();
+        Self {
+            vehicles: setup
+                .links
+                .iter()
+                .zip(&setup.offsets_m)
+                .enumerate()
+                .map(|(i, (cfg, d))| RunVehicle {
+                    sysid: cfg.system_id,
+                    network: cfg.network.clone(),
+                    csv: csv_name(cfg),
+                    offset_enu_m: [d.x, d.y],
+                    weight: setup.ring.w(i),
+                })
+                .collect(),
+            k: setup.ring.k(),
+            altitude_m: setup.altitude_m,
+            control_rate_hz: 1.0 / setup.control_interval.as_secs_f64(),
+        }
+    }
+}
+
+/// The CSV file of a vehicle.
+fn csv_name(cfg: &crate::vehicle::LinkConfig) -> String {
+    format!("vehicle-{}.csv", cfg.file_label())
+}
+
 /// Writes a run directory while the swarm flies.
 #[derive(Debug)]
 pub struct Recorder {
@@ -57,6 +118,7 @@ pub struct Recorder {
     trace: Trace,
     last_tick: u64,
     error: Option<io::Error>,
+    mirrors: Vec<metrics::MirrorReport>,
     /// One CSV line being built (reused: no allocation per row).
     line: Vec<u8>,
 }
@@ -76,8 +138,10 @@ impl Recorder {
             (dir.join("events.csv"), 4096),
         ];
         for cfg in &swarm.setup().links {
-            files.push((dir.join(format!("vehicle-{}.csv", cfg.file_label())), 8192));
+            files.push((dir.join(csv_name(cfg)), 8192));
         }
+        let setup = serde_json::to_string_pretty(&RunSetup::of(swarm)).map_err(io::Error::other)?;
+        std::fs::write(dir.join("setup.json"), setup + "\n")?;
         let mut sinks = Sinks::create(files)?;
         writeln!(sinks.buffer(EVENTS), "t_s,system_id,network,level,event")?;
         for i in 0..swarm.links().len() {
@@ -93,6 +157,7 @@ impl Recorder {
             trace: Trace::new(TRACE_PERIOD),
             last_tick: 0,
             error: None,
+            mirrors: Vec::new(),
             line: Vec::with_capacity(256),
         })
     }
@@ -220,6 +285,11 @@ impl Recorder {
         Ok(())
     }
 
+    /// What the traffic mirrors carried, for `summary.json`.
+    pub fn set_mirrors(&mut self, reports: Vec<metrics::MirrorReport>) {
+        self.mirrors = reports;
+    }
+
     /// Flushes everything and writes `summary.json`; returns the summary and the trace
     /// (for the plots).
     ///
@@ -231,7 +301,8 @@ impl Recorder {
         now: SimTime,
         wall_seconds: f64,
     ) -> io::Result<(Summary, Trace)> {
-        let summary = Summary::new(swarm, &self.tracker, now, wall_seconds);
+        let mut summary = Summary::new(swarm, &self.tracker, now, wall_seconds);
+        summary.mirrors = std::mem::take(&mut self.mirrors);
         let result = self.write_events(swarm);
         self.keep(result);
         if let Some(err) = self.error.take() {

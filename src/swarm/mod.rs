@@ -146,6 +146,8 @@ pub struct Swarm {
     horizontal: Vec<HorizontalState>,
     accel: Vec<Vector2<f64>>,
     commands: Vec<Vector3<f64>>,
+    /// Each vehicle's command as the law gave it, before the saturation.
+    law_commands: Vec<Vector3<f64>>,
     setpoints: Vec<AttitudeThrust>,
     states: Vec<Option<CommonState>>,
     w: Vec<f64>,
@@ -236,6 +238,7 @@ impl Swarm {
             horizontal: vec![HorizontalState::default(); n],
             accel: vec![Vector2::zeros(); n],
             commands: vec![Vector3::zeros(); n],
+            law_commands: vec![Vector3::zeros(); n],
             setpoints,
             states: vec![None; n],
             saturated_ticks: 0,
@@ -371,6 +374,12 @@ impl Swarm {
     /// The last accelerations commanded (m/s², ENU), after saturation.
     pub fn commands(&self) -> &[Vector3<f64>] {
         &self.commands
+    }
+
+    /// Whether the saturation changed vehicle `i`'s command on the last control tick (the
+    /// envelope limited it).
+    pub fn command_limited(&self, i: usize) -> bool {
+        self.law_commands.get(i) != self.commands.get(i)
     }
 
     /// The last attitude and thrust setpoint of each vehicle.

@@ -57,6 +57,7 @@ impl Swarm {
             self.commands[i] = Vector3::new(self.accel[i].x, self.accel[i].y, u_z) + drag;
         }
         self.isolate_non_finite(now, "the law's command");
+        self.law_commands.copy_from_slice(&self.commands);
         if let Ok(summary) = saturate_with(
             saturation,
             &self.setup.envelope,

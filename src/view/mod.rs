@@ -1,0 +1,10 @@
+//! The live view and the replay in a browser: what the swarm looks like at an instant
+//! ([`state`]), a run directory replayed ([`replay`]) and the web server ([`server`]).
+//! See `docs/live-view.md` for the page and the API.
+
+pub mod replay;
+pub mod server;
+pub mod state;
+
+pub use server::{Content, LiveFeed, WebServer};
+pub use state::ViewState;

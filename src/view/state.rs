@@ -1,0 +1,180 @@
+//! What the live view and the replay show: the swarm at one instant, as the page and
+//! `GET /api/state` see it. Positions and velocities are ENU in the common frame (metres,
+//! m/s), as in the run directory's CSVs. Pure: built from a [`Swarm`] or from a run
+//! directory's rows, serialised by the server.
+
+use nalgebra::Vector2;
+use serde::{Deserialize, Serialize};
+use ringswarm_wire::time::SimTime;
+
+use crate::record::metrics::Snapshot;
+use crate::swarm::{Swarm, SwarmEvent};
+
+/// How many of the newest events a state carries (the page keeps its own history, and
+/// `events_total` tells it how many there were in all).
+pub const RECENT_EVENTS: usize = 50;
+
+/// The swarm at one instant.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewState {
+    /// Seconds since the flight started.
+    pub t_s: f64,
+    /// The swarm's phase (`handshake`, `consensus`, `holding`, `ended`, `landing`, …).
+    pub phase: String,
+    /// The velocity the law takes the swarm to, predicted when consensus (last) started
+    /// (m/s, ENU x/y); `null` before.
+    pub predicted_final_velocity: Option<[f64; 2]>,
+    /// The vehicles' mean horizontal velocity (m/s, ENU); `null` until every vehicle's
+    /// position is known.
+    pub mean_velocity_enu_mps: Option<[f64; 2]>,
+    /// `|mean velocity − predicted final velocity|` (m/s).
+    pub velocity_error_mps: Option<f64>,
+    /// Largest horizontal distance of a vehicle from its place in the formation (m).
+    pub formation_error_m: Option<f64>,
+    /// Largest distance from the altitude the swarm holds (m).
+    pub altitude_error_m: Option<f64>,
+    /// The altitude the swarm holds (m, up).
+    pub altitude_target_m: f64,
+    /// Where the formation's reference point is heading for: the consensus value of
+    /// `pᵢ − dᵢ`, the ring's left-null-vector average, which the law does not move but at
+    /// the swarm's mean velocity (m, ENU x/y).
+    pub formation_centre_enu_m: Option<[f64; 2]>,
+    /// One entry per vehicle, in the config's order.
+    pub vehicles: Vec<VehicleView>,
+    /// The newest events (at most [`RECENT_EVENTS`]), oldest first.
+    pub events: Vec<EventView>,
+    /// How many events there have been.
+    pub events_total: usize,
+}
+
+/// One vehicle.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VehicleView {
+    /// MAVLink system id.
+    pub sysid: u8,
+    /// Its MAVLink network (`null` on a socket of its own).
+    pub network: Option<String>,
+    /// Position (m, ENU, common frame); `null` until its origin is known.
+    pub position_enu_m: Option<[f64; 3]>,
+    /// Velocity (m/s, ENU).
+    pub velocity_enu_mps: Option<[f64; 3]>,
+    /// Its place in the formation the law is taking the swarm to (m, ENU x/y).
+    pub target_enu_m: Option<[f64; 2]>,
+    /// The coordinator's link phase (`discovering`, `flying`, `lost`, …).
+    pub link_phase: String,
+    /// PX4's flight mode from the last heartbeat (`null` before one, or in a replay).
+    pub mode: Option<String>,
+    /// Armed, from the last heartbeat (`null` before one, or in a replay).
+    pub armed: Option<bool>,
+    /// Age of the newest frame from the vehicle (ms).
+    pub telemetry_age_ms: Option<f64>,
+    /// Horizontal speed (m/s).
+    pub speed_mps: Option<f64>,
+    /// Whether the envelope limited its last command (`null` in a replay).
+    pub saturated: Option<bool>,
+}
+
+/// An event (lost link, failsafe, refused command, timeout, …).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EventView {
+    /// When (s since start).
+    pub t_s: f64,
+    /// The vehicle, or `null` for the swarm.
+    pub sysid: Option<u8>,
+    /// The vehicle's network.
+    pub network: Option<String>,
+    /// Whether an operator must see it.
+    pub warning: bool,
+    /// What happened.
+    pub text: String,
+}
+
+impl From<&SwarmEvent> for EventView {
+    fn from(e: &SwarmEvent) -> Self {
+        Self {
+            t_s: e.t.as_secs_f64(),
+            sysid: e.system_id,
+            network: e.network.clone(),
+            warning: e.warning,
+            text: e.text.clone(),
+        }
+    }
+}
+
+/// The consensus value of `pᵢ − dᵢ` over the vehicles whose position is known, weighted
+/// by the ring's left null vector `w` (the average the double-integrator law conserves up
+/// to the drift at the mean velocity), and each vehicle's place `centre + dᵢ` around it.
+/// `None` when no position is known or the known weights sum to zero.
+pub fn formation_targets(
+    pos_m: &[Option<Vector2<f64>>],
+    offsets_m: &[Vector2<f64>],
+    w: &[f64],
+) -> Option<(Vector2<f64>, Vec<Vector2<f64>>)> {
+    let (sum, w_sum) = pos_m
+        .iter()
+        .zip(offsets_m)
+        .zip(w)
+        .filter_map(|((p, d), w)| p.map(|p| ((p - d) * *w, *w)))
+        .fold((Vector2::zeros(), 0.0), |(s, ws), (x, w)| (s + x, ws + w));
+    if w_sum.abs() < 1e-12 || !sum.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    let centre = sum / w_sum;
+    Some((centre, offsets_m.iter().map(|d| centre + d).collect()))
+}
+
+impl ViewState {
+    /// The live swarm at `now`; `figures` is the run's latest snapshot of its figures.
+    pub fn of_swarm(swarm: &Swarm, now: SimTime, figures: Option<Snapshot>) -> Self {
+        let setup = swarm.setup();
+        let n = swarm.links().len();
+        let states: Vec<_> = (0..n).map(|i| swarm.common_state(i)).collect();
+        let xy: Vec<_> = states.iter().map(|s| s.map(|s| s.pos_enu_m.xy())).collect();
+        let w: Vec<f64> = (0..n).map(|i| setup.ring.w(i)).collect();
+        let targets = formation_targets(&xy, &setup.offsets_m, &w);
+        let predicted = swarm.predicted_final_velocity();
+        let vehicles = swarm
+            .links()
+            .iter()
+            .enumerate()
+            .map(|(i, link)| {
+                let state = link.state();
+                let heard = state.last_heartbeat.is_some();
+                VehicleView {
+                    sysid: setup.links[i].system_id,
+                    network: setup.links[i].network.clone(),
+                    position_enu_m: states[i].map(|s| s.pos_enu_m.into()),
+                    velocity_enu_mps: states[i].map(|s| s.vel_enu_mps.into()),
+                    target_enu_m: targets.as_ref().map(|(_, t)| t[i].into()),
+                    link_phase: link.phase().name().to_owned(),
+                    mode: heard.then(|| crate::vehicle::px4_mode_name(state.custom_mode)),
+                    armed: heard.then_some(state.armed),
+                    telemetry_age_ms: state
+                        .last_heard
+                        .map(|t| (now - t).as_secs_f64() * 1e3),
+                    speed_mps: states[i].map(|s| s.vel_enu_mps.xy().norm()),
+                    saturated: Some(swarm.command_limited(i)),
+                }
+            })
+            .collect();
+        let events = swarm.events();
+        let mean = figures.map(|f| Vector2::from(f.mean_velocity_mps));
+        Self {
+            t_s: now.as_secs_f64(),
+            phase: swarm.phase().name().to_owned(),
+            predicted_final_velocity: predicted.map(Into::into),
+            mean_velocity_enu_mps: mean.map(Into::into),
+            velocity_error_mps: mean.zip(predicted).map(|(m, p)| (m - p).norm()),
+            formation_error_m: figures.map(|f| f.formation_error_m),
+            altitude_error_m: figures.map(|f| f.altitude_error_m),
+            altitude_target_m: setup.altitude_m,
+            formation_centre_enu_m: targets.map(|(c, _)| c.into()),
+            vehicles,
+            events: events[events.len().saturating_sub(RECENT_EVENTS)..]
+                .iter()
+                .map(EventView::from)
+                .collect(),
+            events_total: events.len(),
+        }
+    }
+}
