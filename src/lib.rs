@@ -56,3 +56,4 @@ pub mod sitl_cmd;
 pub mod swarm;
 pub mod vehicle;
 pub mod view;
+pub mod view_cmd;

@@ -14,15 +14,37 @@ use crate::record::metrics::{altitude_error_m, formation_error_m};
 /// vehicles' long flight (a thousand vehicles × ten minutes at 20 Hz ≈ 12 M rows).
 pub const REPLAY_PERIOD_S: f64 = 0.05;
 
+/// Positions and velocities are kept in units of 10⁻⁴ m and m/s: the CSV's resolution,
+/// exactly (a replayed value prints as it was written), in half the memory of an f64.
+const FIXED_PER_UNIT: f64 = 1e4;
+
 /// One recorded row, as much as a replay shows.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Row {
     t_s: f64,
     swarm_phase: u8,
     link_phase: u8,
-    pos_enu_m: [f32; 3],
-    vel_enu_mps: [f32; 3],
+    /// Units of 10⁻⁴ m.
+    pos_enu: [i32; 3],
+    /// Units of 10⁻⁴ m/s.
+    vel_enu: [i32; 3],
     age_ms: f32,
+}
+
+impl Row {
+    fn pos_enu_m(&self) -> Vector3<f64> {
+        Vector3::from(self.pos_enu.map(|x| f64::from(x) / FIXED_PER_UNIT))
+    }
+
+    fn vel_enu_mps(&self) -> Vector3<f64> {
+        Vector3::from(self.vel_enu.map(|x| f64::from(x) / FIXED_PER_UNIT))
+    }
+}
+
+/// `x` in units of 10⁻⁴, if it fits (±214 km, ±214 km/s).
+fn fixed(x: f64) -> Option<i32> {
+    let scaled = (x * FIXED_PER_UNIT).round();
+    (scaled.abs() <= f64::from(i32::MAX)).then_some(scaled as i32)
 }
 
 /// A run directory in memory.
@@ -51,37 +73,47 @@ impl Replay {
                 setup_path.display()
             )
         })?;
-        let setup: RunSetup = serde_json::from_str(&text)
-            .map_err(|e| format!("{}: {e}", setup_path.display()))?;
+        let setup: RunSetup =
+            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", setup_path.display()))?;
         let mut names = Vec::new();
         let mut tracks = Vec::with_capacity(setup.vehicles.len());
         for v in &setup.vehicles {
             let path = dir.join(&v.csv);
-            let text = std::fs::read_to_string(&path)
-                .map_err(|e| format!("{}: {e}", path.display()))?;
-            let rows = parse_rows(&text, &mut names)
-                .map_err(|e| format!("{}: {e}", path.display()))?;
+            let text =
+                std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+            let rows =
+                parse_rows(&text, &mut names).map_err(|e| format!("{}: {e}", path.display()))?;
             tracks.push(rows);
         }
         let events_path = dir.join("events.csv");
         let events = match std::fs::read_to_string(&events_path) {
-            Ok(text) => parse_events(&text).map_err(|e| format!("{}: {e}", events_path.display()))?,
+            Ok(text) => {
+                parse_events(&text).map_err(|e| format!("{}: {e}", events_path.display()))?
+            }
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
             Err(e) => return Err(format!("{}: {e}", events_path.display())),
         };
         // summary.json is written when the flight ends: an interrupted run has none.
-        let (predicted, consensus_started_s) = match std::fs::read_to_string(dir.join("summary.json")) {
-            Ok(text) => {
-                let summary: serde_json::Value = serde_json::from_str(&text)
-                    .map_err(|e| format!("{}: {e}", dir.join("summary.json").display()))?;
-                let predicted = summary["predicted_final_velocity"]
-                    .as_array()
-                    .and_then(|a| Some([a.first()?.as_f64()?, a.get(1)?.as_f64()?]));
-                (predicted, summary["consensus_started_s"].as_f64())
-            }
-            Err(_) => (None, None),
-        };
-        Ok(Self::new(setup, names, tracks, events, predicted, consensus_started_s))
+        let (predicted, consensus_started_s) =
+            match std::fs::read_to_string(dir.join("summary.json")) {
+                Ok(text) => {
+                    let summary: serde_json::Value = serde_json::from_str(&text)
+                        .map_err(|e| format!("{}: {e}", dir.join("summary.json").display()))?;
+                    let predicted = summary["predicted_final_velocity"]
+                        .as_array()
+                        .and_then(|a| Some([a.first()?.as_f64()?, a.get(1)?.as_f64()?]));
+                    (predicted, summary["consensus_started_s"].as_f64())
+                }
+                Err(_) => (None, None),
+            };
+        Ok(Self::new(
+            setup,
+            names,
+            tracks,
+            events,
+            predicted,
+            consensus_started_s,
+        ))
     }
 
     fn new(
@@ -126,8 +158,8 @@ impl Replay {
                 after.checked_sub(1).map(|i| &track[i])
             })
             .collect();
-        let pos = |r: &Row| Vector3::from(r.pos_enu_m).cast::<f64>();
-        let vel = |r: &Row| Vector3::from(r.vel_enu_mps).cast::<f64>();
+        let pos = Row::pos_enu_m;
+        let vel = Row::vel_enu_mps;
         let xy: Vec<Option<Vector2<f64>>> = rows.iter().map(|r| r.map(|r| pos(r).xy())).collect();
         let offsets: Vec<Vector2<f64>> = self
             .setup
@@ -137,10 +169,7 @@ impl Replay {
             .collect();
         let w: Vec<f64> = self.setup.vehicles.iter().map(|v| v.weight).collect();
         let targets = formation_targets(&xy, &offsets, &w);
-        let newest = rows
-            .iter()
-            .flatten()
-            .max_by(|a, b| a.t_s.total_cmp(&b.t_s));
+        let newest = rows.iter().flatten().max_by(|a, b| a.t_s.total_cmp(&b.t_s));
         let phase = newest.map_or("handshake", |r| self.name(r.swarm_phase));
         let all: Option<Vec<&Row>> = rows.iter().copied().collect();
         let (mean, formation, altitude) = match &all {
@@ -171,7 +200,9 @@ impl Replay {
                 position_enu_m: row.map(|r| pos(r).into()),
                 velocity_enu_mps: row.map(|r| vel(r).into()),
                 target_enu_m: targets.as_ref().map(|(_, t)| t[i].into()),
-                link_phase: row.map_or("discovering", |r| self.name(r.link_phase)).to_owned(),
+                link_phase: row
+                    .map_or("discovering", |r| self.name(r.link_phase))
+                    .to_owned(),
                 mode: None,
                 armed: None,
                 telemetry_age_ms: row.map(|r| f64::from(r.age_ms)).filter(|a| a.is_finite()),
@@ -197,7 +228,9 @@ impl Replay {
     }
 
     fn name(&self, index: u8) -> &str {
-        self.names.get(usize::from(index)).map_or("", String::as_str)
+        self.names
+            .get(usize::from(index))
+            .map_or("", String::as_str)
     }
 }
 
@@ -252,22 +285,26 @@ fn parse_rows(text: &str, names: &mut Vec<String>) -> Result<Vec<Row>, String> {
         }
         let swarm_phase = intern(names, next("swarm_phase")?)?;
         let link_phase = intern(names, next("link_phase")?)?;
-        let mut values = [0.0f32; 6];
+        let mut values = [0i32; 6];
         for (value, name) in values
             .iter_mut()
             .zip(["x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps"])
         {
-            *value = number(name, next(name)?)? as f32;
+            let x = number(name, next(name)?)?;
+            *value = fixed(x)
+                .ok_or_else(|| format!("line {line_no}: column {name} is out of range: {x}"))?;
         }
         // Attitude, command and setpoint columns are not replayed.
-        let age = fields.nth(9).ok_or_else(|| format!("line {line_no}: no column last_heard_age_ms"))?;
+        let age = fields
+            .nth(9)
+            .ok_or_else(|| format!("line {line_no}: no column last_heard_age_ms"))?;
         let age_ms = number("last_heard_age_ms", age)? as f32;
         rows.push(Row {
             t_s,
             swarm_phase,
             link_phase,
-            pos_enu_m: [values[0], values[1], values[2]],
-            vel_enu_mps: [values[3], values[4], values[5]],
+            pos_enu: [values[0], values[1], values[2]],
+            vel_enu: [values[3], values[4], values[5]],
             age_ms,
         });
     }
@@ -297,11 +334,17 @@ fn parse_events(text: &str) -> Result<Vec<EventView>, String> {
                 format!("line {line_no}: system_id is not a MAVLink system id: \"{id}\"")
             })?)
         };
-        let network = Some(next("network")?).filter(|n| !n.is_empty()).map(str::to_owned);
+        let network = Some(next("network")?)
+            .filter(|n| !n.is_empty())
+            .map(str::to_owned);
         let warning = match next("level")? {
             "warning" => true,
             "info" => false,
-            other => return Err(format!("line {line_no}: level is neither warning nor info: \"{other}\"")),
+            other => {
+                return Err(format!(
+                    "line {line_no}: level is neither warning nor info: \"{other}\""
+                ));
+            }
         };
         let quoted = next("event")?;
         let text = quoted
@@ -360,10 +403,14 @@ mod tests {
         // 0, 0.052 and 0.104 s: the first row at least 50 ms after the last kept.
         let times: Vec<f64> = rows.iter().map(|r| r.t_s).collect();
         assert_eq!(times, vec![0.0, 0.052, 0.104]);
-        assert_eq!(rows[1].pos_enu_m, [13.0, 2.0, 3.0]);
+        assert_eq!(rows[1].pos_enu_m(), Vector3::new(13.0, 2.0, 3.0));
+        assert_eq!(rows[1].vel_enu_mps(), Vector3::new(0.5, 0.0, 0.0));
         assert_eq!(rows[1].age_ms, 12.5);
         assert_eq!(names, vec!["consensus", "flying"]);
-        let bad = format!("{}\n0.0,consensus,flying,1,two,3,0,0,0,0,0,0,0,0,0,0,0,0,1\n", crate::record::CSV_HEADER);
+        let bad = format!(
+            "{}\n0.0,consensus,flying,1,two,3,0,0,0,0,0,0,0,0,0,0,0,0,1\n",
+            crate::record::CSV_HEADER
+        );
         assert_eq!(
             parse_rows(&bad, &mut names).unwrap_err(),
             "line 2: column y_m is not a number: \"two\""

@@ -283,10 +283,17 @@ async fn info(State(shared): State<Shared>) -> Response {
 }
 
 /// `GET /api/state`: live, the latest state; in a replay, the state at `?t_s=` (default 0).
-async fn state(State(shared): State<Shared>, Query(query): Query<HashMap<String, String>>) -> Response {
+async fn state(
+    State(shared): State<Shared>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Response {
     match &shared.content {
         Content::Live { .. } => match shared.json.borrow().clone() {
-            Some(json) => ([(header::CONTENT_TYPE, "application/json")], Bytes::from(json)).into_response(),
+            Some(json) => (
+                [(header::CONTENT_TYPE, "application/json")],
+                Bytes::from(json),
+            )
+                .into_response(),
             None => error(
                 StatusCode::SERVICE_UNAVAILABLE,
                 "no state yet: the flight has not started",
