@@ -39,6 +39,71 @@ pub enum Command {
     /// Give every vehicle of a config the key of its `[security] signing_key_file`, with
     /// SETUP_SIGNING over its link (vehicles must be disarmed); says which took it.
     SignSetup(SignSetupArgs),
+    /// Replay a run directory of `fly` or `demo` in a browser (play, pause, speed, a time
+    /// slider) until Ctrl-C.
+    View(ViewArgs),
+}
+
+/// The live view and the traffic mirrors of a flight over UDP.
+#[derive(Debug, Args, Clone, Default)]
+pub struct LiveArgs {
+    /// Serve a live view of the flight at ADDR (HOST:PORT or PORT; alone, 127.0.0.1:8080):
+    /// open http://ADDR/ in a browser; the API is `GET /api/state` and the WebSocket
+    /// `/api/ws`. Read-only; any other host than the loopback shows it to the network.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = DEFAULT_WEB, value_parser = parse_web_addr)]
+    pub web: Option<std::net::SocketAddr>,
+    /// Forward every datagram the coordinator sends and receives, unchanged, to the UDP
+    /// address ADDR (HOST:PORT; repeatable), for pymavlink, MAVProxy or QGroundControl to
+    /// watch. What comes back from it is dropped (counted in summary.json).
+    #[arg(long, value_name = "ADDR", value_parser = parse_mirror_addr)]
+    pub mirror: Vec<std::net::SocketAddr>,
+}
+
+/// Where the web view listens when `--web` has no address.
+pub const DEFAULT_WEB: &str = "127.0.0.1:8080";
+
+/// Arguments of `ringswarm view`.
+#[derive(Debug, Args)]
+pub struct ViewArgs {
+    /// The run directory (with setup.json, the vehicle CSVs, events.csv, summary.json).
+    pub run_dir: std::path::PathBuf,
+    /// Where to serve the page (HOST:PORT or PORT).
+    #[arg(long, value_name = "ADDR", default_value = DEFAULT_WEB, value_parser = parse_web_addr)]
+    pub web: std::net::SocketAddr,
+}
+
+/// `HOST:PORT`, `localhost:PORT` or a bare `PORT` (on 127.0.0.1).
+pub fn parse_web_addr(s: &str) -> Result<std::net::SocketAddr, String> {
+    let s = s.trim();
+    if let Ok(port) = s.parse::<u16>() {
+        return Ok(([127, 0, 0, 1], port).into());
+    }
+    if let Some(port) = s.strip_prefix("localhost:") {
+        return port
+            .parse::<u16>()
+            .map(|p| ([127, 0, 0, 1], p).into())
+            .map_err(|_| format!("\"{s}\": the port is not a number from 0 to 65535"));
+    }
+    s.parse().map_err(|_| {
+        format!("\"{s}\" is not an address: give HOST:PORT or PORT, like {DEFAULT_WEB} or 8080")
+    })
+}
+
+/// `HOST:PORT` (or `localhost:PORT`) of a mirror; port 0 cannot be sent to.
+pub fn parse_mirror_addr(s: &str) -> Result<std::net::SocketAddr, String> {
+    let addr = match s.trim().strip_prefix("localhost:") {
+        Some(port) => port
+            .parse::<u16>()
+            .map(|p| std::net::SocketAddr::from(([127, 0, 0, 1], p)))
+            .map_err(|_| format!("\"{s}\": the port is not a number from 1 to 65535"))?,
+        None => s.trim().parse().map_err(|_| {
+            format!("\"{s}\" is not a UDP address: give HOST:PORT, like 127.0.0.1:14551")
+        })?,
+    };
+    if addr.port() == 0 {
+        return Err(format!("\"{s}\": port 0 cannot be sent to"));
+    }
+    Ok(addr)
 }
 
 /// Arguments of `ringswarm sign-setup`.
@@ -78,6 +143,9 @@ pub struct DemoArgs {
     /// ports in this process (a GCS on udp 14550 sees them).
     #[arg(long)]
     pub realtime: bool,
+    /// The live view and the mirrors (with --realtime).
+    #[command(flatten)]
+    pub live: LiveArgs,
 }
 
 /// Arguments of `ringswarm fly`.
@@ -92,6 +160,9 @@ pub struct FlyArgs {
     /// Seconds of consensus before the end action (overrides swarm.duration_s).
     #[arg(long)]
     pub duration_s: Option<f64>,
+    /// The live view and the mirrors.
+    #[command(flatten)]
+    pub live: LiveArgs,
 }
 
 /// Arguments of `ringswarm sitl`.
@@ -270,6 +341,36 @@ fn parse_saturation(s: &str) -> Result<crate::control::SaturationMode, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn web_and_mirror_addresses_parse_or_say_what_is_wrong() {
+        let local = |p: u16| std::net::SocketAddr::from(([127, 0, 0, 1], p));
+        assert_eq!(parse_web_addr("8080"), Ok(local(8080)));
+        assert_eq!(parse_web_addr("localhost:9000"), Ok(local(9000)));
+        assert_eq!(
+            parse_web_addr("0.0.0.0:8081"),
+            Ok(std::net::SocketAddr::from(([0, 0, 0, 0], 8081)))
+        );
+        assert_eq!(parse_web_addr("[::1]:80").map(|a| a.port()), Ok(80));
+        assert_eq!(
+            parse_web_addr("web"),
+            Err(
+                "\"web\" is not an address: give HOST:PORT or PORT, like 127.0.0.1:8080 or 8080"
+                    .into()
+            )
+        );
+        assert_eq!(parse_mirror_addr("127.0.0.1:14551"), Ok(local(14551)));
+        assert_eq!(parse_mirror_addr("localhost:14552"), Ok(local(14552)));
+        assert_eq!(
+            parse_mirror_addr("127.0.0.1:0"),
+            Err("\"127.0.0.1:0\": port 0 cannot be sent to".into())
+        );
+        assert!(
+            parse_mirror_addr("14551")
+                .unwrap_err()
+                .contains("HOST:PORT")
+        );
+    }
 
     #[test]
     fn velocity_list_parses_with_spaces_and_negatives() {

@@ -102,6 +102,12 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     if args.realtime {
         return realtime(&name, &config, args);
     }
+    if args.live.web.is_some() || !args.live.mirror.is_empty() {
+        anyhow::bail!(
+            "--web and --mirror need --realtime: a lockstep demo is over in a moment \
+             (replay its run directory with `ringswarm view RUN_DIR`)"
+        );
+    }
     let mut run =
         Lockstep::from_config(&config).map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
     crate::config::warn_if_too_fast(run.swarm().setup(), config.gains.time_scale);
@@ -283,7 +289,8 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
             });
         }
         let shards = spawn_shards(fleet, crate::sitl_cmd::cores(), clock, &stop_rx);
-        let summary = crate::fly_cmd::fly(Swarm::new(setup), &transport, &out, None).await;
+        let summary =
+            crate::fly_cmd::fly(Swarm::new(setup), &transport, &out, None, &args.live).await;
         stop_tx.send_replace(true);
         shards.join().await.context("emulated vehicles")?;
         summary

@@ -13,16 +13,18 @@ use ringswarm_wire::time::SimTime;
 use tokio::net::UdpSocket;
 use tokio::sync::watch;
 
-use crate::cli::FlyArgs;
+use crate::cli::{FlyArgs, LiveArgs};
 use crate::config::Config;
 use crate::driver::Observer;
+use crate::driver::mirror::Mirrors;
 use crate::driver::udp::{DriverCommand, run_swarm};
 use crate::link::router::{Router, TransportPlan};
-use crate::record::Recorder;
 use crate::record::metrics::Summary;
+use crate::record::{Recorder, RunSetup};
 use crate::security::FlightSigning;
 use crate::swarm::{Swarm, SwarmPhase};
 use crate::vehicle::Phase;
+use crate::view::{Content, LiveFeed, ViewState, WebServer};
 
 /// Flies until every vehicle has landed (end of the duration, link-loss policy `land`, or
 /// Ctrl-C) and prints the summary.
@@ -73,7 +75,13 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("start the tokio runtime")?;
-    let summary = runtime.block_on(fly(Swarm::new(setup), &transport, &out, signing))?;
+    let summary = runtime.block_on(fly(
+        Swarm::new(setup),
+        &transport,
+        &out,
+        signing,
+        &args.live,
+    ))?;
     runtime.shutdown_background();
     println!("{}", serde_json::to_string_pretty(&summary)?);
     println!("run directory: {}", out.display());
@@ -94,18 +102,38 @@ fn default_run_dir(config: &Path) -> PathBuf {
     PathBuf::from("runs").join(format!("{stem}-{secs}"))
 }
 
-/// Flies `swarm` over UDP until it has landed (or a second Ctrl-C), recording into `out`;
-/// returns the summary. Shared by `fly` and `demo --realtime`.
+/// Flies `swarm` over UDP until it has landed (or a second Ctrl-C), recording into `out`,
+/// with the live view and the mirrors `live` asks for; returns the summary. Shared by
+/// `fly` and `demo --realtime`.
 ///
 /// # Errors
-/// A port that cannot be bound, a run directory that cannot be written.
+/// A port that cannot be bound (the vehicles', the web view's), a mirror's socket, a run
+/// directory that cannot be written.
 pub(crate) async fn fly(
     swarm: Swarm,
     transport: &TransportPlan,
     out: &Path,
     signing: Option<FlightSigning>,
+    live: &LiveArgs,
 ) -> anyhow::Result<Summary> {
     let sockets = bind_all(transport).await?;
+    let mirrors = Mirrors::open(&live.mirror).map_err(anyhow::Error::msg)?;
+    for m in &live.mirror {
+        eprintln!("mirroring every datagram to udp {m}");
+    }
+    let (feed, web) = match live.web {
+        Some(addr) => {
+            let (feed, states) = LiveFeed::new();
+            let content = Content::Live {
+                setup: RunSetup::of(&swarm),
+                states,
+            };
+            let server = WebServer::start(addr, content).map_err(anyhow::Error::msg)?;
+            crate::view_cmd::announce(server.addr());
+            (Some(feed), Some(server))
+        }
+        None => (None, None),
+    };
     let epoch_us = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as u64);
@@ -137,12 +165,30 @@ pub(crate) async fn fly(
         next_status: SimTime::ZERO,
         last: SimTime::ZERO,
         signing,
+        feed,
+        mirrors,
     };
     let wall = Instant::now();
     let router = Router::new(transport);
     let (swarm, mut observer) = run_swarm(swarm, sockets, router, command_rx, observer).await?;
     observer.keep_signing_clock(&swarm);
     let now = observer.last;
+    if let Some(feed) = &observer.feed {
+        feed.publish(ViewState::of_swarm(
+            &swarm,
+            now,
+            observer.recorder.tracker().latest(),
+        ));
+    }
+    drop(web);
+    observer.mirrors.drain();
+    for m in observer.mirrors.reports() {
+        eprintln!(
+            "mirror {}: {} datagrams forwarded, {} not sent, {} from it dropped",
+            m.address, m.forwarded_datagrams, m.not_sent_datagrams, m.dropped_inbound_datagrams
+        );
+    }
+    observer.recorder.set_mirrors(observer.mirrors.reports());
     let (summary, trace) = observer
         .recorder
         .finish(&swarm, now, wall.elapsed().as_secs_f64())
@@ -206,6 +252,9 @@ struct FlyObserver {
     next_status: SimTime,
     last: SimTime,
     signing: Option<FlightSigning>,
+    /// The live view's feed, with `--web`.
+    feed: Option<LiveFeed>,
+    mirrors: Mirrors,
 }
 
 impl FlyObserver {
@@ -229,11 +278,16 @@ impl FlyObserver {
 impl Observer for FlyObserver {
     fn datagram(&mut self, now: SimTime, _vehicle: usize, _to_vehicle: bool, bytes: &[u8]) {
         self.recorder.datagram(now, bytes);
+        self.mirrors.forward(bytes);
     }
 
     fn swarm(&mut self, swarm: &Swarm, now: SimTime) {
         self.last = now;
         self.recorder.sample(swarm, now);
+        if let Some(feed) = &mut self.feed {
+            feed.offer(swarm, now, self.recorder.tracker().latest());
+        }
+        self.mirrors.drain_due(now);
         if now >= self.next_status {
             self.next_status = now + Duration::from_secs(1);
             self.keep_signing_clock(swarm);

@@ -39,6 +39,7 @@ fn main() -> ExitCode {
         Command::Demo(args) => ringswarm::demo_cmd::run(&args).map(|()| true),
         Command::Keygen(args) => keygen(&args.file).map(|()| true),
         Command::SignSetup(args) => ringswarm::sign_setup_cmd::run(&args).map(|()| true),
+        Command::View(args) => ringswarm::view_cmd::run(&args).map(|()| true),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,

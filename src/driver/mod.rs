@@ -4,12 +4,14 @@
 //!   encoded MAVLink frames in between, seeded latency and loss. Deterministic.
 //! - [`udp`]: tokio, a socket per vehicle or per MAVLink network, for real PX4 or
 //!   `ringswarm sitl` vehicles.
+//! - [`mirror`]: every datagram of a UDP flight copied to extra addresses, read-only.
 //!
 //! Both hand received datagrams to the swarm through one `Inbound` (router, links,
 //! address learning) when they route.
 
 #[cfg(feature = "emulator")]
 pub mod lockstep;
+pub mod mirror;
 pub mod udp;
 
 use std::net::SocketAddr;
