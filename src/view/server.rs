@@ -11,6 +11,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use axum::body::Bytes;
+use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::ws::{Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
 use axum::extract::{Path, Query, State};
 use axum::http::{StatusCode, header};
@@ -320,9 +321,15 @@ async fn state(
 
 /// `GET /api/ws`: live, every new state as a JSON text message (the newest only when
 /// the client reads slower than they come).
-async fn ws(State(shared): State<Shared>, upgrade: WebSocketUpgrade) -> Response {
+async fn ws(
+    State(shared): State<Shared>,
+    upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
+) -> Response {
     match shared.content {
-        Content::Live { .. } => upgrade.on_upgrade(move |socket| stream(socket, shared.json)),
+        Content::Live { .. } => match upgrade {
+            Ok(upgrade) => upgrade.on_upgrade(move |socket| stream(socket, shared.json)),
+            Err(rejection) => rejection.into_response(),
+        },
         Content::Replay(_) => error(
             StatusCode::NOT_FOUND,
             "a replay has no live stream: ask GET /api/state?t_s=<seconds>",

@@ -176,3 +176,30 @@ impl ViewState {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn targets_are_the_weighted_consensus_value_plus_each_offset() {
+        let d = [Vector2::new(1.0, 0.0), Vector2::new(-1.0, 0.0)];
+        // In formation around (10, 5): every vehicle is at its target.
+        let p = [Some(Vector2::new(11.0, 5.0)), Some(Vector2::new(9.0, 5.0))];
+        let (c, t) = formation_targets(&p, &d, &[1.0, 3.0]).expect("targets");
+        assert_eq!(c, Vector2::new(10.0, 5.0));
+        assert_eq!(t, vec![Vector2::new(11.0, 5.0), Vector2::new(9.0, 5.0)]);
+        // Out of formation: p − d = (0, 0) and (4, 0), weights 1 and 3 → centre (3, 0).
+        let p = [Some(Vector2::new(1.0, 0.0)), Some(Vector2::new(3.0, 0.0))];
+        let (c, t) = formation_targets(&p, &d, &[1.0, 3.0]).expect("targets");
+        assert_eq!(c, Vector2::new(3.0, 0.0));
+        assert_eq!(t, vec![Vector2::new(4.0, 0.0), Vector2::new(2.0, 0.0)]);
+        // A vehicle not known yet is left out of the average; none known: no targets.
+        let p = [None, Some(Vector2::new(3.0, 0.0))];
+        assert_eq!(
+            formation_targets(&p, &d, &[1.0, 3.0]).map(|x| x.0),
+            Some(Vector2::new(4.0, 0.0))
+        );
+        assert_eq!(formation_targets(&[None, None], &d, &[1.0, 3.0]), None);
+    }
+}
