@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Runs every test of the project on a fresh machine:
 #   formatting, clippy (warnings are errors), all Rust tests (unit, integration, doc),
-#   then the Python checks against independent numpy computations, in a project-local
-#   virtual environment (.venv) with pinned packages.
+#   then the Python checks against independent numpy computations, pymavlink, MAVSDK and
+#   headless Chromium (Debian's, installed when missing), in a project-local virtual
+#   environment (.venv) with pinned packages.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -15,6 +16,14 @@ cargo clippy --no-default-features --lib --bins --locked -- -D warnings
 echo "== cargo test"
 cargo test --workspace --locked
 cargo build --workspace --locked --bins
+
+echo "== browser for the live view's tests: Debian's chromium and its chromedriver"
+if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then
+  sudo=""
+  if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+  $sudo apt-get update -q
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q --no-install-recommends chromium chromium-driver
+fi
 
 echo "== python checks"
 if [ ! -x .venv/bin/python ]; then

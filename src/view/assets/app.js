@@ -164,7 +164,7 @@ function draw(s) {
     ctx.fillStyle = `hsl(${120 - 120 * dz}, 70%, 40%)`;
     ctx.beginPath(); ctx.arc(x, y, r, 0, 2 * Math.PI); ctx.fill();
     if (s.vehicles.length <= 50) { ctx.fillStyle = "#223"; ctx.fillText(String(v.sysid), x + 7, y - 7); }
-    drawn.push({ sysid: v.sysid, network: v.network, x_px: x, y_px: y });
+    drawn.push({ sysid: v.sysid, network: v.network, x_m: v.position_enu_m[0], y_m: v.position_enu_m[1], x_px: x, y_px: y });
   });
   view.drawn = drawn;
   // The predicted final velocity, from the formation's reference point.
