@@ -173,12 +173,16 @@ pub(crate) async fn fly(
     let (swarm, mut observer) = run_swarm(swarm, sockets, router, command_rx, observer).await?;
     observer.keep_signing_clock(&swarm);
     let now = observer.last;
-    if let Some(feed) = &observer.feed {
+    if let Some(feed) = observer.feed.take() {
         feed.publish(ViewState::of_swarm(
             &swarm,
             now,
             observer.recorder.tracker().latest(),
         ));
+        // The feed gone, each stream sends the last state and a close frame: a moment
+        // for them before the server stops.
+        drop(feed);
+        tokio::time::sleep(WEB_GOODBYE).await;
     }
     drop(web);
     observer.mirrors.drain();
@@ -199,6 +203,9 @@ pub(crate) async fn fly(
     }
     Ok(summary)
 }
+
+/// How long the live view's clients are given, after the flight, to receive its last state.
+const WEB_GOODBYE: Duration = Duration::from_millis(300);
 
 /// Binds every socket of the plan, naming the one that cannot be bound.
 ///

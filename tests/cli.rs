@@ -522,3 +522,46 @@ fn keygen_writes_a_private_key_once_and_never_overwrites_it() {
     assert_ne!(std::fs::read_to_string(&other).unwrap(), text);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn web_and_mirror_without_realtime_and_a_view_of_no_run_directory_are_refused_by_name() {
+    let out = ringswarm(&["demo", "--web", "8080"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("--web and --mirror need --realtime"),
+        "{}",
+        stderr(&out)
+    );
+    let out = ringswarm(&["demo", "--realtime", "--mirror", "14551"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("HOST:PORT"), "{}", stderr(&out));
+    let out = ringswarm(&["view", "/nonexistent/run", "--web", "127.0.0.1:0"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr(&out);
+    assert!(err.contains("/nonexistent/run/setup.json"), "{err}");
+    // A web address already taken is named (this port is held by the test).
+    let held = std::net::TcpListener::bind("127.0.0.1:0").expect("a port");
+    let port = held.local_addr().expect("addr").port().to_string();
+    let dir = std::env::temp_dir().join(format!("ringswarm-cli-view-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let demo = ringswarm(&[
+        "demo",
+        "--scenario",
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/fixtures/ground-diamond.toml"
+        ),
+        "--no-plots",
+        "--out",
+        dir.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(demo.status.code(), Some(0), "{}", stderr(&demo));
+    let out = ringswarm(&["view", dir.to_str().expect("utf-8"), "--web", &port]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = stderr(&out);
+    assert!(
+        err.contains(&format!("bind 127.0.0.1:{port} for the web view")),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -5,7 +5,7 @@
 const TRAIL_S = 5;          // trail length (s of flight)
 const ROWS_PER_PAGE = 50;   // the table shows one page of vehicles at a time
 const EVENTS_KEPT = 200;
-const ARROW_S = 5;          // the velocity arrow shows 5 s of travel
+const ARROW_S = 2;          // the velocity arrow shows 2 s of travel
 
 const $ = (id) => document.getElementById(id);
 const view = {
@@ -129,6 +129,8 @@ function draw(s) {
     if (v.target_enu_m) { xs.push(v.target_enu_m[0]); ys.push(v.target_enu_m[1]); }
     for (const p of view.trails[i] ?? []) { xs.push(p[1]); ys.push(p[2]); }
   });
+  const v = s.predicted_final_velocity, c = s.formation_centre_enu_m;
+  if (v && c) { xs.push(c[0] + v[0] * ARROW_S); ys.push(c[1] + v[1] * ARROW_S); }
   if (!xs.length) { view.drawn = []; return; }
   const cx = (Math.min(...xs) + Math.max(...xs)) / 2, cy = (Math.min(...ys) + Math.max(...ys)) / 2;
   const span = Math.max(10, Math.max(...xs) - Math.min(...xs), (Math.max(...ys) - Math.min(...ys)) * (W - 2 * pad) / (H - 2 * pad));
@@ -168,7 +170,6 @@ function draw(s) {
   });
   view.drawn = drawn;
   // The predicted final velocity, from the formation's reference point.
-  const v = s.predicted_final_velocity, c = s.formation_centre_enu_m;
   if (v && c) arrow(ctx, px(c[0], c[1]), px(c[0] + v[0] * ARROW_S, c[1] + v[1] * ARROW_S), "#c50");
 }
 
