@@ -218,6 +218,28 @@ fn live_server() -> (WebServer, LiveFeed) {
     (server, feed)
 }
 
+/// A WebSocket client of the live stream.
+type Client =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// Runs `body` with a client of `server`'s live stream.
+fn with_client<Fut: std::future::Future<Output = ()>>(
+    server: &WebServer,
+    body: impl FnOnce(Client) -> Fut,
+) {
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("runtime");
+    runtime.block_on(async {
+        let url = format!("ws://{}/api/ws", server.addr());
+        let (ws, _) = tokio_tungstenite::connect_async(url)
+            .await
+            .expect("connect");
+        body(ws).await;
+    });
+}
+
 fn t_of(message: &Message) -> f64 {
     match message {
         Message::Text(text) => json(text)["t_s"].as_f64().expect("t_s"),
@@ -228,15 +250,7 @@ fn t_of(message: &Message) -> f64 {
 #[test]
 fn the_websocket_pushes_every_state_to_a_client_that_keeps_up() {
     let (server, feed) = live_server();
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .expect("runtime");
-    runtime.block_on(async {
-        let url = format!("ws://{}/api/ws", server.addr());
-        let (mut ws, _) = tokio_tungstenite::connect_async(url)
-            .await
-            .expect("connect");
+    with_client(&server, |mut ws| async move {
         for i in 0..40 {
             let t = f64::from(i) * 0.05;
             feed.publish(state_of(6, t));
@@ -256,15 +270,7 @@ fn the_websocket_pushes_every_state_to_a_client_that_keeps_up() {
 #[test]
 fn a_client_that_does_not_read_is_sent_the_newest_state_not_a_queue() {
     let (server, feed) = live_server();
-    let runtime = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .expect("runtime");
-    runtime.block_on(async {
-        let url = format!("ws://{}/api/ws", server.addr());
-        let (mut ws, _) = tokio_tungstenite::connect_async(url)
-            .await
-            .expect("connect");
+    with_client(&server, |mut ws| async move {
         // 500 states of a thousand vehicles (~250 kB of JSON each, 125 MB in all) while
         // the client reads nothing.
         let published = 500;

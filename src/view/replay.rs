@@ -106,28 +106,10 @@ impl Replay {
                 }
                 Err(_) => (None, None),
             };
-        Ok(Self::new(
-            setup,
-            names,
-            tracks,
-            events,
-            predicted,
-            consensus_started_s,
-        ))
-    }
-
-    fn new(
-        setup: RunSetup,
-        names: Vec<String>,
-        tracks: Vec<Vec<Row>>,
-        events: Vec<EventView>,
-        predicted: Option<[f64; 2]>,
-        consensus_started_s: Option<f64>,
-    ) -> Self {
         let last_row = tracks.iter().filter_map(|t| t.last()).map(|r| r.t_s);
         let last_event = events.iter().map(|e| e.t_s);
         let duration_s = last_row.chain(last_event).fold(0.0, f64::max);
-        Self {
+        Ok(Self {
             setup,
             names,
             tracks,
@@ -135,7 +117,7 @@ impl Replay {
             predicted,
             consensus_started_s,
             duration_s,
-        }
+        })
     }
 
     /// What the flight was asked.
