@@ -11,6 +11,7 @@ const $ = (id) => document.getElementById(id);
 const view = {
   mode: null, setup: null, state: null, trails: [], lastT: -Infinity,
   page: 0, eventsSeen: 0, drawn: [], frames: 0,
+  renderMs: 0,               // how long the last state took to show (ms)
 };
 window.ringswarmView = view; // what was drawn, for whoever inspects the page
 
@@ -101,10 +102,12 @@ function show(state) {
     if (v.position_enu_m) trail.push([state.t_s, v.position_enu_m[0], v.position_enu_m[1]]);
     while (trail.length && trail[0][0] < state.t_s - TRAIL_S) trail.shift();
   });
+  const began = performance.now();
   figures(state);
   draw(state);
   table(state);
   events(state);
+  view.renderMs = performance.now() - began;
 }
 
 function figures(s) {
@@ -122,18 +125,20 @@ function draw(s) {
   const ctx = canvas.getContext("2d");
   const W = canvas.width, H = canvas.height, pad = 30;
   ctx.clearRect(0, 0, W, H);
-  // The view: every vehicle, trail and target, at least 10 m across, one scale for both axes.
-  let xs = [], ys = [];
+  // The view: every vehicle, trail, target and the arrow, at least 10 m across, one scale
+  // for both axes (a running min/max: a thousand trails are too many points to spread).
+  let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+  const take = (x, y) => { x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y); };
   s.vehicles.forEach((v, i) => {
-    if (v.position_enu_m) { xs.push(v.position_enu_m[0]); ys.push(v.position_enu_m[1]); }
-    if (v.target_enu_m) { xs.push(v.target_enu_m[0]); ys.push(v.target_enu_m[1]); }
-    for (const p of view.trails[i] ?? []) { xs.push(p[1]); ys.push(p[2]); }
+    if (v.position_enu_m) take(v.position_enu_m[0], v.position_enu_m[1]);
+    if (v.target_enu_m) take(v.target_enu_m[0], v.target_enu_m[1]);
+    for (const p of view.trails[i] ?? []) take(p[1], p[2]);
   });
   const v = s.predicted_final_velocity, c = s.formation_centre_enu_m;
-  if (v && c) { xs.push(c[0] + v[0] * ARROW_S); ys.push(c[1] + v[1] * ARROW_S); }
-  if (!xs.length) { view.drawn = []; return; }
-  const cx = (Math.min(...xs) + Math.max(...xs)) / 2, cy = (Math.min(...ys) + Math.max(...ys)) / 2;
-  const span = Math.max(10, Math.max(...xs) - Math.min(...xs), (Math.max(...ys) - Math.min(...ys)) * (W - 2 * pad) / (H - 2 * pad));
+  if (v && c) take(c[0] + v[0] * ARROW_S, c[1] + v[1] * ARROW_S);
+  if (!Number.isFinite(x0)) { view.drawn = []; return; }
+  const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
+  const span = Math.max(10, x1 - x0, (y1 - y0) * (W - 2 * pad) / (H - 2 * pad));
   const scale = (W - 2 * pad) / span;
   const px = (x, y) => [W / 2 + (x - cx) * scale, H / 2 - (y - cy) * scale];
   grid(ctx, W, H, cx, cy, scale, px);
