@@ -17,7 +17,6 @@ window.ringswarmView = view; // what was drawn, for whoever inspects the page
 
 const fmt = (x, digits = 2) => (x === null || x === undefined || !Number.isFinite(x)) ? "–" : x.toFixed(digits);
 const fmtVec = (v) => v ? `(${fmt(v[0])}, ${fmt(v[1])}) m/s` : "–";
-const key = (v) => `${v.network ?? ""}/${v.sysid}`;
 
 async function start() {
   const info = await (await fetch("/api/info")).json();
@@ -36,11 +35,11 @@ async function start() {
 function live() {
   const socket = new WebSocket(`ws://${location.host}/api/ws`);
   socket.onmessage = (m) => show(JSON.parse(m.data));
-  socket.onclose = () => {
-    $("mode").textContent = "live: flight over (the last state stays)";
-  };
-  socket.onerror = () => {
-    $("mode").textContent = "live: connection lost";
+  // The server closes the stream when the flight is over; 1006 is a connection lost.
+  socket.onclose = (e) => {
+    $("mode").textContent = e.code === 1006
+      ? "live: connection lost (the last state stays)"
+      : "live: flight over (the last state stays)";
   };
 }
 
@@ -53,13 +52,18 @@ function replay(duration) {
     wanted = at;
     if (pending) return;
     pending = true;
-    while (wanted !== null) {
-      const ask = wanted;
-      wanted = null;
-      const r = await fetch(`/api/state?t_s=${ask}`);
-      if (r.ok) show(await r.json());
+    try {
+      while (wanted !== null) {
+        const ask = wanted;
+        wanted = null;
+        const r = await fetch(`/api/state?t_s=${ask}`);
+        if (r.ok) show(await r.json());
+      }
+    } catch (e) {
+      $("mode").textContent = `replay: the server is gone (${e})`;
+    } finally {
+      pending = false;
     }
-    pending = false;
   };
   const setTime = (at) => {
     t = Math.min(Math.max(at, 0), duration);
