@@ -336,6 +336,19 @@ fn a_replay_shows_the_recorded_positions_and_serves_them() {
     };
     run.run_observed(SimTime::from_micros(20_000_000), &mut recording);
     let ticks = recording.ticks;
+    // The events are on the disk while the flight goes on (what a killed run leaves).
+    let events = dir.join("events.csv");
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    while !std::fs::read_to_string(&events)
+        .unwrap_or_default()
+        .contains("consensus started")
+    {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "events.csv has no event 30 s after it happened"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
     let started = run
         .swarm()
         .consensus_started()

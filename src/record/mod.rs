@@ -135,7 +135,9 @@ impl Recorder {
         // telemetry is ~6 MB/s of tlog).
         let mut files = vec![
             (dir.join("traffic.tlog"), 256 * 1024),
-            (dir.join("events.csv"), 4096),
+            // Events go to the disk as they happen: they are few, and they are what is
+            // read after a flight that was killed.
+            (dir.join("events.csv"), 1),
         ];
         for cfg in &swarm.setup().links {
             files.push((dir.join(csv_name(cfg)), 8192));
