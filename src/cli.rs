@@ -78,32 +78,35 @@ pub fn parse_web_addr(s: &str) -> Result<std::net::SocketAddr, String> {
     if let Ok(port) = s.parse::<u16>() {
         return Ok(([127, 0, 0, 1], port).into());
     }
-    if let Some(port) = s.strip_prefix("localhost:") {
-        return port
-            .parse::<u16>()
-            .map(|p| ([127, 0, 0, 1], p).into())
-            .map_err(|_| format!("\"{s}\": the port is not a number from 0 to 65535"));
-    }
-    s.parse().map_err(|_| {
-        format!("\"{s}\" is not an address: give HOST:PORT or PORT, like {DEFAULT_WEB} or 8080")
+    localhost(s).unwrap_or_else(|| {
+        s.parse().map_err(|_| {
+            format!("\"{s}\" is not an address: give HOST:PORT or PORT, like {DEFAULT_WEB} or 8080")
+        })
     })
 }
 
 /// `HOST:PORT` (or `localhost:PORT`) of a mirror; port 0 cannot be sent to.
 pub fn parse_mirror_addr(s: &str) -> Result<std::net::SocketAddr, String> {
-    let addr = match s.trim().strip_prefix("localhost:") {
-        Some(port) => port
-            .parse::<u16>()
-            .map(|p| std::net::SocketAddr::from(([127, 0, 0, 1], p)))
-            .map_err(|_| format!("\"{s}\": the port is not a number from 1 to 65535"))?,
-        None => s.trim().parse().map_err(|_| {
+    let s = s.trim();
+    let addr = localhost(s).unwrap_or_else(|| {
+        s.parse().map_err(|_| {
             format!("\"{s}\" is not a UDP address: give HOST:PORT, like 127.0.0.1:14551")
-        })?,
-    };
+        })
+    })?;
     if addr.port() == 0 {
         return Err(format!("\"{s}\": port 0 cannot be sent to"));
     }
     Ok(addr)
+}
+
+/// `localhost:PORT` as 127.0.0.1 (`None` for anything else).
+fn localhost(s: &str) -> Option<Result<std::net::SocketAddr, String>> {
+    let port = s.strip_prefix("localhost:")?;
+    Some(
+        port.parse::<u16>()
+            .map(|p| ([127, 0, 0, 1], p).into())
+            .map_err(|_| format!("\"{s}\": the port is not a number from 0 to 65535")),
+    )
 }
 
 /// Arguments of `ringswarm sign-setup`.

@@ -186,13 +186,14 @@ pub(crate) async fn fly(
     }
     drop(web);
     observer.mirrors.drain();
-    for m in observer.mirrors.reports() {
+    let mirrors = observer.mirrors.reports();
+    for m in &mirrors {
         eprintln!(
             "mirror {}: {} datagrams forwarded, {} not sent, {} from it dropped",
             m.address, m.forwarded_datagrams, m.not_sent_datagrams, m.dropped_inbound_datagrams
         );
     }
-    observer.recorder.set_mirrors(observer.mirrors.reports());
+    observer.recorder.set_mirrors(mirrors);
     let (summary, trace) = observer
         .recorder
         .finish(&swarm, now, wall.elapsed().as_secs_f64())

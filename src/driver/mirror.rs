@@ -100,13 +100,9 @@ impl Mirrors {
     /// Reads and drops what the mirrors sent back.
     pub fn drain(&mut self) {
         for m in &mut self.mirrors {
-            loop {
-                match m.socket.recv_from(&mut self.buf) {
-                    Ok(_) => m.report.dropped_inbound_datagrams += 1,
-                    // Nothing more; or an ICMP error of an earlier send (nobody listens).
-                    Err(e) if e.kind() == ErrorKind::WouldBlock => break,
-                    Err(_) => break,
-                }
+            // Until nothing more (or an ICMP error of an earlier send: nobody listens).
+            while m.socket.recv_from(&mut self.buf).is_ok() {
+                m.report.dropped_inbound_datagrams += 1;
             }
         }
     }

@@ -38,6 +38,7 @@ fn checksum(bytes: &[u8], extra_crc: u8) -> u16 {
     digest.update(&[extra_crc]);
     digest.finalize()
 }
+
 /// The longest MAVLink 2 frame: start byte, 9-byte header, 255-byte payload, checksum,
 /// signature. A buffer of this capacity takes any frame without growing.
 pub const MAX_FRAME_LEN: usize = V2_HEADER_LEN + MAX_PAYLOAD_LEN + 2 + SIGNATURE_LEN;
