@@ -1,6 +1,7 @@
 //! Lockstep speed: the coordinator and the emulator exchanging encoded MAVLink frames in
 //! virtual time (1 kHz physics), with and without a run directory being written.
-//! `cargo bench --bench lockstep` prints one table row per case.
+//! `cargo bench --bench lockstep` prints one table row per case; `-- WORD …` keeps the
+//! cases whose name contains one of the words (`-- paper` for the two paper-sim1 rows).
 
 use std::time::{Duration, Instant};
 
@@ -24,7 +25,14 @@ fn main() {
         "| case | vehicles | control | simulated s | wall s | x real time | µs per vehicle per simulated ms |"
     );
     println!("|---|---|---|---|---|---|---|");
+    let words: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with('-'))
+        .collect();
     let row = |name: &str, toml: &str, record: bool, seconds: f64| {
+        if !words.is_empty() && !words.iter().any(|w| name.contains(w.as_str())) {
+            return;
+        }
         let end = SimTime::from_micros((seconds * 1e6) as u64);
         let mut run = lockstep(toml);
         let n = run.vehicles().len();
