@@ -9,6 +9,7 @@
 
 use crc::{CRC_16_MCRF4XX, Crc, Table};
 use mavlink::dialects::common::MavMessage;
+use mavlink::error::ParserError;
 use mavlink::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message};
 
 use crate::signing::{Signing, SigningKey, Trailer};
@@ -134,8 +135,9 @@ impl Iterator for Frames<'_> {
     type Item = Result<Frame, FrameError>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        if let Some(frame) = self.pending.take() {
-            return Some(frame);
+        // Checked before taken: `take` copies the whole (large) slot even when empty.
+        if self.pending.is_some() {
+            return self.pending.take();
         }
         let bytes = self.bytes;
         if self.at >= bytes.len() {
@@ -252,11 +254,15 @@ fn decode_frame(
     };
     let crc_at = header_len + payload_len;
     let received_crc = u16::from_le_bytes([bytes[crc_at], bytes[crc_at + 1]]);
-    if MavMessage::default_message_from_id(msgid).is_none() {
-        return (Err(FrameError::UnknownMessage { msgid }), Some(total));
-    }
     if checksum(&bytes[1..crc_at], MavMessage::extra_crc(msgid)) != received_crc {
-        return (Err(FrameError::BadCrc { msgid }), Some(total));
+        // Only a frame that fails is asked whether its message is known at all (that
+        // builds a default message: too dear for every frame).
+        let error = if MavMessage::default_message_from_id(msgid).is_some() {
+            FrameError::BadCrc { msgid }
+        } else {
+            FrameError::UnknownMessage { msgid }
+        };
+        return (Err(error), Some(total));
     }
     let version = if v2 {
         MavlinkVersion::V2
@@ -276,7 +282,11 @@ fn decode_frame(
             version,
             signature,
         })
-        .map_err(|_| FrameError::BadPayload { msgid });
+        .map_err(|e| match e {
+            // An unknown id whose checksum happened to match with no extra byte.
+            ParserError::UnknownMessage { .. } => FrameError::UnknownMessage { msgid },
+            _ => FrameError::BadPayload { msgid },
+        });
     (result, Some(total))
 }
 
@@ -596,6 +606,14 @@ pub(crate) mod tests {
         unknown[7] = 0x39; // id 0x30039, not in common
         unknown[8] = 0x00;
         unknown[9] = 0x03;
+        assert_eq!(
+            decode_datagram(&unknown),
+            vec![Err(FrameError::UnknownMessage { msgid: 0x30039 })]
+        );
+        // Its checksum made right (an unknown id has no extra byte): still unknown.
+        let crc_at = unknown.len() - 2;
+        let crc = checksum(&unknown[1..crc_at], 0).to_le_bytes();
+        unknown[crc_at..].copy_from_slice(&crc);
         assert_eq!(
             decode_datagram(&unknown),
             vec![Err(FrameError::UnknownMessage { msgid: 0x30039 })]
