@@ -12,7 +12,7 @@ fn main() {
     );
     println!("|---|---|---|---|---|");
     for profile in Profile::all() {
-        let frame = Airframe::new(profile.clone());
+        let mut frame = Airframe::new(profile.clone());
         let env = Environment {
             ground_z_ned_m: 0.0,
             ..Default::default()

@@ -168,7 +168,7 @@ mod tests {
     /// Flies a roll step from level and returns (overshoot fraction, settling time to
     /// within 2 % of the step).
     fn roll_step(profile: Profile, step_rad: f64) -> (f64, f64) {
-        let frame = Airframe::new(profile.clone());
+        let mut frame = Airframe::new(profile.clone());
         let hover = profile.hover_throttle();
         let mut state = BodyState::at_rest(Vector3::new(0.0, 0.0, -100.0));
         state.motor_thrust_n = Vector4::repeat(profile.mass_kg * GRAVITY_MPS2 / 4.0);

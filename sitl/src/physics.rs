@@ -73,6 +73,9 @@ pub struct Airframe {
     allocation: Matrix4<f64>,
     /// Its inverse.
     mixing: Matrix4<f64>,
+    /// The motor lag's decay `e^(−dt/τ)` over the last step length `dt` (s), kept so that
+    /// fixed steps pay the exponential once: `(dt, decay)`.
+    motor_decay: (f64, f64),
 }
 
 /// Motor positions in FRD (x, y) for PX4's quad X, and the yaw reaction sign.
@@ -101,6 +104,7 @@ impl Airframe {
             profile,
             allocation,
             mixing,
+            motor_decay: (0.0, 1.0),
         }
     }
 
@@ -116,7 +120,8 @@ impl Airframe {
     pub fn mix(&self, thrust_n: f64, torque_frd_nm: Vector3<f64>) -> Vector4<f64> {
         let max = self.profile.max_motor_thrust_n;
         let collective = (thrust_n / 4.0).clamp(0.0, max);
-        let roll_pitch = self.mixing * Vector4::new(0.0, torque_frd_nm.x, torque_frd_nm.y, 0.0);
+        let roll_pitch =
+            self.mixing.column(1) * torque_frd_nm.x + self.mixing.column(2) * torque_frd_nm.y;
         // Largest share of roll/pitch that fits between 0 and max once the collective may
         // be lowered: the spread must fit, and no motor may go below zero.
         let spread = roll_pitch.max() - roll_pitch.min();
@@ -129,7 +134,7 @@ impl Airframe {
         if over > 0.0 {
             thrusts.add_scalar_mut(-over);
         }
-        let yaw = self.mixing * Vector4::new(0.0, 0.0, 0.0, torque_frd_nm.z);
+        let yaw = self.mixing.column(3) * torque_frd_nm.z;
         let yaw_scale = thrusts
             .iter()
             .zip(yaw.iter())
@@ -170,7 +175,7 @@ impl Airframe {
     /// Advances the state by `dt_s` under motor thrust commands `motor_cmd_n` (held
     /// constant over the step), then applies the ground contact.
     pub fn step(
-        &self,
+        &mut self,
         s: &BodyState,
         motor_cmd_n: &Vector4<f64>,
         env: &Environment,
@@ -180,7 +185,14 @@ impl Airframe {
         let (accel, rate_dot) = self.accelerations(s, env);
         let vel = s.vel_ned_mps + accel * dt_s;
         let half_turn = Quaternion::from_parts(1.0, s.rate_frd_rps * (0.5 * dt_s));
-        let decay = (-dt_s / self.profile.motor_time_constant_s).exp();
+        let decay = match self.motor_decay {
+            (dt, decay) if dt == dt_s => decay,
+            _ => {
+                let decay = (-dt_s / self.profile.motor_time_constant_s).exp();
+                self.motor_decay = (dt_s, decay);
+                decay
+            }
+        };
         let mut next = BodyState {
             pos_ned_m: s.pos_ned_m + (s.vel_ned_mps + vel) * (0.5 * dt_s),
             vel_ned_mps: vel,
@@ -227,7 +239,7 @@ mod tests {
     #[test]
     fn hover_thrust_holds_altitude_within_a_centimetre_for_ten_seconds() {
         for profile in Profile::all() {
-            let frame = Airframe::new(profile.clone());
+            let mut frame = Airframe::new(profile.clone());
             let hover = profile.mass_kg * GRAVITY_MPS2 / 4.0;
             let mut s = BodyState::at_rest(Vector3::new(0.0, 0.0, -10.0));
             s.motor_thrust_n = Vector4::repeat(hover);
@@ -250,7 +262,7 @@ mod tests {
 
     #[test]
     fn free_fall_after_motor_cut_matches_g() {
-        let frame = Airframe::new(Profile::ideal());
+        let mut frame = Airframe::new(Profile::ideal());
         let mut s = BodyState::at_rest(Vector3::new(0.0, 0.0, -100.0));
         let env = Environment {
             ground_z_ned_m: 0.0,
@@ -266,7 +278,7 @@ mod tests {
 
     #[test]
     fn quaternion_stays_unit_over_a_million_steps() {
-        let frame = Airframe::new(Profile::x500());
+        let mut frame = Airframe::new(Profile::x500());
         let mut s = BodyState::at_rest(Vector3::new(0.0, 0.0, -1e6));
         s.rate_frd_rps = Vector3::new(3.0, -2.0, 1.5);
         let env = Environment {
@@ -281,7 +293,7 @@ mod tests {
 
     #[test]
     fn ground_holds_a_vehicle_without_thrust_at_zero_height() {
-        let frame = Airframe::new(Profile::x500());
+        let mut frame = Airframe::new(Profile::x500());
         let env = Environment {
             ground_z_ned_m: 0.0,
             ..Default::default()
@@ -304,7 +316,7 @@ mod tests {
     #[test]
     fn full_thrust_lifts_off_the_ground() {
         let profile = Profile::x500();
-        let frame = Airframe::new(profile.clone());
+        let mut frame = Airframe::new(profile.clone());
         let env = Environment {
             ground_z_ned_m: 0.0,
             ..Default::default()
@@ -354,7 +366,7 @@ mod tests {
     #[test]
     fn drag_pulls_velocity_towards_the_wind() {
         let profile = Profile::x500();
-        let frame = Airframe::new(profile.clone());
+        let mut frame = Airframe::new(profile.clone());
         let hover = profile.mass_kg * GRAVITY_MPS2 / 4.0;
         let mut s = BodyState::at_rest(Vector3::new(0.0, 0.0, -50.0));
         s.motor_thrust_n = Vector4::repeat(hover);

@@ -81,7 +81,7 @@ fn fly(
     seconds: f64,
 ) -> Vec<(Vector3<f64>, Vector3<f64>)> {
     const DT: f64 = 1e-3;
-    let frame = Airframe::new(profile.clone());
+    let mut frame = Airframe::new(profile.clone());
     let params = MpcParams::px4_defaults(profile.hover_throttle());
     let mut state = BodyState::at_rest(Vector3::new(0.0, 0.0, -50.0));
     state.motor_thrust_n = Vector4::repeat(profile.mass_kg * GRAVITY_MPS2 / 4.0);
