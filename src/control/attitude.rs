@@ -67,10 +67,12 @@ pub fn attitude_thrust_from_acceleration(
     }
 }
 
-/// The tilt of an attitude: the angle between the body z axis and the vertical (rad).
-pub fn tilt_rad(attitude_ned_frd: &UnitQuaternion<f64>) -> f64 {
-    let body_z = attitude_ned_frd * Vector3::z();
-    body_z.z.clamp(-1.0, 1.0).acos()
+/// The cosine of an attitude's tilt (the angle between the body z axis and the vertical):
+/// the body z axis's vertical component, `1 − 2(x² + y²)` of the quaternion (no
+/// trigonometry).
+pub fn tilt_cos(attitude_ned_frd: &UnitQuaternion<f64>) -> f64 {
+    let q = attitude_ned_frd.quaternion();
+    (1.0 - 2.0 * (q.i * q.i + q.j * q.j)).clamp(-1.0, 1.0)
 }
 
 #[cfg(test)]
@@ -169,6 +171,22 @@ mod tests {
             assert!((sp.thrust_n - 1.5 * GRAVITY_MPS2).abs() < 1e-12);
             let (roll, pitch, yaw) = euler_ned_frd(&sp.attitude_ned_frd);
             assert!(roll.abs() < 1e-12 && pitch.abs() < 1e-12 && (yaw - 0.3).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn tilt_cosine_is_the_body_z_axis_vertical_component() {
+        for (roll, pitch, yaw) in [
+            (0.0, 0.0, 0.0),
+            (0.3, -0.2, 2.0),
+            (FRAC_PI_2, 0.0, 1.0),
+            (2.5, 0.4, -3.0),
+        ] {
+            let q = UnitQuaternion::from_euler_angles(roll, pitch, yaw);
+            // Roll then pitch about the rotated axes: cos(tilt) = cos(roll)·cos(pitch).
+            let expected = f64::cos(roll) * f64::cos(pitch);
+            assert!((tilt_cos(&q) - expected).abs() < 1e-12, "{roll} {pitch}");
+            assert!((tilt_cos(&q) - (q * Vector3::z()).z).abs() < 1e-12);
         }
     }
 }

@@ -12,7 +12,7 @@ mod hover;
 mod vehicle;
 
 pub use altitude::AltitudeGains;
-pub use attitude::{AttitudeThrust, attitude_thrust_from_acceleration, tilt_rad};
+pub use attitude::{AttitudeThrust, attitude_thrust_from_acceleration, tilt_cos};
 pub use envelope::{Envelope, SaturationMode, SaturationSummary, saturate, saturate_with};
 pub use frames::{enu_to_ned, euler_ned_frd, ned_to_enu, quaternion_to_wxyz};
 pub use hover::HoverThrustEkf;

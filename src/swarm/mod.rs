@@ -42,6 +42,7 @@ mod tick;
 pub mod timing;
 
 use nalgebra::{Vector2, Vector3};
+use ringswarm_wire::geo::Geodetic;
 use ringswarm_wire::time::SimTime;
 
 use std::cmp::Reverse;
@@ -150,6 +151,9 @@ pub struct Swarm {
     law_commands: Vec<Vector3<f64>>,
     setpoints: Vec<AttitudeThrust>,
     states: Vec<Option<CommonState>>,
+    /// Each link's origin with its NED offset (m) from the common reference, projected
+    /// once when the origin is learnt (not at every use: the projection costs trigonometry).
+    origin_offsets: Vec<Option<(Geodetic, Vector3<f64>)>>,
     w: Vec<f64>,
     saturated_ticks: u64,
     consensus_ticks: u64,
@@ -241,6 +245,7 @@ impl Swarm {
             law_commands: vec![Vector3::zeros(); n],
             setpoints,
             states: vec![None; n],
+            origin_offsets: vec![None; n],
             saturated_ticks: 0,
             consensus_ticks: 0,
             ready: VecDeque::with_capacity(n),
@@ -392,11 +397,15 @@ impl Swarm {
     pub fn common_state(&self, i: usize) -> Option<CommonState> {
         let state = self.links[i].state();
         let origin = state.origin?;
-        Some(CommonState {
-            pos_enu_m: self
+        let pos_common_ned_m = match self.origin_offsets[i] {
+            Some((known, offset_ned_m)) if known == origin => offset_ned_m + state.pos_local_ned_m,
+            _ => self
                 .setup
                 .frame
-                .to_common_enu(&origin, &state.pos_local_ned_m),
+                .to_common_ned(&origin, &state.pos_local_ned_m),
+        };
+        Some(CommonState {
+            pos_enu_m: crate::control::ned_to_enu(pos_common_ned_m),
             vel_enu_mps: crate::control::ned_to_enu(state.vel_ned_mps),
         })
     }
@@ -508,6 +517,11 @@ impl Swarm {
         let Some(link) = self.links.get(i) else {
             return;
         };
+        if let Some(origin) = link.state().origin
+            && self.origin_offsets[i].is_none_or(|(known, _)| known != origin)
+        {
+            self.origin_offsets[i] = Some((origin, self.setup.frame.offset_ned_m(&origin)));
+        }
         if link.has_output() && !self.queued[i] {
             self.queued[i] = true;
             self.ready.push_back(i);

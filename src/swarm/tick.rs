@@ -7,7 +7,7 @@ use ringswarm_wire::time::SimTime;
 
 use super::{Swarm, SwarmPhase};
 use crate::consensus::HorizontalState;
-use crate::control::{attitude_thrust_from_acceleration, enu_to_ned, saturate_with, tilt_rad};
+use crate::control::{attitude_thrust_from_acceleration, enu_to_ned, saturate_with, tilt_cos};
 use crate::swarm::SetpointKind;
 use crate::vehicle::{Phase, Setpoint};
 
@@ -95,7 +95,7 @@ impl Swarm {
             {
                 // The thrust's vertical part on the reported tilt: the vehicle's attitude
                 // may lag the command, its motors hardly.
-                self.flown[i].commanded(sp.thrust_norm * tilt_rad(&q).cos());
+                self.flown[i].commanded(sp.thrust_norm * tilt_cos(&q));
             }
         }
         // The links' events are drained by `handle_timeout` right after.
