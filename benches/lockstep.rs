@@ -1,14 +1,24 @@
 //! Lockstep speed: the coordinator and the emulator exchanging encoded MAVLink frames in
 //! virtual time (1 kHz physics), with and without a run directory being written.
-//! `cargo bench --bench lockstep` prints one table row per case; `-- WORD …` keeps the
-//! cases whose name contains one of the words (`-- paper` for the two paper-sim1 rows).
+//! `cargo bench --bench lockstep` prints two tables: the speed of each case, then where
+//! the time goes in three of them next to the floor of the work they cannot avoid.
+//! `-- WORD …` keeps the cases whose name contains one of the words (`-- paper`).
 
+use std::hint::black_box;
 use std::time::{Duration, Instant};
 
+use nalgebra::{UnitQuaternion, Vector2, Vector3, Vector4};
 use ringswarm::config::Config;
-use ringswarm::driver::lockstep::Lockstep;
+use ringswarm::consensus::{HorizontalState, ring_accelerations};
+use ringswarm::control::{attitude_thrust_from_acceleration, saturate_with};
+use ringswarm::driver::Observer;
+use ringswarm::driver::lockstep::{Lockstep, PhaseTimes};
 use ringswarm::record::Recorder;
-use ringswarm::swarm::Swarm;
+use ringswarm::swarm::{Swarm, SwarmSetup};
+use ringswarm_sitl::control::{AttitudeCommand, AttitudeController, AttitudeSetpoint};
+use ringswarm_sitl::physics::{Airframe, BodyState, Environment};
+use ringswarm_sitl::profile::{GRAVITY_MPS2, Profile};
+use ringswarm_wire::codec::{Encoder, frames};
 use ringswarm_wire::time::SimTime;
 
 mod common;
@@ -18,71 +28,259 @@ fn lockstep(toml: &str) -> Lockstep {
     Lockstep::from_config(&Config::from_toml(toml).expect("scenario parses")).expect("scenario")
 }
 
-fn main() {
-    let sim1 = include_str!("../config/paper-sim1.toml");
-    let full = 61.2; // handshake (1.2 s) + the paper's 60 s
-    println!(
-        "| case | vehicles | control | simulated s | wall s | x real time | µs per vehicle per simulated ms |"
+/// One case of the tables.
+struct Case {
+    name: &'static str,
+    toml: String,
+    seconds: f64,
+    /// Also measured with a run directory, and broken down into parts.
+    breakdown: bool,
+}
+
+/// What a run measured.
+struct Run {
+    n: usize,
+    rate_hz: f64,
+    wall: Duration,
+    phases: Option<PhaseTimes>,
+}
+
+/// How a case is run.
+#[derive(Clone, Copy, PartialEq)]
+enum How {
+    Plain,
+    RunDirectory,
+    PhaseClock,
+}
+
+fn fly(case: &Case, how: How) -> Run {
+    let end = SimTime::from_micros((case.seconds * 1e6) as u64);
+    let mut run = lockstep(&case.toml);
+    let n = run.vehicles().len();
+    let rate_hz = 1.0 / run.swarm().setup().control_interval.as_secs_f64();
+    let dir = std::env::temp_dir().join(format!("ringswarm-bench-{}", std::process::id()));
+    if how == How::PhaseClock {
+        run.keep_phase_times();
+    }
+    let start = Instant::now();
+    if how == How::RunDirectory {
+        let mut recorder = Recorder::create(&dir, run.swarm(), 0).expect("temp dir");
+        struct Rec<'a>(&'a mut Recorder);
+        impl Observer for Rec<'_> {
+            fn datagram(&mut self, now: SimTime, _: usize, _: bool, bytes: &[u8]) {
+                self.0.datagram(now, bytes);
+            }
+            fn swarm(&mut self, swarm: &Swarm, now: SimTime) {
+                self.0.sample(swarm, now);
+            }
+        }
+        run.run_observed(end, &mut Rec(&mut recorder));
+        let wall = start.elapsed();
+        let _ = recorder
+            .finish(run.swarm(), run.now(), wall.as_secs_f64())
+            .expect("summary");
+    } else {
+        run.run_until(end, |_| {});
+    }
+    let wall = start.elapsed();
+    let _ = std::fs::remove_dir_all(&dir);
+    Run {
+        n,
+        rate_hz,
+        wall,
+        phases: run.phase_times(),
+    }
+}
+
+/// Every datagram of a case's flight, both ways, as the coordinator sent or received it.
+fn traffic(case: &Case) -> Vec<Vec<u8>> {
+    struct Capture(Vec<Vec<u8>>);
+    impl Observer for Capture {
+        fn datagram(&mut self, _: SimTime, _: usize, _: bool, bytes: &[u8]) {
+            self.0.push(bytes.to_vec());
+        }
+    }
+    let mut capture = Capture(Vec::new());
+    lockstep(&case.toml).run_observed(
+        SimTime::from_micros((case.seconds * 1e6) as u64),
+        &mut capture,
     );
-    println!("|---|---|---|---|---|---|---|");
+    capture.0
+}
+
+/// The codec's floor: every datagram of the flight decoded and each frame encoded again,
+/// as the two sides do once each (ns in all).
+fn codec_ns(traffic: &[Vec<u8>]) -> f64 {
+    let mut encoder = Encoder::new(1, 1);
+    let mut out = Vec::with_capacity(300);
+    let start = Instant::now();
+    for datagram in traffic {
+        for frame in frames(datagram, None).flatten() {
+            out.clear();
+            encoder.encode_into(&frame.msg, None, &mut out);
+            black_box(&out);
+        }
+    }
+    start.elapsed().as_nanos() as f64
+}
+
+/// The physics' floor: one vehicle's airframe and inner loops (attitude and rate
+/// control, mixer) for one 1 ms step, holding a 10° bank at hover thrust (ns).
+fn physics_ns_per_step() -> f64 {
+    let profile = Profile::ideal();
+    let mut frame = Airframe::new(profile.clone());
+    let mut controller = AttitudeController::default();
+    let mut state = BodyState::at_rest(Vector3::new(0.0, 0.0, -1e6));
+    state.motor_thrust_n = Vector4::repeat(profile.mass_kg * GRAVITY_MPS2 / 4.0);
+    let env = Environment {
+        ground_z_ned_m: 0.0,
+        ..Default::default()
+    };
+    let command = AttitudeCommand::Attitude {
+        setpoint: AttitudeSetpoint {
+            attitude: UnitQuaternion::from_euler_angles(10f64.to_radians(), 0.0, 0.3),
+            thrust_norm: profile.hover_throttle(),
+        },
+        yawspeed_ff_rps: 0.0,
+    };
+    let steps = 2_000_000;
+    let start = Instant::now();
+    for _ in 0..steps {
+        let motors = controller.update_command(&frame, &state, black_box(&command), 1e-3);
+        state = frame.step(&state, &motors, &env, 1e-3);
+    }
+    black_box(state);
+    start.elapsed().as_nanos() as f64 / f64::from(steps)
+}
+
+/// The law's floor: one control tick of the whole swarm in formation (ring coupling,
+/// altitude loop, swarm-wide saturation, attitude and thrust of each vehicle), in ns.
+fn law_ns_per_tick(setup: &SwarmSetup) -> f64 {
+    let n = setup.offsets_m.len();
+    let states: Vec<HorizontalState> = setup
+        .offsets_m
+        .iter()
+        .map(|d| HorizontalState {
+            pos_m: d + Vector2::new(3.0, -2.0),
+            vel_mps: Vector2::new(2.0, 0.5),
+            offset_m: *d,
+        })
+        .collect();
+    let w: Vec<f64> = (0..n).map(|i| setup.ring.w(i)).collect();
+    let mut accel = vec![Vector2::zeros(); n];
+    let mut commands = vec![Vector3::zeros(); n];
+    let mut boxes = Vec::with_capacity(n);
+    let ticks = (200_000 / n).max(20);
+    let start = Instant::now();
+    for _ in 0..ticks {
+        ring_accelerations(&setup.ring, setup.gains, black_box(&states), &mut accel);
+        for (i, c) in commands.iter_mut().enumerate() {
+            let u_z = setup
+                .altitude_gains
+                .acceleration_with(49.9, 0.1, setup.altitude_m, 0.0);
+            *c = Vector3::new(accel[i].x, accel[i].y, u_z);
+        }
+        let _ = saturate_with(
+            setup.saturation,
+            &setup.envelope,
+            &setup.models,
+            &w,
+            &mut commands,
+            &mut boxes,
+        );
+        for (c, model) in commands.iter().zip(&setup.models) {
+            black_box(attitude_thrust_from_acceleration(*c, 0.0, model));
+        }
+    }
+    start.elapsed().as_nanos() as f64 / ticks as f64
+}
+
+fn main() {
     let words: Vec<String> = std::env::args()
         .skip(1)
         .filter(|a| !a.starts_with('-'))
         .collect();
-    let row = |name: &str, toml: &str, record: bool, seconds: f64| {
-        if !words.is_empty() && !words.iter().any(|w| name.contains(w.as_str())) {
-            return;
-        }
-        let end = SimTime::from_micros((seconds * 1e6) as u64);
-        let mut run = lockstep(toml);
-        let n = run.vehicles().len();
-        let rate = 1.0 / run.swarm().setup().control_interval.as_secs_f64();
-        let dir = std::env::temp_dir().join(format!("ringswarm-bench-{}", std::process::id()));
-        let start = Instant::now();
-        if record {
-            let mut recorder = Recorder::create(&dir, run.swarm(), 0).expect("temp dir");
-            struct Rec<'a>(&'a mut Recorder);
-            impl ringswarm::driver::Observer for Rec<'_> {
-                fn datagram(&mut self, now: SimTime, _: usize, _: bool, bytes: &[u8]) {
-                    self.0.datagram(now, bytes);
-                }
-                fn swarm(&mut self, swarm: &Swarm, now: SimTime) {
-                    self.0.sample(swarm, now);
-                }
-            }
-            run.run_observed(end, &mut Rec(&mut recorder));
-            let wall = start.elapsed();
-            let _ = recorder
-                .finish(run.swarm(), run.now(), wall.as_secs_f64())
-                .expect("summary");
-        } else {
-            run.run_until(end, |_| {});
-        }
-        let wall = start.elapsed();
-        let _ = std::fs::remove_dir_all(&dir);
-        print_row(name, n, rate, seconds, wall);
+    let full = 61.2; // handshake (1.2 s) + the paper's 60 s
+    let case = |name, toml, seconds, breakdown| Case {
+        name,
+        toml,
+        seconds,
+        breakdown,
     };
-    row("paper-sim1", sim1, false, full);
-    row("paper-sim1 + run directory", sim1, true, full);
-    row("ring of 6", &ring(6, 250.0), false, full);
-    row("ring of 16", &ring(16, 250.0), false, full);
-    row("ring of 64", &ring(64, 250.0), false, full);
-    row("ring of 64, 50 Hz", &ring(64, 50.0), false, full);
-    row("ring of 250, 50 Hz", &ring(250, 50.0), false, 20.0);
-    row("ring of 1000, 50 Hz", &ring(1000, 50.0), false, 5.0);
-    row(
-        "ring of 1000, 50 Hz + run directory",
-        &ring(1000, 50.0),
-        true,
-        5.0,
+    let cases: Vec<Case> = [
+        case(
+            "paper-sim1",
+            include_str!("../config/paper-sim1.toml").to_string(),
+            full,
+            true,
+        ),
+        case("ring of 6", ring(6, 250.0), full, false),
+        case("ring of 16", ring(16, 250.0), full, false),
+        case("ring of 64", ring(64, 250.0), full, true),
+        case("ring of 64, 50 Hz", ring(64, 50.0), full, false),
+        case("ring of 250, 50 Hz", ring(250, 50.0), 20.0, false),
+        case("ring of 1000, 50 Hz", ring(1000, 50.0), 5.0, true),
+    ]
+    .into_iter()
+    .filter(|c| words.is_empty() || words.iter().any(|w| c.name.contains(w.as_str())))
+    .collect();
+
+    println!(
+        "| case | vehicles | control | simulated s | wall s | x real time | µs per vehicle per simulated ms |"
     );
+    println!("|---|---|---|---|---|---|---|");
+    let mut breakdowns = Vec::new();
+    for c in &cases {
+        let plain = fly(c, How::Plain);
+        print_row(c.name, &plain, c.seconds);
+        if c.breakdown {
+            let recorded = fly(c, How::RunDirectory);
+            print_row(&format!("{} + run directory", c.name), &recorded, c.seconds);
+            breakdowns.push((c, plain, recorded));
+        }
+    }
+    if breakdowns.is_empty() {
+        return;
+    }
+
+    println!();
+    println!(
+        "| case | total | emulated vehicles | coordinator | delivery | run directory | physics floor | law floor | codec floor | floor sum | total / floor |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    let physics = physics_ns_per_step() / 1e3;
+    for (c, plain, recorded) in breakdowns {
+        let vehicle_ms = plain.n as f64 * c.seconds * 1e3;
+        let per = |d: Duration| d.as_secs_f64() * 1e6 / vehicle_ms;
+        let clocked = fly(c, How::PhaseClock);
+        let phases = clocked.phases.expect("phase clock");
+        let setup = Config::from_toml(&c.toml)
+            .and_then(|cfg| cfg.validate())
+            .expect("scenario");
+        let law = law_ns_per_tick(&setup) / 1e3 * plain.rate_hz * c.seconds / vehicle_ms;
+        let codec = codec_ns(&traffic(c)) / 1e3 / vehicle_ms;
+        let total = per(plain.wall);
+        let floor = physics + law + codec;
+        println!(
+            "| {} | {total:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {physics:.3} | {law:.3} | {codec:.3} | {floor:.3} | {:.1} |",
+            c.name,
+            per(phases.vehicles),
+            per(phases.coordinator),
+            per(phases.delivery),
+            per(recorded.wall.saturating_sub(plain.wall)),
+            total / floor,
+        );
+    }
 }
 
-fn print_row(name: &str, n: usize, rate: f64, seconds: f64, wall: Duration) {
-    let w = wall.as_secs_f64();
+fn print_row(name: &str, run: &Run, seconds: f64) {
+    let w = run.wall.as_secs_f64();
+    let speed = seconds / w;
+    let digits = if speed < 10.0 { 1 } else { 0 };
     println!(
-        "| {name} | {n} | {rate:.0} Hz | {seconds:.1} | {w:.3} | {:.0} | {:.2} |",
-        seconds / w,
-        w * 1e6 / (n as f64 * seconds * 1e3)
+        "| {name} | {} | {:.0} Hz | {seconds:.1} | {w:.3} | {speed:.digits$} | {:.2} |",
+        run.n,
+        run.rate_hz,
+        w * 1e6 / (run.n as f64 * seconds * 1e3)
     );
 }

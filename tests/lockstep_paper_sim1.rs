@@ -104,7 +104,23 @@ fn two_runs_with_the_same_seed_are_identical_bit_for_bit() {
             .all(|(p, q)| p.iter().zip(q).all(|(a, b)| a.to_bits() == b.to_bits()))
     };
     let a = trajectory(&mut build(lossy(7)), 6);
-    let b = trajectory(&mut build(lossy(7)), 6);
+    // The second run keeps its phase times (a benchmark's clock): the same flight, and
+    // the phases account for the wall time of the run, no more.
+    let mut timed = build(lossy(7));
+    assert_eq!(timed.phase_times(), None);
+    timed.keep_phase_times();
+    let wall = std::time::Instant::now();
+    let b = trajectory(&mut timed, 6);
+    let wall = wall.elapsed();
+    let phases = timed.phase_times().expect("kept");
+    for (name, t) in [
+        ("vehicles", phases.vehicles),
+        ("coordinator", phases.coordinator),
+        ("delivery", phases.delivery),
+    ] {
+        assert!(t > Duration::ZERO, "no time in {name}");
+    }
+    assert!(phases.vehicles + phases.coordinator + phases.delivery <= wall);
     let c = trajectory(&mut build(lossy(8)), 6);
     assert_eq!(a.len(), 6 * 61); // t = 1 ms, then every 100 ms up to 6 s
     assert!(same(&a, &b), "same seed, different trajectories");

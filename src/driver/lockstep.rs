@@ -9,6 +9,7 @@
 //! frames, and what the router cannot deliver is dropped.
 
 use std::collections::VecDeque;
+use std::time::{Duration, Instant};
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -65,6 +66,27 @@ struct Routing {
     pieces: Vec<(usize, Range<usize>)>,
 }
 
+/// Wall time the lockstep loop spent in each of its phases, kept once asked for
+/// ([`Lockstep::keep_phase_times`]): where a benchmark's time goes.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// The vehicles' steps: physics, inner loops, autopilot, telemetry built and encoded.
+    pub vehicles: Duration,
+    /// The coordinator's timers and control ticks: the law, the saturation, setpoints
+    /// built and encoded.
+    pub coordinator: Duration,
+    /// Datagrams carried both ways: the link conditions, decoding, each side's handling
+    /// of what it received. An observer's work counts in the phase that calls it.
+    pub delivery: Duration,
+}
+
+/// The clock behind [`PhaseTimes`].
+#[derive(Debug, Clone, Copy)]
+struct PhaseClock {
+    times: PhaseTimes,
+    lap_start: Instant,
+}
+
 /// The coordinator and its vehicles in one virtual world.
 #[derive(Debug)]
 pub struct Lockstep {
@@ -80,6 +102,7 @@ pub struct Lockstep {
     unsent: u64,
     /// Step the vehicles on every core (see [`Lockstep::set_parallel`]).
     parallel: bool,
+    clock: Option<PhaseClock>,
 }
 
 /// From this many vehicles on, they are stepped on every core: below, handing work to
@@ -101,6 +124,30 @@ impl Lockstep {
             routing: None,
             unsent: 0,
             parallel: n >= PARALLEL_FROM,
+            clock: None,
+        }
+    }
+
+    /// From now on, adds up the wall time of each phase of the loop ([`PhaseTimes`]); a
+    /// few clock reads per step, and the flight is the same.
+    pub fn keep_phase_times(&mut self) {
+        self.clock = Some(PhaseClock {
+            times: PhaseTimes::default(),
+            lap_start: Instant::now(),
+        });
+    }
+
+    /// The phase times kept so far (none unless [`Lockstep::keep_phase_times`] was called).
+    pub fn phase_times(&self) -> Option<PhaseTimes> {
+        self.clock.map(|c| c.times)
+    }
+
+    /// Adds the time since the last lap to one phase.
+    fn lap(&mut self, phase: fn(&mut PhaseTimes) -> &mut Duration) {
+        if let Some(clock) = &mut self.clock {
+            let now = Instant::now();
+            *phase(&mut clock.times) += now - clock.lap_start;
+            clock.lap_start = now;
         }
     }
 
@@ -203,6 +250,7 @@ impl Lockstep {
     fn step_observed(&mut self, observer: &mut impl Observer) {
         self.now = self.now + PHYSICS_STEP;
         let now = self.now;
+        self.lap(|t| &mut t.delivery); // the caller's observer, between steps
         if self.parallel {
             use rayon::iter::{IntoParallelRefMutIterator, ParallelIterator};
             self.vehicles
@@ -213,6 +261,7 @@ impl Lockstep {
                 v.handle_timeout(now);
             }
         }
+        self.lap(|t| &mut t.vehicles);
         for i in 0..self.vehicles.len() {
             while let Some(tx) = self.vehicles[i].poll_transmit() {
                 if tx.link == LinkId::Offboard {
@@ -226,6 +275,7 @@ impl Lockstep {
             while self.vehicles[i].poll_event().is_some() {}
         }
         self.deliver(now, observer);
+        self.lap(|t| &mut t.delivery);
         if now >= self.swarm.poll_timeout() {
             self.swarm.handle_timeout(now);
         }
@@ -239,7 +289,9 @@ impl Lockstep {
                 }
             }
         }
+        self.lap(|t| &mut t.coordinator);
         self.deliver(now, observer);
+        self.lap(|t| &mut t.delivery);
     }
 
     /// Puts a datagram from a third party on vehicle `index`'s link, delivered with the
