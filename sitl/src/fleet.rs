@@ -116,11 +116,15 @@ async fn run_fleet(
     let mut slots: Vec<Slot> = Vec::with_capacity(vehicles.len());
     for (boot_offset, v) in vehicles {
         let ids: Vec<LinkId> = v.links.iter().map(|l| l.id).collect();
+        let mut vehicle = v.vehicle;
+        for link in [LinkId::Offboard, LinkId::Gcs] {
+            vehicle.set_link_wired(link, ids.contains(&link));
+        }
         let defaults: Vec<SocketAddr> = v.links.iter().map(|l| l.default_peer).collect();
         let faults: Vec<LinkFaults> = v.links.iter().map(|l| l.faults).collect();
         let sockets = v.links.into_iter().map(|l| l.socket).collect();
         slots.push(Slot {
-            vehicle: v.vehicle,
+            vehicle,
             sockets,
             ids,
             partners: defaults.iter().copied().map(Partner::new).collect(),

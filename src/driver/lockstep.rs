@@ -111,8 +111,12 @@ const PARALLEL_FROM: usize = 128;
 
 impl Lockstep {
     /// Pairs the swarm's links with `vehicles` (link `i` talks to vehicle `i`'s offboard link).
-    pub fn new(swarm: Swarm, vehicles: Vec<Vehicle>, conditions: LinkConditions) -> Self {
+    pub fn new(swarm: Swarm, mut vehicles: Vec<Vehicle>, conditions: LinkConditions) -> Self {
         let n = vehicles.len();
+        // Only the offboard links are carried: nothing is built for the ground station's.
+        for v in &mut vehicles {
+            v.set_link_wired(LinkId::Gcs, false);
+        }
         Self {
             swarm,
             vehicles,

@@ -173,6 +173,8 @@ struct Link {
     /// No stream is due before this (a lower bound: the table is scanned only then).
     streams_due: SimTime,
     last_heard: Option<SimTime>,
+    /// Whether a driver carries this link's frames (see [`Vehicle::set_link_wired`]).
+    wired: bool,
 }
 
 /// The battery model.
@@ -268,6 +270,7 @@ impl Vehicle {
             streams: telemetry::default_streams(cfg.fast_rate_hz),
             streams_due: SimTime::ZERO,
             last_heard: None,
+            wired: true,
         });
         let rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         let nav = if in_air {
@@ -338,7 +341,11 @@ impl Vehicle {
         // The key and its clock are stored, not configured: they survive; the stream
         // table is memory and does not.
         let signing = self.signing_key();
+        let wired = self.links.each_ref().map(|l| l.wired);
         *self = fresh;
+        for (link, wired) in self.links.iter_mut().zip(wired) {
+            link.wired = wired;
+        }
         self.signing = signing.map(|s| ringswarm_wire::signing::Signing::new(s.key, s.timestamp));
         self.last_step = now;
         self.boot_at = now;
@@ -368,6 +375,13 @@ impl Vehicle {
     /// The next frame to send, if any.
     pub fn poll_transmit(&mut self) -> Option<Transmit> {
         self.outbox.pop_front()
+    }
+
+    /// Whether a driver carries `link`'s frames (both links are wired at boot, as in
+    /// PX4's SITL layout). A driver that serves only the offboard link unwires the other:
+    /// nothing is built or encoded for it, streams or replies (a reboot keeps the wiring).
+    pub fn set_link_wired(&mut self, link: LinkId, wired: bool) {
+        self.links[link as usize].wired = wired;
     }
 
     /// Gives a sent frame's buffer back for the next one: a driver that does so makes

@@ -82,6 +82,9 @@ fn is_known(msg_id: u32) -> bool {
 impl Vehicle {
     /// Encodes `msg` for `link` and queues it.
     pub(super) fn send(&mut self, link: LinkId, msg: &MavMessage) {
+        if !self.links[link as usize].wired {
+            return;
+        }
         let signing = self
             .signing
             .as_mut()
@@ -118,7 +121,7 @@ impl Vehicle {
             }
         }
         for link in [LinkId::Offboard, LinkId::Gcs] {
-            if self.links[link as usize].streams_due > now {
+            if self.links[link as usize].streams_due > now || !self.links[link as usize].wired {
                 continue;
             }
             let mut earliest = SimTime::MAX;

@@ -358,6 +358,51 @@ fn message_interval_changes_the_rate_on_that_link_only() {
 }
 
 #[test]
+fn an_unwired_link_gets_nothing_and_the_other_is_unchanged_across_a_reboot() {
+    let mut rig = Rig::on_ground();
+    rig.vehicle.set_link_wired(LinkId::Gcs, false);
+    let count = |rig: &Rig, link: LinkId, name: &str| {
+        rig.received
+            .iter()
+            .filter(|(_, l, m)| *l == link && mavlink::Message::message_name(m) == name)
+            .count()
+    };
+    rig.advance(Duration::from_secs(2));
+    // The offboard link keeps PX4's default streams (LOCAL_POSITION_NED at 50 Hz: 100 in
+    // 2 s, the first at boot), and a command is answered on it.
+    assert!((100..=101).contains(&count(&rig, LinkId::Offboard, "LOCAL_POSITION_NED")));
+    assert_eq!(
+        rig.command(
+            MavCmd::MAV_CMD_REQUEST_MESSAGE,
+            [148.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+        ),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    assert_eq!(
+        rig.received
+            .iter()
+            .filter(|(_, l, _)| *l == LinkId::Gcs)
+            .count(),
+        0
+    );
+    rig.vehicle.reboot(rig.now);
+    rig.received.clear();
+    rig.advance(Duration::from_secs(1));
+    assert!(count(&rig, LinkId::Offboard, "HEARTBEAT") >= 1);
+    assert_eq!(
+        rig.received
+            .iter()
+            .filter(|(_, l, _)| *l == LinkId::Gcs)
+            .count(),
+        0,
+        "the wiring survives a reboot"
+    );
+    rig.vehicle.set_link_wired(LinkId::Gcs, true);
+    rig.advance(Duration::from_secs(1));
+    assert!(count(&rig, LinkId::Gcs, "HEARTBEAT") >= 1);
+}
+
+#[test]
 fn parameter_list_and_set_are_answered() {
     let mut rig = Rig::on_ground();
     rig.send(MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA {
