@@ -19,6 +19,7 @@
 
 mod fixed;
 pub mod metrics;
+mod rows;
 mod sink;
 pub mod trace;
 
@@ -119,8 +120,6 @@ pub struct Recorder {
     last_tick: u64,
     error: Option<io::Error>,
     mirrors: Vec<metrics::MirrorReport>,
-    /// One CSV line being built (reused: no allocation per row).
-    line: Vec<u8>,
 }
 
 impl Recorder {
@@ -133,21 +132,22 @@ impl Recorder {
         std::fs::create_dir_all(dir)?;
         // Chunks of about a second of rows (a CSV row is ~150 bytes; a thousand vehicles'
         // telemetry is ~6 MB/s of tlog).
-        let mut files = vec![
-            (dir.join("traffic.tlog"), 256 * 1024),
+        let mut files: Vec<(PathBuf, usize, Option<sink::Transcode>)> = vec![
+            (dir.join("traffic.tlog"), 256 * 1024, None),
             // Events go to the disk as they happen: they are few, and they are what is
             // read after a flight that was killed.
-            (dir.join("events.csv"), 1),
+            (dir.join("events.csv"), 1, None),
         ];
         for cfg in &swarm.setup().links {
-            files.push((dir.join(csv_name(cfg)), 8192));
+            // Rows in binary: the writer thread formats them (see `rows`).
+            files.push((dir.join(csv_name(cfg)), 8192, Some(rows::to_csv)));
         }
         let setup = serde_json::to_string_pretty(&RunSetup::of(swarm)).map_err(io::Error::other)?;
         std::fs::write(dir.join("setup.json"), setup + "\n")?;
         let mut sinks = Sinks::create(files)?;
         writeln!(sinks.buffer(EVENTS), "t_s,system_id,network,level,event")?;
         for i in 0..swarm.links().len() {
-            writeln!(sinks.buffer(FIRST_CSV + i), "{CSV_HEADER}")?;
+            rows::push_text(sinks.buffer(FIRST_CSV + i), &format!("{CSV_HEADER}\n"));
         }
         Ok(Self {
             dir: dir.to_owned(),
@@ -160,7 +160,6 @@ impl Recorder {
             last_tick: 0,
             error: None,
             mirrors: Vec::new(),
-            line: Vec::with_capacity(256),
         })
     }
 
@@ -241,47 +240,31 @@ impl Recorder {
             let Some(s) = swarm.common_state(i) else {
                 continue;
             };
-            let (roll, pitch, yaw) = link
-                .state()
-                .attitude
-                .map_or((f64::NAN, f64::NAN, f64::NAN), |q| q.euler_angles());
+            let wijk = |q: &nalgebra::UnitQuaternion<f64>| [q.w, q.i, q.j, q.k];
             let c = swarm.commands()[i];
             let sp = swarm.setpoints()[i];
-            let (sp_roll, sp_pitch, _) = sp.attitude_ned_frd.euler_angles();
-            let age_ms = link
-                .state()
-                .last_heard
-                .map_or(f64::NAN, |t| (now - t).as_secs_f64() * 1e3);
-            let line = &mut self.line;
-            line.clear();
-            fixed::push(line, now.as_secs_f64(), 4);
-            line.push(b',');
-            line.extend_from_slice(phase.as_bytes());
-            line.push(b',');
-            line.extend_from_slice(link.phase().name().as_bytes());
-            for (x, decimals) in [
-                (s.pos_enu_m.x, 4),
-                (s.pos_enu_m.y, 4),
-                (s.pos_enu_m.z, 4),
-                (s.vel_enu_mps.x, 4),
-                (s.vel_enu_mps.y, 4),
-                (s.vel_enu_mps.z, 4),
-                (roll, 5),
-                (pitch, 5),
-                (yaw, 5),
-                (c.x, 4),
-                (c.y, 4),
-                (c.z, 4),
-                (sp_roll, 5),
-                (sp_pitch, 5),
-                (sp.thrust_norm, 4),
-                (age_ms, 1),
-            ] {
-                line.push(b',');
-                fixed::push(line, x, decimals);
-            }
-            line.push(b'\n');
-            sinks.buffer(FIRST_CSV + i).extend_from_slice(line);
+            let row = rows::Row {
+                t_s: now.as_secs_f64(),
+                swarm_phase: phase,
+                link_phase: link.phase().name(),
+                state_enu: [
+                    s.pos_enu_m.x,
+                    s.pos_enu_m.y,
+                    s.pos_enu_m.z,
+                    s.vel_enu_mps.x,
+                    s.vel_enu_mps.y,
+                    s.vel_enu_mps.z,
+                ],
+                attitude_wijk: link.state().attitude.as_ref().map_or([f64::NAN; 4], wijk),
+                command_enu_mps2: [c.x, c.y, c.z],
+                setpoint_wijk: wijk(&sp.attitude_ned_frd),
+                thrust_norm: sp.thrust_norm,
+                heard_age_ms: link
+                    .state()
+                    .last_heard
+                    .map_or(f64::NAN, |t| (now - t).as_secs_f64() * 1e3),
+            };
+            rows::push_row(sinks.buffer(FIRST_CSV + i), &row);
             sinks.appended(FIRST_CSV + i)?;
         }
         Ok(())

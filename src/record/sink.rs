@@ -15,6 +15,9 @@ use std::thread::JoinHandle;
 /// Full buffers that may wait for the writer.
 const IN_FLIGHT: usize = 1024;
 
+/// Turns a chunk as it was appended into the bytes written (on the writer's thread).
+pub type Transcode = fn(&[u8], &mut Vec<u8>);
+
 /// The files of a run, each with its buffer.
 #[derive(Debug)]
 pub struct Sinks {
@@ -27,15 +30,16 @@ pub struct Sinks {
 
 impl Sinks {
     /// Creates every file (here, so that a bad path is reported at once) and starts the
-    /// writer; file `i` is handed over in chunks of about `chunk_bytes`.
+    /// writer; file `i` is handed over in chunks of about `chunk_bytes`, and turned into
+    /// what is written by its transcoder, if it has one, on the writer's thread.
     ///
     /// # Errors
     /// A file that cannot be created, or a thread that cannot be started.
-    pub fn create(files: Vec<(PathBuf, usize)>) -> io::Result<Self> {
+    pub fn create(files: Vec<(PathBuf, usize, Option<Transcode>)>) -> io::Result<Self> {
         let mut opened = Vec::with_capacity(files.len());
         let mut chunk_bytes = Vec::with_capacity(files.len());
-        for (path, chunk) in files {
-            opened.push(File::create(&path)?);
+        for (path, chunk, transcode) in files {
+            opened.push((File::create(&path)?, transcode));
             chunk_bytes.push(chunk.max(1));
         }
         let (tx, rx) = mpsc::sync_channel::<(usize, Vec<u8>)>(IN_FLIGHT);
@@ -43,15 +47,22 @@ impl Sinks {
         let writer = std::thread::Builder::new()
             .name("run-directory".into())
             .spawn(move || {
+                let mut text = Vec::new();
                 for (i, mut buf) in rx {
-                    if let Some(file) = opened.get_mut(i) {
-                        file.write_all(&buf)?;
+                    match opened.get_mut(i) {
+                        Some((file, Some(transcode))) => {
+                            text.clear();
+                            transcode(&buf, &mut text);
+                            file.write_all(&text)?;
+                        }
+                        Some((file, None)) => file.write_all(&buf)?,
+                        None => {}
                     }
                     buf.clear();
                     // The recorder may be gone (finishing): nothing to give back to.
                     let _ = spare_tx.send(buf);
                 }
-                opened.iter_mut().try_for_each(File::flush)
+                opened.iter_mut().try_for_each(|(file, _)| file.flush())
             })?;
         Ok(Self {
             buffers: chunk_bytes.iter().map(|c| Vec::with_capacity(*c)).collect(),
@@ -140,7 +151,8 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("ringswarm-sink-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let (a, b) = (dir.join("a"), dir.join("b"));
-        let mut sinks = Sinks::create(vec![(a.clone(), 10), (b.clone(), 1000)]).unwrap();
+        let mut sinks =
+            Sinks::create(vec![(a.clone(), 10, None), (b.clone(), 1000, None)]).unwrap();
         let mut expected_a = Vec::new();
         for k in 0..500u32 {
             let line = format!("{k}\n");
@@ -157,9 +169,28 @@ mod tests {
     }
 
     #[test]
+    fn a_transcoded_file_gets_its_chunks_transcoded_in_order() {
+        let dir = std::env::temp_dir().join(format!("ringswarm-sink-t-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("upper");
+        let upper: Transcode = |raw, out| out.extend(raw.iter().map(u8::to_ascii_uppercase));
+        let mut sinks = Sinks::create(vec![(path.clone(), 7, Some(upper))]).unwrap();
+        for k in 0..300u32 {
+            sinks
+                .buffer(0)
+                .extend_from_slice(format!("a{k}\n").as_bytes());
+            sinks.appended(0).unwrap();
+        }
+        sinks.finish().unwrap();
+        let expected: String = (0..300).map(|k| format!("A{k}\n")).collect();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), expected);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
     fn a_file_that_cannot_be_created_is_reported_at_once() {
         let missing = std::env::temp_dir().join("ringswarm-no-such-dir/x/y");
-        let err = Sinks::create(vec![(missing, 10)]).unwrap_err();
+        let err = Sinks::create(vec![(missing, 10, None)]).unwrap_err();
         assert_eq!(err.kind(), io::ErrorKind::NotFound);
     }
 
@@ -167,7 +198,7 @@ mod tests {
     #[test]
     fn a_write_error_is_reported_by_a_later_hand_over() {
         // /dev/full takes every open and fails every write with "no space".
-        let mut sinks = Sinks::create(vec![("/dev/full".into(), 4)]).unwrap();
+        let mut sinks = Sinks::create(vec![("/dev/full".into(), 4, None)]).unwrap();
         let mut failed = None;
         for _ in 0..10_000 {
             sinks.buffer(0).extend_from_slice(b"12345678");
@@ -184,7 +215,7 @@ mod tests {
     #[cfg(target_os = "linux")]
     #[test]
     fn a_write_error_of_the_last_chunk_is_reported_by_finish() {
-        let mut sinks = Sinks::create(vec![("/dev/full".into(), 1 << 20)]).unwrap();
+        let mut sinks = Sinks::create(vec![("/dev/full".into(), 1 << 20, None)]).unwrap();
         sinks
             .buffer(0)
             .extend_from_slice(b"never handed over before finish");
