@@ -13,7 +13,7 @@ use ringswarm::consensus::{HorizontalState, ring_accelerations};
 use ringswarm::control::{attitude_thrust_from_acceleration, saturate_with};
 use ringswarm::driver::Observer;
 use ringswarm::driver::lockstep::{Lockstep, PhaseTimes};
-use ringswarm::record::Recorder;
+use ringswarm::record::{Recorder, RowText};
 use ringswarm::swarm::{Swarm, SwarmSetup};
 use ringswarm_sitl::control::{AttitudeCommand, AttitudeController, AttitudeSetpoint};
 use ringswarm_sitl::physics::{Airframe, BodyState, Environment};
@@ -64,7 +64,8 @@ fn fly(case: &Case, how: How) -> Run {
     }
     let start = Instant::now();
     if how == How::RunDirectory {
-        let mut recorder = Recorder::create(&dir, run.swarm(), 0).expect("temp dir");
+        let mut recorder =
+            Recorder::create(&dir, run.swarm(), 0, RowText::Writer).expect("temp dir");
         struct Rec<'a>(&'a mut Recorder);
         impl Observer for Rec<'_> {
             fn datagram(&mut self, now: SimTime, _: usize, _: bool, bytes: &[u8]) {

@@ -14,8 +14,8 @@ use crate::config::Config;
 use crate::control::SaturationMode;
 use crate::driver::Observer;
 use crate::driver::lockstep::Lockstep;
-use crate::record::Recorder;
 use crate::record::metrics::Summary;
+use crate::record::{Recorder, RowText};
 use crate::swarm::{Swarm, SwarmPhase};
 use indicatif::{ProgressBar, ProgressStyle};
 use ringswarm_sitl::autopilot::Vehicle;
@@ -125,7 +125,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let out = args.out.clone().unwrap_or_else(|| {
         PathBuf::from("runs").join(format!("demo-{name}-{}", epoch_us / 1_000_000))
     });
-    let recorder = Recorder::create(&out, run.swarm(), epoch_us)
+    let recorder = Recorder::create(&out, run.swarm(), epoch_us, RowText::Writer)
         .with_context(|| format!("create the run directory {}", out.display()))?;
     let terminal = std::io::stderr().is_terminal();
     let flight_s = run.swarm().setup().duration.map_or(60, |d| d.as_secs() + 2);

@@ -20,7 +20,7 @@ use crate::driver::mirror::Mirrors;
 use crate::driver::udp::{DriverCommand, run_swarm};
 use crate::link::router::{Router, TransportPlan};
 use crate::record::metrics::Summary;
-use crate::record::{Recorder, RunSetup};
+use crate::record::{Recorder, RowText, RunSetup};
 use crate::security::FlightSigning;
 use crate::swarm::{Swarm, SwarmPhase};
 use crate::vehicle::Phase;
@@ -137,7 +137,7 @@ pub(crate) async fn fly(
     let epoch_us = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as u64);
-    let recorder = Recorder::create(out, &swarm, epoch_us)
+    let recorder = Recorder::create(out, &swarm, epoch_us, RowText::Inline)
         .with_context(|| format!("create the run directory {}", out.display()))?;
     eprintln!(
         "flying {} vehicles; Ctrl-C lands them, twice stops at once. Run directory: {}",

@@ -198,3 +198,39 @@ fn in_lockstep_every_tick_is_on_time_and_states_are_at_most_one_period_old() {
     assert!(max < 4.0, "{t:?}");
     assert_eq!(age.p50_ms, Some(max), "{t:?}");
 }
+
+#[test]
+fn rows_formatted_inline_or_on_the_writer_thread_make_the_same_files() {
+    use ringswarm::record::{Recorder, RowText};
+    let record = |text: RowText, name: &str| {
+        let dir =
+            std::env::temp_dir().join(format!("ringswarm-rows-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut run = build(LinkConditions::default());
+        let mut recorder = Recorder::create(&dir, run.swarm(), 0, text).unwrap();
+        run.run_observed(SimTime::from_millis(3_000), &mut |swarm: &Swarm, now| {
+            recorder.sample(swarm, now)
+        });
+        recorder.finish(run.swarm(), run.now(), 1.0).unwrap();
+        dir
+    };
+    let (inline, writer) = (
+        record(RowText::Inline, "inline"),
+        record(RowText::Writer, "writer"),
+    );
+    for i in 1..=6 {
+        let name = format!("vehicle-{i}.csv");
+        let a = std::fs::read_to_string(inline.join(&name)).unwrap();
+        let b = std::fs::read_to_string(writer.join(&name)).unwrap();
+        assert_eq!(a, b, "{name}");
+        // The header and a row per control tick from the first state on (250 Hz).
+        assert!(a.starts_with("t_s,swarm_phase,"), "{name}");
+        assert!(
+            a.lines().count() > 250,
+            "{name}: {} lines",
+            a.lines().count()
+        );
+    }
+    let _ = std::fs::remove_dir_all(inline);
+    let _ = std::fs::remove_dir_all(writer);
+}

@@ -13,7 +13,7 @@ use futures_util::StreamExt;
 use ringswarm::config::Config;
 use ringswarm::driver::Observer;
 use ringswarm::driver::lockstep::Lockstep;
-use ringswarm::record::{Recorder, RunSetup};
+use ringswarm::record::{Recorder, RowText, RunSetup};
 use ringswarm::swarm::Swarm;
 use ringswarm::view::replay::Replay;
 use ringswarm::view::state::VehicleView;
@@ -329,7 +329,8 @@ fn a_replay_shows_the_recorded_positions_and_serves_them() {
     let dir = std::env::temp_dir().join(format!("ringswarm-replay-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let mut run = sim1();
-    let mut recorder = Recorder::create(&dir, run.swarm(), 0).expect("run directory");
+    let mut recorder =
+        Recorder::create(&dir, run.swarm(), 0, RowText::Writer).expect("run directory");
     let mut recording = Recording {
         recorder: &mut recorder,
         ticks: BTreeMap::new(),

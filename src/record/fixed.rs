@@ -14,6 +14,20 @@ const POW10: [f64; 10] = [1.0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9];
 /// Largest integer a double holds exactly.
 const EXACT: f64 = 9_007_199_254_740_992.0;
 
+/// Powers of ten as integers, for splitting the scaled value at the point.
+const POW10_U64: [u64; 10] = [
+    1,
+    10,
+    100,
+    1_000,
+    10_000,
+    100_000,
+    1_000_000,
+    10_000_000,
+    100_000_000,
+    1_000_000_000,
+];
+
 /// Appends `x` with `decimals` digits after the point (at most 9).
 pub fn push(out: &mut Vec<u8>, x: f64, decimals: usize) {
     let d = decimals.min(POW10.len() - 1);
@@ -25,20 +39,15 @@ pub fn push(out: &mut Vec<u8>, x: f64, decimals: usize) {
     if x.is_sign_negative() {
         out.push(b'-');
     }
-    // Digits of |scaled|, at least d + 1 of them (a leading zero before the point).
-    let mut n = scaled.abs() as u64;
-    let mut digits = [0u8; 24];
-    let mut len = 0;
-    while n > 0 || len <= d {
-        digits[len] = b'0' + (n % 10) as u8;
-        n /= 10;
-        len += 1;
-    }
-    for k in (0..len).rev() {
-        out.push(digits[k]);
-        if k == d && d > 0 {
-            out.push(b'.');
-        }
+    // The integer part, then the fraction padded with leading zeros to `d` digits.
+    let n = scaled.abs() as u64;
+    let mut digits = itoa::Buffer::new();
+    out.extend_from_slice(digits.format(n / POW10_U64[d]).as_bytes());
+    if d > 0 {
+        out.push(b'.');
+        let fraction = digits.format(n % POW10_U64[d]).as_bytes();
+        out.extend(std::iter::repeat_n(b'0', d - fraction.len()));
+        out.extend_from_slice(fraction);
     }
 }
 

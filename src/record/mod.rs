@@ -120,15 +120,30 @@ pub struct Recorder {
     last_tick: u64,
     error: Option<io::Error>,
     mirrors: Vec<metrics::MirrorReport>,
+    text: RowText,
+    /// One row in binary, before it is written inline (reused: no allocation per row).
+    row: Vec<u8>,
+}
+
+/// Where a vehicle CSV's numbers become text (the files are the same either way).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RowText {
+    /// On the control thread, as each row is sampled: the least CPU in all, for flights in
+    /// real time, whose cores are shared with everything else on the machine (moved to
+    /// the writer thread, a thousand vehicles' rows cost about a tenth more in all).
+    Inline,
+    /// On the run directory's writer thread: the control thread only copies numbers, for
+    /// lockstep runs, which leave a core free.
+    Writer,
 }
 
 impl Recorder {
     /// Creates `dir` (and its parents) and the files for the swarm's vehicles. Frames are
-    /// stamped `epoch_us` (Unix µs) plus the swarm's time.
+    /// stamped `epoch_us` (Unix µs) plus the swarm's time; rows become text as `text` says.
     ///
     /// # Errors
     /// The directory or a file cannot be created.
-    pub fn create(dir: &Path, swarm: &Swarm, epoch_us: u64) -> io::Result<Self> {
+    pub fn create(dir: &Path, swarm: &Swarm, epoch_us: u64, text: RowText) -> io::Result<Self> {
         std::fs::create_dir_all(dir)?;
         // Chunks of about a second of rows (a CSV row is ~150 bytes; a thousand vehicles'
         // telemetry is ~6 MB/s of tlog).
@@ -139,15 +154,21 @@ impl Recorder {
             (dir.join("events.csv"), 1, None),
         ];
         for cfg in &swarm.setup().links {
-            // Rows in binary: the writer thread formats them (see `rows`).
-            files.push((dir.join(csv_name(cfg)), 8192, Some(rows::to_csv)));
+            let transcode = (text == RowText::Writer).then_some(rows::to_csv as sink::Transcode);
+            files.push((dir.join(csv_name(cfg)), 8192, transcode));
         }
         let setup = serde_json::to_string_pretty(&RunSetup::of(swarm)).map_err(io::Error::other)?;
         std::fs::write(dir.join("setup.json"), setup + "\n")?;
         let mut sinks = Sinks::create(files)?;
         writeln!(sinks.buffer(EVENTS), "t_s,system_id,network,level,event")?;
         for i in 0..swarm.links().len() {
-            rows::push_text(sinks.buffer(FIRST_CSV + i), &format!("{CSV_HEADER}\n"));
+            let header = format!("{CSV_HEADER}\n");
+            match text {
+                RowText::Writer => rows::push_text(sinks.buffer(FIRST_CSV + i), &header),
+                RowText::Inline => sinks
+                    .buffer(FIRST_CSV + i)
+                    .extend_from_slice(header.as_bytes()),
+            }
         }
         Ok(Self {
             dir: dir.to_owned(),
@@ -160,6 +181,8 @@ impl Recorder {
             last_tick: 0,
             error: None,
             mirrors: Vec::new(),
+            text,
+            row: Vec::with_capacity(256),
         })
     }
 
@@ -264,7 +287,14 @@ impl Recorder {
                     .last_heard
                     .map_or(f64::NAN, |t| (now - t).as_secs_f64() * 1e3),
             };
-            rows::push_row(sinks.buffer(FIRST_CSV + i), &row);
+            match self.text {
+                RowText::Writer => rows::push_row(sinks.buffer(FIRST_CSV + i), &row),
+                RowText::Inline => {
+                    self.row.clear();
+                    rows::push_row(&mut self.row, &row);
+                    rows::to_csv(&self.row, sinks.buffer(FIRST_CSV + i));
+                }
+            }
             sinks.appended(FIRST_CSV + i)?;
         }
         Ok(())
