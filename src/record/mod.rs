@@ -121,8 +121,6 @@ pub struct Recorder {
     error: Option<io::Error>,
     mirrors: Vec<metrics::MirrorReport>,
     text: RowText,
-    /// One row in binary, before it is written inline (reused: no allocation per row).
-    row: Vec<u8>,
 }
 
 /// Where a vehicle CSV's numbers become text (the files are the same either way).
@@ -182,7 +180,6 @@ impl Recorder {
             error: None,
             mirrors: Vec::new(),
             text,
-            row: Vec::with_capacity(256),
         })
     }
 
@@ -289,11 +286,7 @@ impl Recorder {
             };
             match self.text {
                 RowText::Writer => rows::push_row(sinks.buffer(FIRST_CSV + i), &row),
-                RowText::Inline => {
-                    self.row.clear();
-                    rows::push_row(&mut self.row, &row);
-                    rows::to_csv(&self.row, sinks.buffer(FIRST_CSV + i));
-                }
+                RowText::Inline => row.write_csv(sinks.buffer(FIRST_CSV + i)),
             }
             sinks.appended(FIRST_CSV + i)?;
         }

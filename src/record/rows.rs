@@ -1,6 +1,7 @@
-//! A vehicle CSV's rows as the control loop hands them over: numbers in binary, turned into
-//! text by the run directory's writer thread ([`to_csv`]), so that neither the decimal
-//! formatting nor the attitudes' Euler angles cost the control loop anything.
+//! A vehicle CSV's rows: written as text at once ([`Row::write_csv`]), or handed over as
+//! numbers in binary ([`push_row`]) and turned into text by the run directory's writer
+//! thread ([`to_csv`]), so that neither the decimal formatting nor the attitudes' Euler
+//! angles cost the control loop anything.
 //!
 //! A chunk is a sequence of records, each a tag byte then:
 //! - `TEXT`: a `u16` length (little endian) and that many bytes, written as they are;
@@ -131,32 +132,55 @@ pub fn to_csv(raw: &[u8], out: &mut Vec<u8>) {
 
 fn write_row(r: &mut Reader, out: &mut Vec<u8>) -> Option<()> {
     let t_s = r.f64()?;
-    let (swarm_phase, link_phase) = (r.name()?, r.name()?);
-    let mut state = [0.0; 6];
-    for x in &mut state {
+    let swarm_phase = std::str::from_utf8(r.name()?).ok()?;
+    let link_phase = std::str::from_utf8(r.name()?).ok()?;
+    let mut state_enu = [0.0; 6];
+    for x in &mut state_enu {
         *x = r.f64()?;
     }
-    let (roll, pitch, yaw) = euler(r.quaternion()?);
-    let command = [r.f64()?, r.f64()?, r.f64()?];
-    let (sp_roll, sp_pitch, _) = euler(r.quaternion()?);
-    let (thrust, age_ms) = (r.f64()?, r.f64()?);
-    fixed::push(out, t_s, 4);
-    out.push(b',');
-    out.extend_from_slice(swarm_phase);
-    out.push(b',');
-    out.extend_from_slice(link_phase);
-    let numbers = state
-        .iter()
-        .map(|x| (*x, 4))
-        .chain([(roll, 5), (pitch, 5), (yaw, 5)])
-        .chain(command.iter().map(|x| (*x, 4)))
-        .chain([(sp_roll, 5), (sp_pitch, 5), (thrust, 4), (age_ms, 1)]);
-    for (x, decimals) in numbers {
-        out.push(b',');
-        fixed::push(out, x, decimals);
-    }
-    out.push(b'\n');
+    let row = Row {
+        t_s,
+        swarm_phase,
+        link_phase,
+        state_enu,
+        attitude_wijk: r.quaternion()?,
+        command_enu_mps2: [r.f64()?, r.f64()?, r.f64()?],
+        setpoint_wijk: r.quaternion()?,
+        thrust_norm: r.f64()?,
+        heard_age_ms: r.f64()?,
+    };
+    row.write_csv(out);
     Some(())
+}
+
+impl Row<'_> {
+    /// Appends the row as a CSV line (the attitudes as Euler angles).
+    pub fn write_csv(&self, out: &mut Vec<u8>) {
+        let (roll, pitch, yaw) = euler(self.attitude_wijk);
+        let (sp_roll, sp_pitch, _) = euler(self.setpoint_wijk);
+        fixed::push(out, self.t_s, 4);
+        out.push(b',');
+        out.extend_from_slice(self.swarm_phase.as_bytes());
+        out.push(b',');
+        out.extend_from_slice(self.link_phase.as_bytes());
+        let numbers = self
+            .state_enu
+            .iter()
+            .map(|x| (*x, 4))
+            .chain([(roll, 5), (pitch, 5), (yaw, 5)])
+            .chain(self.command_enu_mps2.iter().map(|x| (*x, 4)))
+            .chain([
+                (sp_roll, 5),
+                (sp_pitch, 5),
+                (self.thrust_norm, 4),
+                (self.heard_age_ms, 1),
+            ]);
+        for (x, decimals) in numbers {
+            out.push(b',');
+            fixed::push(out, x, decimals);
+        }
+        out.push(b'\n');
+    }
 }
 
 #[cfg(test)]
