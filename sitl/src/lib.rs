@@ -5,7 +5,8 @@
 //! hardware, PX4 build or Gazebo.
 //!
 //! ## Layout
-//! - [`physics`]: pure, fixed-step rigid-body quadrotor (RK4), motors, drag, wind, ground.
+//! - [`physics`]: pure, fixed-step rigid-body quadrotor (integrated as PX4's SIH does),
+//!   motors, drag, wind, ground.
 //! - [`control`]: PX4-like attitude P → rate PID → mixer.
 //! - [`position_control`]: PX4's multicopter position controller (position P → velocity
 //!   PID → thrust vector → attitude), which flies every mode but raw offboard attitude.
