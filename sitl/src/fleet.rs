@@ -1,9 +1,11 @@
 //! The tokio UDP driver of many vehicles: one task steps a whole shard of vehicles on a
-//! common 1 ms tick and, on the same tick, reads every socket the reactor found readable
-//! (a socket with nothing to read costs a flag check, not a system call). A thousand
-//! vehicles cost one task's timer wake-ups per shard, not a task and a channel hop per
-//! datagram; run one shard per core. A datagram waits at most one tick, as it would for
-//! the next 1 ms physics step anyway.
+//! common 1 ms tick and, on the same tick, asks the shard's own readiness poller (mio,
+//! outside tokio's reactor, polled without waiting) which sockets have something to read,
+//! and reads those. The sockets are not in the reactor, so arriving datagrams never wake
+//! the shard's thread: a thousand vehicles cost one timer wake-up per shard and tick (in
+//! the reactor their setpoints woke each shard about ten times per tick), not a task and
+//! a channel hop per datagram; run one shard per core. A datagram waits at most one tick,
+//! as it would for the next 1 ms physics step anyway.
 //!
 //! Each vehicle has one or two links (offboard and GCS), each its own socket. Which peer
 //! a link answers follows PX4's `mavlink_receiver.cpp` ([`Partner`]): the default address
@@ -23,6 +25,7 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
 
+use mio::{Events, Interest, Poll, Token};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tokio::net::UdpSocket;
@@ -84,7 +87,7 @@ struct Delayed {
 /// A vehicle while the shard runs.
 struct Slot {
     vehicle: Vehicle,
-    sockets: Vec<UdpSocket>,
+    sockets: Vec<mio::net::UdpSocket>,
     ids: Vec<LinkId>,
     default_peers: Vec<SocketAddr>,
     partners: Vec<Partner>,
@@ -113,16 +116,34 @@ async fn run_fleet(
     mut controls: mpsc::Receiver<(usize, VehicleControl)>,
     mut shutdown: watch::Receiver<bool>,
 ) {
+    let (mut poll, mut events) = match Poll::new() {
+        Ok(poll) => (poll, Events::with_capacity(EVENTS_PER_POLL)),
+        Err(e) => {
+            tracing::error!(error = %e, vehicles = vehicles.len(), "no readiness poller: this shard's vehicles do not run");
+            return;
+        }
+    };
     let mut slots: Vec<Slot> = Vec::with_capacity(vehicles.len());
     for (boot_offset, v) in vehicles {
         let ids: Vec<LinkId> = v.links.iter().map(|l| l.id).collect();
+        let defaults: Vec<SocketAddr> = v.links.iter().map(|l| l.default_peer).collect();
+        let faults: Vec<LinkFaults> = v.links.iter().map(|l| l.faults).collect();
         let mut vehicle = v.vehicle;
+        let sysid = vehicle.system_id();
+        let sockets = match polled_sockets(
+            &poll,
+            slots.len(),
+            v.links.into_iter().map(|l| l.socket),
+        ) {
+            Ok(sockets) => sockets,
+            Err(e) => {
+                tracing::error!(sysid, error = %e, "its sockets cannot be polled: the vehicle does not run");
+                continue;
+            }
+        };
         for link in [LinkId::Offboard, LinkId::Gcs] {
             vehicle.set_link_wired(link, ids.contains(&link));
         }
-        let defaults: Vec<SocketAddr> = v.links.iter().map(|l| l.default_peer).collect();
-        let faults: Vec<LinkFaults> = v.links.iter().map(|l| l.faults).collect();
-        let sockets = v.links.into_iter().map(|l| l.socket).collect();
         slots.push(Slot {
             vehicle,
             sockets,
@@ -140,6 +161,9 @@ async fn run_fleet(
         });
     }
     let mut buf = vec![0u8; MAX_DATAGRAM];
+    // Sockets left with something to read after an error: read again at the next tick
+    // (the poller reports a socket again only when a new datagram arrives).
+    let mut retry: Vec<(usize, usize)> = Vec::new();
     let mut tick = tokio::time::interval(Duration::from_millis(1));
     tick.set_missed_tick_behavior(MissedTickBehavior::Skip);
     let mut last_status = SimTime::ZERO;
@@ -170,12 +194,12 @@ async fn run_fleet(
                         slot.vehicle.handle_timeout(now);
                         slot.deliver_delayed(now);
                         slot.flush(now);
-                    }
-                    slot.receive(now, &mut buf);
-                    if slot.alive && publish {
-                        slot.status.send_replace(slot.vehicle.status());
+                        if publish {
+                            slot.status.send_replace(slot.vehicle.status());
+                        }
                     }
                 }
+                receive_ready(&mut poll, &mut events, &mut slots, &mut retry, now, &mut buf);
             }
         }
     }
@@ -189,6 +213,68 @@ async fn run_fleet(
                 dropped = slot.dropped_sends,
                 "datagrams dropped: the socket's send buffer was full"
             );
+        }
+    }
+}
+
+/// Readiness events taken per poll (more ready sockets take further polls).
+const EVENTS_PER_POLL: usize = 1024;
+
+/// The poller's token of slot `slot`'s link `link` (a vehicle has at most two).
+fn token(slot: usize, link: usize) -> Token {
+    Token(slot * 2 + link)
+}
+
+/// A vehicle's sockets taken out of tokio's reactor (so that no datagram wakes the
+/// shard's thread) and registered with the shard's poller instead, under [`token`]s for
+/// slot `slot`.
+fn polled_sockets(
+    poll: &Poll,
+    slot: usize,
+    sockets: impl Iterator<Item = UdpSocket>,
+) -> io::Result<Vec<mio::net::UdpSocket>> {
+    let mut polled = Vec::new();
+    for (link, socket) in sockets.enumerate() {
+        // Non-blocking, as tokio leaves it.
+        let mut socket = mio::net::UdpSocket::from_std(socket.into_std()?);
+        poll.registry()
+            .register(&mut socket, token(slot, link), Interest::READABLE)?;
+        polled.push(socket);
+    }
+    Ok(polled)
+}
+
+/// Reads every socket the poller reports readable (without waiting), and those left
+/// unread by an error at the last tick.
+fn receive_ready(
+    poll: &mut Poll,
+    events: &mut Events,
+    slots: &mut [Slot],
+    retry: &mut Vec<(usize, usize)>,
+    now: SimTime,
+    buf: &mut [u8],
+) {
+    let mut ready = std::mem::take(retry);
+    loop {
+        if let Err(e) = poll.poll(events, Some(Duration::ZERO)) {
+            if e.kind() != io::ErrorKind::Interrupted {
+                tracing::warn!(error = %e, "readiness poll failed");
+            }
+            break;
+        }
+        let taken = events.iter().count();
+        ready.extend(events.iter().map(|e| (e.token().0 / 2, e.token().0 % 2)));
+        if taken < EVENTS_PER_POLL {
+            break;
+        }
+    }
+    for (s, link) in ready {
+        let Some(slot) = slots.get_mut(s) else {
+            continue;
+        };
+        let at = slot.time(now);
+        if !slot.receive(at, link, buf) {
+            retry.push((s, link));
         }
     }
 }
@@ -298,27 +384,27 @@ impl Slot {
         }
     }
 
-    /// Reads whatever has arrived on the vehicle's sockets (a socket the reactor has not
-    /// seen readable is skipped without a system call) and hands it to the vehicle; a
-    /// powered-off vehicle's datagrams are read and dropped. A socket error is logged and
-    /// that socket left until the next tick: one vehicle's socket never stops the shard.
-    fn receive(&mut self, now: SimTime, buf: &mut [u8]) {
-        for link in 0..self.sockets.len() {
-            loop {
-                let (n, from) = match self.sockets[link].try_recv_from(buf) {
-                    Ok(got) => got,
-                    Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
-                    // ICMP port unreachable from an earlier send (nobody listening at the
-                    // default peer yet) surfaces here on some systems.
-                    Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
-                    Err(e) => {
-                        tracing::warn!(sysid = self.vehicle.system_id(), error = %e, "receive failed");
-                        break;
-                    }
-                };
-                self.inbound(now, link, from, &buf[..n]);
-                self.flush(now);
-            }
+    /// Reads everything that has arrived on link `link`'s socket and hands it to the
+    /// vehicle; a powered-off vehicle's datagrams are read and dropped. `false` when a
+    /// socket error (logged) left it unread: one vehicle's socket never stops the shard.
+    fn receive(&mut self, now: SimTime, link: usize, buf: &mut [u8]) -> bool {
+        if link >= self.sockets.len() {
+            return true;
+        }
+        loop {
+            let (n, from) = match self.sockets[link].recv_from(buf) {
+                Ok(got) => got,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => return true,
+                // ICMP port unreachable from an earlier send (nobody listening at the
+                // default peer yet) surfaces here on some systems.
+                Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
+                Err(e) => {
+                    tracing::warn!(sysid = self.vehicle.system_id(), error = %e, "receive failed");
+                    return false;
+                }
+            };
+            self.inbound(now, link, from, &buf[..n]);
+            self.flush(now);
         }
     }
 
@@ -401,7 +487,7 @@ impl Slot {
 
     fn send(&mut self, link: usize, bytes: &[u8]) {
         let to = self.partners[link].addr();
-        match self.sockets[link].try_send_to(bytes, to) {
+        match self.sockets[link].send_to(bytes, to) {
             Ok(_) => {}
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => self.dropped_sends += 1,
             Err(e) => {
