@@ -8,14 +8,11 @@
 
 use std::io::Write;
 
-/// Powers of ten up to the largest precision used.
-const POW10: [f64; 10] = [1.0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9];
-
 /// Largest integer a double holds exactly.
 const EXACT: f64 = 9_007_199_254_740_992.0;
 
-/// Powers of ten as integers, for splitting the scaled value at the point.
-const POW10_U64: [u64; 10] = [
+/// Powers of ten up to the largest precision used (exact as doubles too).
+const POW10: [u64; 10] = [
     1,
     10,
     100,
@@ -31,7 +28,7 @@ const POW10_U64: [u64; 10] = [
 /// Appends `x` with `decimals` digits after the point (at most 9).
 pub fn push(out: &mut Vec<u8>, x: f64, decimals: usize) {
     let d = decimals.min(POW10.len() - 1);
-    let scaled = (x * POW10[d]).round();
+    let scaled = (x * POW10[d] as f64).round();
     if !scaled.is_finite() || scaled.abs() >= EXACT {
         let _ = write!(out, "{x:.d$}");
         return;
@@ -42,10 +39,10 @@ pub fn push(out: &mut Vec<u8>, x: f64, decimals: usize) {
     // The integer part, then the fraction padded with leading zeros to `d` digits.
     let n = scaled.abs() as u64;
     let mut digits = itoa::Buffer::new();
-    out.extend_from_slice(digits.format(n / POW10_U64[d]).as_bytes());
+    out.extend_from_slice(digits.format(n / POW10[d]).as_bytes());
     if d > 0 {
         out.push(b'.');
-        let fraction = digits.format(n % POW10_U64[d]).as_bytes();
+        let fraction = digits.format(n % POW10[d]).as_bytes();
         out.extend(std::iter::repeat_n(b'0', d - fraction.len()));
         out.extend_from_slice(fraction);
     }

@@ -159,8 +159,8 @@ impl Recorder {
         std::fs::write(dir.join("setup.json"), setup + "\n")?;
         let mut sinks = Sinks::create(files)?;
         writeln!(sinks.buffer(EVENTS), "t_s,system_id,network,level,event")?;
+        let header = format!("{CSV_HEADER}\n");
         for i in 0..swarm.links().len() {
-            let header = format!("{CSV_HEADER}\n");
             match text {
                 RowText::Writer => rows::push_text(sinks.buffer(FIRST_CSV + i), &header),
                 RowText::Inline => sinks
