@@ -148,7 +148,7 @@ fn physics_ns_per_step() -> f64 {
     let start = Instant::now();
     for _ in 0..steps {
         let motors = controller.update_command(&frame, &state, black_box(&command), 1e-3);
-        state = frame.step(&state, &motors, &env, 1e-3);
+        frame.advance(&mut state, &motors, &env, 1e-3);
     }
     black_box(state);
     start.elapsed().as_nanos() as f64 / f64::from(steps)

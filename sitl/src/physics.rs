@@ -120,24 +120,34 @@ impl Airframe {
     pub fn mix(&self, thrust_n: f64, torque_frd_nm: Vector3<f64>) -> Vector4<f64> {
         let max = self.profile.max_motor_thrust_n;
         let collective = (thrust_n / 4.0).clamp(0.0, max);
-        let roll_pitch =
-            self.mixing.column(1) * torque_frd_nm.x + self.mixing.column(2) * torque_frd_nm.y;
+        let (roll, pitch, yaw) = (
+            self.mixing.column(1),
+            self.mixing.column(2),
+            self.mixing.column(3),
+        );
+        let roll_pitch: [f64; 4] =
+            std::array::from_fn(|i| roll[i] * torque_frd_nm.x + pitch[i] * torque_frd_nm.y);
+        let (lowest, highest) = roll_pitch
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
         // Largest share of roll/pitch that fits between 0 and max once the collective may
         // be lowered: the spread must fit, and no motor may go below zero.
-        let spread = roll_pitch.max() - roll_pitch.min();
+        let spread = highest - lowest;
         let mut scale = if spread > max { max / spread } else { 1.0 };
-        if roll_pitch.min() < 0.0 {
-            scale = scale.min(collective / -roll_pitch.min());
+        if lowest < 0.0 {
+            scale = scale.min(collective / -lowest);
         }
-        let mut thrusts = roll_pitch * scale + Vector4::repeat(collective);
-        let over = thrusts.max() - max;
+        let mut thrusts = roll_pitch.map(|v| v * scale + collective);
+        let over = thrusts.iter().fold(f64::NEG_INFINITY, |m, &t| m.max(t)) - max;
         if over > 0.0 {
-            thrusts.add_scalar_mut(-over);
+            thrusts.iter_mut().for_each(|t| *t -= over);
         }
-        let yaw = self.mixing.column(3) * torque_frd_nm.z;
+        let yaw: [f64; 4] = std::array::from_fn(|i| yaw[i] * torque_frd_nm.z);
         let yaw_scale = thrusts
             .iter()
-            .zip(yaw.iter())
+            .zip(&yaw)
             .map(|(t, y)| {
                 if *y > 0.0 {
                     (max - t) / y
@@ -149,8 +159,7 @@ impl Airframe {
             })
             .fold(1.0_f64, f64::min)
             .max(0.0);
-        thrusts += yaw * yaw_scale;
-        thrusts.map(|t| t.clamp(0.0, max))
+        Vector4::from_fn(|i, _| (thrusts[i] + yaw[i] * yaw_scale).clamp(0.0, max))
     }
 
     /// Collective thrust (N) and torques (N·m) produced by motor thrusts.
@@ -172,8 +181,8 @@ impl Airframe {
         (accel, (torque - gyro).component_div(&inertia))
     }
 
-    /// Advances the state by `dt_s` under motor thrust commands `motor_cmd_n` (held
-    /// constant over the step), then applies the ground contact.
+    /// The state `dt_s` after `s` under motor thrust commands `motor_cmd_n` (held
+    /// constant over the step), the ground contact applied: [`Airframe::advance`] on a copy.
     pub fn step(
         &mut self,
         s: &BodyState,
@@ -181,6 +190,20 @@ impl Airframe {
         env: &Environment,
         dt_s: f64,
     ) -> BodyState {
+        let mut next = *s;
+        self.advance(&mut next, motor_cmd_n, env, dt_s);
+        next
+    }
+
+    /// Advances the state in place by `dt_s` under motor thrust commands `motor_cmd_n`
+    /// (held constant over the step), then applies the ground contact.
+    pub fn advance(
+        &mut self,
+        s: &mut BodyState,
+        motor_cmd_n: &Vector4<f64>,
+        env: &Environment,
+        dt_s: f64,
+    ) {
         let cmd = motor_cmd_n.map(|t| t.clamp(0.0, self.profile.max_motor_thrust_n));
         let (accel, rate_dot) = self.accelerations(s, env);
         let vel = s.vel_ned_mps + accel * dt_s;
@@ -193,15 +216,12 @@ impl Airframe {
                 decay
             }
         };
-        let mut next = BodyState {
-            pos_ned_m: s.pos_ned_m + (s.vel_ned_mps + vel) * (0.5 * dt_s),
-            vel_ned_mps: vel,
-            attitude: UnitQuaternion::new_normalize(s.attitude.quaternion() * half_turn),
-            rate_frd_rps: s.rate_frd_rps + rate_dot * dt_s,
-            motor_thrust_n: cmd + (s.motor_thrust_n - cmd) * decay,
-        };
-        self.apply_ground(&mut next, env);
-        next
+        s.pos_ned_m += (s.vel_ned_mps + vel) * (0.5 * dt_s);
+        s.vel_ned_mps = vel;
+        s.attitude = UnitQuaternion::new_normalize(s.attitude.quaternion() * half_turn);
+        s.rate_frd_rps += rate_dot * dt_s;
+        s.motor_thrust_n = cmd + (s.motor_thrust_n - cmd) * decay;
+        self.apply_ground(s, env);
     }
 
     /// Keeps the vehicle on or above the ground; on the ground and unable to lift off it

@@ -457,7 +457,7 @@ impl Vehicle {
         self.update_wind(dt);
         // A sagging battery: every motor gives that much less than it was asked for.
         let motors = motors * sag;
-        self.state = self.frame.step(&self.state, &motors, &self.env, dt);
+        self.frame.advance(&mut self.state, &motors, &self.env, dt);
         self.estimator
             .step(t, dt, self.state.pos_ned_m, self.state.vel_ned_mps);
         self.update_battery(dt);
