@@ -13,6 +13,7 @@ use ringswarm::consensus::{HorizontalState, ring_accelerations};
 use ringswarm::control::{attitude_thrust_from_acceleration, saturate_with};
 use ringswarm::driver::Observer;
 use ringswarm::driver::lockstep::{Lockstep, PhaseTimes};
+use ringswarm::record::rows::Row;
 use ringswarm::record::{Recorder, RowText};
 use ringswarm::swarm::{Swarm, SwarmSetup};
 use ringswarm_sitl::control::{AttitudeCommand, AttitudeController, AttitudeSetpoint};
@@ -43,6 +44,8 @@ struct Run {
     rate_hz: f64,
     wall: Duration,
     phases: Option<PhaseTimes>,
+    /// Bytes and vehicle CSV rows of the run directory, when one was written.
+    run_dir: Option<(u64, u64)>,
 }
 
 /// How a case is run.
@@ -84,13 +87,84 @@ fn fly(case: &Case, how: How) -> Run {
         run.run_until(end, |_| {});
     }
     let wall = start.elapsed();
+    let run_dir = (how == How::RunDirectory).then(|| dir_size(&dir));
     let _ = std::fs::remove_dir_all(&dir);
     Run {
         n,
         rate_hz,
         wall,
         phases: run.phase_times(),
+        run_dir,
     }
+}
+
+/// The bytes of the files in `dir`, and the rows of its vehicle CSVs.
+fn dir_size(dir: &std::path::Path) -> (u64, u64) {
+    let mut bytes = 0;
+    let mut rows = 0;
+    for entry in std::fs::read_dir(dir).expect("run directory").flatten() {
+        bytes += entry.metadata().map_or(0, |m| m.len());
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with("vehicle-") && name.ends_with(".csv") {
+            let text = std::fs::read(entry.path()).expect("vehicle CSV");
+            // Less the header line.
+            rows += text
+                .iter()
+                .filter(|b| **b == b'\n')
+                .count()
+                .saturating_sub(1) as u64;
+        }
+    }
+    (bytes, rows)
+}
+
+/// Formatting `rows` vehicle CSV rows as text, as the run directory's writer does (ns).
+fn format_ns(rows: u64) -> f64 {
+    let row = Row {
+        t_s: 0.0,
+        swarm_phase: "consensus",
+        link_phase: "flying",
+        state_enu: [123.4567, -78.9012, 50.0123, 12.8912, 7.4734, -0.0213],
+        attitude_wijk: [0.9912, 0.0123, -0.0921, 0.0934],
+        command_enu_mps2: [0.3412, -0.2123, 0.0132],
+        setpoint_wijk: [0.9909, 0.0131, -0.0934, 0.0941],
+        thrust_norm: 0.2132,
+        heard_age_ms: 3.912,
+    };
+    let mut out = Vec::with_capacity(128 << 10);
+    let start = Instant::now();
+    for i in 0..rows {
+        let row = Row {
+            t_s: i as f64 * 0.004,
+            ..row
+        };
+        black_box(&row).write_csv(&mut out);
+        if out.len() >= 64 << 10 {
+            black_box(&out);
+            out.clear();
+        }
+    }
+    start.elapsed().as_nanos() as f64
+}
+
+/// `bytes` written once to a file through the page cache, in 64 KiB writes, as the run
+/// directory's writer does (ns).
+fn write_ns(bytes: u64) -> f64 {
+    use std::io::Write;
+    let path = std::env::temp_dir().join(format!("ringswarm-bench-write-{}", std::process::id()));
+    let chunk = vec![b'7'; 64 << 10];
+    let mut file = std::fs::File::create(&path).expect("temp file");
+    let start = Instant::now();
+    let mut left = bytes;
+    while left > 0 {
+        let n = left.min(chunk.len() as u64) as usize;
+        file.write_all(&chunk[..n]).expect("write");
+        left -= n as u64;
+    }
+    drop(file);
+    let ns = start.elapsed().as_nanos() as f64;
+    let _ = std::fs::remove_file(&path);
+    ns
 }
 
 /// Every datagram of a case's flight, both ways, as the coordinator sent or received it.
@@ -246,9 +320,9 @@ fn main() {
 
     println!();
     println!(
-        "| case | total | emulated vehicles | coordinator | delivery | run directory | physics floor | law floor | codec floor | floor sum | total / floor |"
+        "| case | total | emulated vehicles | coordinator | delivery | physics floor | law floor | codec floor | floor sum | total / floor | run directory | run directory floor |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     let physics = physics_ns_per_step() / 1e3;
     for (c, plain, recorded) in breakdowns {
         let vehicle_ms = plain.n as f64 * c.seconds * 1e3;
@@ -262,14 +336,16 @@ fn main() {
         let codec = codec_ns(&traffic(c)) / 1e3 / vehicle_ms;
         let total = per(plain.wall);
         let floor = physics + law + codec;
+        let (bytes, rows) = recorded.run_dir.unwrap_or((0, 0));
+        let recording = (write_ns(bytes) + format_ns(rows)) / 1e3 / vehicle_ms;
         println!(
-            "| {} | {total:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {physics:.3} | {law:.3} | {codec:.3} | {floor:.3} | {:.1} |",
+            "| {} | {total:.3} | {:.3} | {:.3} | {:.3} | {physics:.3} | {law:.3} | {codec:.3} | {floor:.3} | {:.1} | {:.3} | {recording:.3} |",
             c.name,
             per(phases.vehicles),
             per(phases.coordinator),
             per(phases.delivery),
-            per(recorded.wall.saturating_sub(plain.wall)),
             total / floor,
+            per(recorded.wall.saturating_sub(plain.wall)),
         );
     }
 }

@@ -19,7 +19,7 @@
 
 mod fixed;
 pub mod metrics;
-mod rows;
+pub mod rows;
 mod sink;
 pub mod trace;
 
