@@ -1,4 +1,8 @@
 //! The command line (clap derive). Parsing only: the work is in [`crate::report`].
+//!
+//! The doc comments of the argument structs are `--help`'s text, printed as written:
+//! `<scenario>` and `[[vehicle]]` there are words for the terminal, not HTML or links.
+#![allow(rustdoc::invalid_html_tags, rustdoc::broken_intra_doc_links)]
 
 use clap::{Args, Parser, Subcommand};
 use nalgebra::Vector2;

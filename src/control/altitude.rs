@@ -73,9 +73,9 @@ impl AltitudeGains {
     }
 
     /// The integral `∫(z_cmd − z) dt` (m·s) after `dt_s` more at height `z_m`: it grows
-    /// only within [`INTEGRAL_BAND_M`] of the commanded height and while `hold` is false
+    /// only within `INTEGRAL_BAND_M` of the commanded height and while `hold` is false
     /// (the vertical command saturated), and its term stays within
-    /// [`INTEGRAL_LIMIT_MPS2`].
+    /// `INTEGRAL_LIMIT_MPS2`.
     pub fn integrate(&self, integral: f64, z_m: f64, z_cmd_m: f64, dt_s: f64, hold: bool) -> f64 {
         let error = z_cmd_m - z_m;
         if self.k_iz == 0.0 || hold || error.abs() > INTEGRAL_BAND_M || !dt_s.is_finite() {

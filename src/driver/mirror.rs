@@ -88,7 +88,7 @@ impl Mirrors {
         }
     }
 
-    /// Reads and drops what the mirrors sent back, every [`DRAIN_PERIOD`] at most.
+    /// Reads and drops what the mirrors sent back, every `DRAIN_PERIOD` at most.
     pub fn drain_due(&mut self, now: SimTime) {
         if now < self.next_drain {
             return;

@@ -1,5 +1,5 @@
 //! A finished run directory, loaded for replay: each vehicle's rows (sampled every
-//! [`REPLAY_PERIOD`]), the events and the predicted velocity, and the swarm as a
+//! [`REPLAY_PERIOD_S`]), the events and the predicted velocity, and the swarm as a
 //! [`ViewState`] at any time. Pure but for [`Replay::load`], which reads the files.
 
 use std::path::Path;
