@@ -4,8 +4,8 @@
 //! and reads those. The sockets are not in the reactor, so arriving datagrams never wake
 //! the shard's thread (at a thousand vehicles a shard's context switches fell from about
 //! ten per tick to four), and there is no task or channel hop per datagram; run one shard
-//! per core. A datagram waits at most one tick,
-//! as it would for the next 1 ms physics step anyway.
+//! per core. A datagram waits at most one tick, as it would for the next 1 ms physics step
+//! anyway.
 //!
 //! Each vehicle has one or two links (offboard and GCS), each its own socket. Which peer
 //! a link answers follows PX4's `mavlink_receiver.cpp` ([`Partner`]): the default address

@@ -151,8 +151,8 @@ impl Recorder {
             // read after a flight that was killed.
             (dir.join("events.csv"), 1, None),
         ];
+        let transcode = (text == RowText::Writer).then_some(rows::to_csv as sink::Transcode);
         for cfg in &swarm.setup().links {
-            let transcode = (text == RowText::Writer).then_some(rows::to_csv as sink::Transcode);
             files.push((dir.join(csv_name(cfg)), 8192, transcode));
         }
         let setup = serde_json::to_string_pretty(&RunSetup::of(swarm)).map_err(io::Error::other)?;
