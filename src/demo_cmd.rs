@@ -160,9 +160,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     }
     println!("{}", table(&name, config.envelope.saturation, &summary));
     println!("run directory: {}", out.display());
-    if let Some(failure) = summary.failure {
-        return Err(crate::error::GaveUp(failure).into());
-    }
+    crate::error::flight_result(&summary)?;
     if !ended(run.swarm()) {
         bail!(
             "the vehicles had not all landed after {:.0} simulated seconds",
@@ -305,10 +303,7 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
         )
     );
     println!("run directory: {}", out.display());
-    match summary.failure {
-        Some(failure) => Err(crate::error::GaveUp(failure).into()),
-        None => Ok(()),
-    }
+    crate::error::flight_result(&summary)
 }
 
 /// A shipped scenario by name, or a TOML file by path (anything ending in `.toml`).

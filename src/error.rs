@@ -44,6 +44,9 @@ pub enum ConsensusError {
         /// The gain.
         k: f64,
     },
+    /// Consensus weights that sum to zero: the consensus value is undefined.
+    #[error("the consensus weights sum to zero")]
+    ZeroWeightSum,
     /// A design interval `[k̂, k]` that is empty or leaves the stable range.
     #[error("design gain k̂ = {design_k} must satisfy k_min = {k_min:.6} < k̂ ≤ k = {k}")]
     BadDesignGain {
@@ -146,4 +149,31 @@ pub struct GaveUp(pub String);
 impl GaveUp {
     /// The process exit code for it.
     pub const EXIT_CODE: u8 = 3;
+}
+
+/// The divergence guard ended the consensus (the swarm ran away from the law's
+/// prediction); the vehicles were held or landed by the loss policy. `fly` and `demo`
+/// exit with [`GuardStopped::EXIT_CODE`].
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("{0}")]
+pub struct GuardStopped(pub String);
+
+impl GuardStopped {
+    /// The process exit code for it.
+    pub const EXIT_CODE: u8 = 4;
+}
+
+/// A finished flight's outcome as the process sees it: [`GaveUp`] when the swarm gave up
+/// before its flight, [`GuardStopped`] when the divergence guard ended the consensus.
+///
+/// # Errors
+/// One of those two, carrying the summary's words.
+pub fn flight_result(summary: &crate::record::metrics::Summary) -> anyhow::Result<()> {
+    if let Some(failure) = &summary.failure {
+        return Err(GaveUp(failure.clone()).into());
+    }
+    if let Some(guard) = &summary.guard {
+        return Err(GuardStopped(guard.clone()).into());
+    }
+    Ok(())
 }

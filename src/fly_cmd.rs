@@ -85,10 +85,7 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
     runtime.shutdown_background();
     println!("{}", serde_json::to_string_pretty(&summary)?);
     println!("run directory: {}", out.display());
-    match summary.failure {
-        Some(failure) => Err(crate::error::GaveUp(failure).into()),
-        None => Ok(()),
-    }
+    crate::error::flight_result(&summary)
 }
 
 /// `runs/<config stem>-<unix seconds>`.
@@ -309,6 +306,7 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
     let phase = match swarm.phase() {
         SwarmPhase::Holding(_) => "HOLDING (a vehicle is lost)",
         SwarmPhase::Ended(_) => "ended (hovering)",
+        SwarmPhase::Stopped(_) => "STOPPED by the divergence guard (hovering)",
         other => other.name(),
     };
     let links: String = swarm

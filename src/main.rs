@@ -4,7 +4,8 @@
 //! for an unstable / infeasible one, 2 for a usage error (clap's own, or a value our
 //! validation refuses), 3 when `fly` or `demo` gave up before the flight (a handshake
 //! not complete within `swarm.handshake_timeout_s`: the vehicles not flying are named,
-//! the others were landed).
+//! the others were landed), 4 when the divergence guard ended the consensus of `fly` or
+//! `demo` (the swarm ran away from the law's prediction; `summary.json` names the cause).
 //!
 //! Logging: `RUST_LOG` as usual; unset, warnings and the swarm's warning events (lost,
 //! refused, timeouts, failsafes, origin changes) are printed.
@@ -14,7 +15,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use ringswarm::cli::{AnalyzeArgs, Cli, Command, PlanArgs};
 use ringswarm::consensus::PlanRequest;
-use ringswarm::error::GaveUp;
+use ringswarm::error::{GaveUp, GuardStopped};
 use ringswarm::report::{AnalyzeRequest, emit, run_analyze, run_plan};
 use tracing_subscriber::EnvFilter;
 use tracing_subscriber::filter::LevelFilter;
@@ -48,6 +49,8 @@ fn main() -> ExitCode {
             eprintln!("error: {err:#}");
             if err.downcast_ref::<GaveUp>().is_some() {
                 ExitCode::from(GaveUp::EXIT_CODE)
+            } else if err.downcast_ref::<GuardStopped>().is_some() {
+                ExitCode::from(GuardStopped::EXIT_CODE)
             } else {
                 ExitCode::from(2)
             }

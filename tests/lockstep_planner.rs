@@ -29,12 +29,11 @@ fn the_planned_agent_is_retargeted_then_consensus_predicts_the_target() {
         }
         _ => {}
     });
-    let Some(PlanDecision::Planned {
-        k,
-        retarget: Some((agent, v)),
-    }) = run.swarm().plan_decision().cloned()
-    else {
+    let Some(PlanDecision::Planned { k, retarget }) = run.swarm().plan_decision().cloned() else {
         panic!("{:?}", run.swarm().plan_decision());
+    };
+    let [(agent, v)] = retarget[..] else {
+        panic!("the paper's plan re-targets one agent: {retarget:?}");
     };
     assert_eq!(agent, 3, "agent 4 (0-based 3)");
     assert!((k - 10.0).abs() < 1e-9, "k = {k}");

@@ -180,11 +180,11 @@ fn ground_start_arms_climbs_forms_and_cruises_at_the_planned_velocity_then_lands
     // From rest, w·v = 0: the planner (k ≤ 3, k ≥ k_min + 1.3) re-targets agent 2 with
     // k = 3 (w = (1, 4, 1, 4, 1, 4), sum 15): it must fly (3, 2)·15/4 = (11.25, 7.5).
     match run.swarm().plan_decision() {
-        Some(PlanDecision::Planned {
-            k,
-            retarget: Some((agent, v)),
-        }) => {
-            assert_eq!(*agent, 1);
+        Some(PlanDecision::Planned { k, retarget }) => {
+            let [(agent, v)] = retarget[..] else {
+                panic!("the paper's plan re-targets one agent: {retarget:?}");
+            };
+            assert_eq!(agent, 1);
             assert!((k - 3.0).abs() < 1e-9, "k = {k}");
             assert!((v - Vector2::new(11.25, 7.5)).norm() < 0.05, "{v:?}");
         }

@@ -100,12 +100,14 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         duration: None,
         handshake_timeout: Duration::from_secs(30),
         estimate_hover: true,
+        estimate_drag: true,
         mean_velocity_gain: 0.2,
         setpoint: ringswarm::swarm::SetpointKind::Attitude,
         bandwidth: None,
         end_action: EndAction::Land,
         loss_policy: LossPolicy::Hold,
         target: None,
+        guard: None,
     };
     let mut all_flying_at = None;
     let (command_tx, command_rx) = watch::channel(DriverCommand::Fly);

@@ -56,6 +56,45 @@ pub struct Config {
     /// MAVLink 2 signing.
     #[serde(default)]
     pub security: SecuritySection,
+    /// The divergence guard.
+    #[serde(default)]
+    pub guard: GuardSection,
+}
+
+/// `[guard]`: the divergence guard ends the consensus (the swarm applies
+/// `swarm.on_link_loss`: brake and hold, or land; `fly` and `demo` exit with code 4) when
+/// the swarm runs away from what the law promises.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GuardSection {
+    /// Whether the guard watches (default true).
+    pub enabled: bool,
+    /// Bound on `|v̄_w − v_f|`, the w-weighted mean velocity against the predicted final
+    /// velocity (m/s, default 1.0).
+    pub velocity_error_mps: f64,
+    /// How long the velocity error may stay beyond its bound (s, default 1.0).
+    pub velocity_error_s: f64,
+    /// How far the formation error may rise above the lowest it reached in this
+    /// consensus (m, default 2.0), or this fraction of that lowest value, the larger
+    /// (default 0.5) ...
+    pub formation_growth_m: f64,
+    /// See `formation_growth_m`.
+    pub formation_growth_fraction: f64,
+    /// ... for how long (s, default 10).
+    pub formation_growth_s: f64,
+}
+
+impl Default for GuardSection {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            velocity_error_mps: 1.0,
+            velocity_error_s: 1.0,
+            formation_growth_m: 2.0,
+            formation_growth_fraction: 0.5,
+            formation_growth_s: 10.0,
+        }
+    }
 }
 
 /// `[security]`: MAVLink 2 signing of every link.
@@ -158,6 +197,10 @@ pub struct SwarmSection {
     /// Estimate each vehicle's hover thrust in flight (PX4's hover thrust EKF) and fly
     /// with it instead of the configured `hover_throttle` (default true).
     pub estimate_hover: bool,
+    /// Estimate each vehicle's linear drag in flight (default true): the drag fed forward
+    /// is then never more than the estimate's lower confidence bound, and the estimate is
+    /// flown once it is settled and differs from `drag_per_s`.
+    pub estimate_drag: bool,
     /// What is streamed: `attitude` (SET_ATTITUDE_TARGET, the paper's outputs; default)
     /// or `acceleration` (SET_POSITION_TARGET_LOCAL_NED: PX4 closes thrust itself).
     pub setpoint: SetpointKind,
@@ -178,6 +221,7 @@ impl Default for SwarmSection {
             state_timeout_ms: 300,
             retake_offboard: false,
             estimate_hover: true,
+            estimate_drag: true,
             setpoint: SetpointKind::Attitude,
         }
     }

@@ -12,7 +12,7 @@ use super::Config;
 use crate::consensus::{CouplingGains, RingDigraph, analyze};
 use crate::control::{AltitudeGains, Envelope, VehicleModel};
 use crate::frame::{CommonFrame, Geodetic};
-use crate::swarm::{SwarmSetup, TargetVelocity};
+use crate::swarm::{GuardLimits, SwarmSetup, TargetVelocity};
 use crate::vehicle::LinkConfig;
 
 /// Longest flight (s): about eleven days. `Duration` cannot hold 1e20 s, and no battery
@@ -187,6 +187,7 @@ impl Config {
         let timing = self.check_swarm(&mut p);
         let target = self.target(&mut p);
         let models = self.models(envelope.as_ref(), &mut p);
+        let guard = self.guard(&mut p);
         self.transport(&mut p);
         if !p.0.is_empty() {
             return Err(p.0.join("\n"));
@@ -237,13 +238,57 @@ impl Config {
             duration: Some(timing.duration),
             handshake_timeout: timing.handshake_timeout,
             estimate_hover: s.estimate_hover,
+            estimate_drag: s.estimate_drag,
             mean_velocity_gain: g.k_vmean,
             setpoint: s.setpoint,
             bandwidth,
             end_action: s.end,
             loss_policy: s.on_link_loss,
             target,
+            guard,
         })
+    }
+
+    /// `[guard]`: every bound checked by name; `None` when the guard is off.
+    fn guard(&self, p: &mut Problems) -> Option<GuardLimits> {
+        let g = &self.guard;
+        let ok = p.positive(
+            "guard.velocity_error_mps",
+            g.velocity_error_mps,
+            MAX_SPEED_MPS,
+            " m/s",
+        ) & p.positive("guard.velocity_error_s", g.velocity_error_s, 3600.0, " s")
+            & p.positive(
+                "guard.formation_growth_fraction",
+                g.formation_growth_fraction,
+                100.0,
+                "",
+            )
+            & p.positive(
+                "guard.formation_growth_m",
+                g.formation_growth_m,
+                MAX_DISTANCE_M,
+                " m",
+            )
+            & p.positive(
+                "guard.formation_growth_s",
+                g.formation_growth_s,
+                3600.0,
+                " s",
+            );
+        if !(ok && g.enabled) {
+            return None;
+        }
+        GuardLimits::new(
+            (g.velocity_error_mps, g.velocity_error_s),
+            (
+                g.formation_growth_m,
+                g.formation_growth_fraction,
+                g.formation_growth_s,
+            ),
+        )
+        .map_err(|e| p.push(format!("guard: {e}")))
+        .ok()
     }
 
     /// `[swarm]`: rates, durations and timeouts, and the coordinator's own ids.

@@ -63,7 +63,10 @@ pub fn least_change_velocities(
     if n == 0 {
         return Err(ConsensusError::NoMacroVertices);
     }
-    for (what, got) in [("weights", weights.len()), ("speed limits", max_speed_mps.len())] {
+    for (what, got) in [
+        ("weights", weights.len()),
+        ("speed limits", max_speed_mps.len()),
+    ] {
         if got != n {
             return Err(ConsensusError::WrongLength {
                 what,
@@ -256,7 +259,11 @@ mod tests {
         let c = (target * 9.0 - weighted) / 15.0;
         for i in 0..6 {
             let expected = v[i] + c * w[i];
-            assert!((got[i] - expected).norm() < 1e-12, "{i}: {} vs {expected}", got[i]);
+            assert!(
+                (got[i] - expected).norm() < 1e-12,
+                "{i}: {} vs {expected}",
+                got[i]
+            );
         }
     }
 
@@ -265,8 +272,13 @@ mod tests {
         // k = 0: every weight 1, so each agent goes to the target itself: |(3, 2)| = 3.606.
         let w = ring_w(3, 0.0);
         let got = reached(
-            least_change_velocities(&[Vector2::zeros(); 6], &w, Vector2::new(3.0, 2.0), &[5.49; 6])
-                .unwrap(),
+            least_change_velocities(
+                &[Vector2::zeros(); 6],
+                &w,
+                Vector2::new(3.0, 2.0),
+                &[5.49; 6],
+            )
+            .unwrap(),
         );
         for v in &got {
             assert!((v - Vector2::new(3.0, 2.0)).norm() < 1e-12);
@@ -283,8 +295,13 @@ mod tests {
         // beyond 4.5, projected).
         let w = ring_w(2, 2.0);
         let got = reached(
-            least_change_velocities(&[Vector2::zeros(); 4], &w, Vector2::new(4.0, 0.0), &[4.5; 4])
-                .unwrap(),
+            least_change_velocities(
+                &[Vector2::zeros(); 4],
+                &w,
+                Vector2::new(4.0, 0.0),
+                &[4.5; 4],
+            )
+            .unwrap(),
         );
         let expected = [2.5, 4.5, 2.5, 4.5];
         for (v, e) in got.iter().zip(expected) {
@@ -302,7 +319,12 @@ mod tests {
         let target = Vector2::new(2.5, -1.5);
         let got = reached(least_change_velocities(&v, &w, target, &limits).unwrap());
         let total: f64 = w.iter().sum();
-        let mean: Vector2<f64> = got.iter().zip(&w).map(|(v, w)| v * *w).sum::<Vector2<f64>>() / total;
+        let mean: Vector2<f64> = got
+            .iter()
+            .zip(&w)
+            .map(|(v, w)| v * *w)
+            .sum::<Vector2<f64>>()
+            / total;
         assert!((mean - target).norm() < 1e-10, "{mean}");
         let mut binding = 0;
         for i in 0..8 {
@@ -321,7 +343,11 @@ mod tests {
                 if i == j {
                     continue;
                 }
-                for d in [Vector2::new(1e-4, 0.0), Vector2::new(0.0, 1e-4), Vector2::new(-1e-4, 3e-5)] {
+                for d in [
+                    Vector2::new(1e-4, 0.0),
+                    Vector2::new(0.0, 1e-4),
+                    Vector2::new(-1e-4, 3e-5),
+                ] {
                     let mut u = got.clone();
                     u[i] += d / w[i];
                     u[j] -= d / w[j];
@@ -337,12 +363,20 @@ mod tests {
     fn an_unreachable_target_names_the_nearest_reachable() {
         // w = (1, 2, 1, 2), W = 6, limits 3: reachable radius (2·3 + 2·6)/6 = 3 m/s.
         let w = ring_w(2, 1.0);
-        let r = least_change_velocities(&[Vector2::zeros(); 4], &w, Vector2::new(0.0, 5.0), &[3.0; 4])
-            .unwrap();
+        let r = least_change_velocities(
+            &[Vector2::zeros(); 4],
+            &w,
+            Vector2::new(0.0, 5.0),
+            &[3.0; 4],
+        )
+        .unwrap();
         let LeastChange::Unreachable { best_mps, reason } = r else {
             panic!("{r:?}")
         };
-        assert!((best_mps - Vector2::new(0.0, 3.0)).norm() < 1e-5, "{best_mps}");
+        assert!(
+            (best_mps - Vector2::new(0.0, 3.0)).norm() < 1e-5,
+            "{best_mps}"
+        );
         assert!(reason.contains("3.000 m/s in any direction"), "{reason}");
     }
 
@@ -353,8 +387,12 @@ mod tests {
         let e = least_change_velocities(&v, &w, Vector2::zeros(), &[1.0]).unwrap_err();
         assert!(e.to_string().starts_with("speed limits"), "{e}");
         let e = least_change_velocities(&v, &w, Vector2::zeros(), &[1.0, 0.0]).unwrap_err();
-        assert!(e.to_string().starts_with("speed limit must be greater"), "{e}");
-        let e = least_change_velocities(&v, &w, Vector2::new(f64::NAN, 0.0), &[1.0; 2]).unwrap_err();
+        assert!(
+            e.to_string().starts_with("speed limit must be greater"),
+            "{e}"
+        );
+        let e =
+            least_change_velocities(&v, &w, Vector2::new(f64::NAN, 0.0), &[1.0; 2]).unwrap_err();
         assert!(e.to_string().starts_with("target must be a finite"), "{e}");
         let e = least_change_velocities(&v, &[1.0, -1.0], Vector2::zeros(), &[1.0; 2]).unwrap_err();
         assert!(e.to_string().contains("sum to zero"), "{e}");

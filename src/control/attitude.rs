@@ -75,6 +75,12 @@ pub fn tilt_cos(attitude_ned_frd: &UnitQuaternion<f64>) -> f64 {
     (1.0 - 2.0 * (q.i * q.i + q.j * q.j)).clamp(-1.0, 1.0)
 }
 
+/// The direction the thrust of an attitude points in (unit vector, ENU: east, north, up):
+/// the body's −z axis (FRD) turned into NED by the attitude, then into ENU.
+pub fn thrust_direction_enu(attitude_ned_frd: &UnitQuaternion<f64>) -> Vector3<f64> {
+    super::ned_to_enu(attitude_ned_frd * Vector3::new(0.0, 0.0, -1.0))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -84,6 +90,24 @@ mod tests {
 
     fn model() -> VehicleModel {
         VehicleModel::from_hover_throttle(1.5, 0.4).unwrap()
+    }
+
+    #[test]
+    fn thrust_points_up_when_level_and_north_when_the_nose_is_down() {
+        let level = thrust_direction_enu(&UnitQuaternion::identity());
+        assert!((level - Vector3::new(0.0, 0.0, 1.0)).norm() < 1e-15);
+        // Nose down by 0.3 rad (pitch −0.3 in FRD, heading north): the thrust tilts north.
+        let nose_down = thrust_direction_enu(&UnitQuaternion::from_euler_angles(0.0, -0.3, 0.0));
+        let expected = Vector3::new(0.0, 0.3f64.sin(), 0.3f64.cos());
+        assert!((nose_down - expected).norm() < 1e-12, "{nose_down}");
+        // Right wing down by 0.2 rad, heading east (yaw π/2): the thrust tilts south.
+        let roll_east =
+            thrust_direction_enu(&UnitQuaternion::from_euler_angles(0.2, 0.0, FRAC_PI_2));
+        let expected = Vector3::new(0.0, -0.2f64.sin(), 0.2f64.cos());
+        assert!((roll_east - expected).norm() < 1e-12, "{roll_east}");
+        // Its vertical part is the tilt's cosine.
+        let q = UnitQuaternion::from_euler_angles(0.3, -0.4, 1.0);
+        assert!((thrust_direction_enu(&q).z - tilt_cos(&q)).abs() < 1e-12);
     }
 
     #[test]

@@ -210,6 +210,11 @@ pub struct Summary {
     pub final_phase: String,
     /// Why the swarm gave up before its flight, if it did.
     pub failure: Option<String>,
+    /// Why the flight stopped: `duration`, `guard`, `handshake`, `link_loss` or
+    /// `requested`; `null` while it has not.
+    pub stop_reason: Option<String>,
+    /// What the divergence guard saw when it ended the consensus, if it did.
+    pub guard: Option<String>,
     /// Warnings in `events.csv`.
     pub warnings: usize,
     /// The control loop's punctuality (in lockstep every tick is on time).
@@ -245,6 +250,8 @@ impl Summary {
             wall_seconds,
             final_phase: swarm.phase().name().to_owned(),
             failure: swarm.failure().map(ToString::to_string),
+            stop_reason: swarm.stop_reason().map(|r| r.name().to_owned()),
+            guard: swarm.guard_trip().map(|t| t.to_string()),
             warnings: swarm.events().iter().filter(|e| e.warning).count(),
             timing: swarm.timing(),
             mirrors: Vec::new(),

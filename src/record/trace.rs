@@ -63,7 +63,10 @@ impl Trace {
         self.next = now + self.period;
         self.consensus_start_s = swarm.consensus_started().map(SimTime::as_secs_f64);
         if self.end_s.is_none()
-            && matches!(swarm.phase(), SwarmPhase::Landing(_) | SwarmPhase::Ended(_))
+            && matches!(
+                swarm.phase(),
+                SwarmPhase::Landing(_) | SwarmPhase::Ended(_) | SwarmPhase::Stopped(_)
+            )
         {
             self.end_s = Some(now.as_secs_f64());
         }

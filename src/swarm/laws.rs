@@ -4,7 +4,7 @@
 //!
 //! - **Handshake:** each flying vehicle keeps the velocity it had when it was first seen
 //!   flying: `u = K_KEEP·(v_keep − v)`.
-//! - **Retargeting:** the re-targeted agent goes to its planned velocity
+//! - **Retargeting:** each re-targeted agent goes to its planned velocity
 //!   (`RETARGET_K_V`), the others keep the velocity they had at the plan.
 //! - **Consensus:** the ring law `u = −αL(p − d) − βLv`, plus, unless `k_vmean = 0`, a
 //!   uniform PI correction `−k·e − (k²/2)·∫e`, `e = v̄_w − v_f`, `k = k_vmean`, that drives
@@ -14,7 +14,7 @@
 //!   vehicle that is the model, `v̄_w = v_f` already (the law keeps `w·v`) and it is zero.
 //!   With model error (a wrong hover thrust, drag, PX4's own loops) it stops the drift
 //!   the pure law cannot see. A documented deviation from the paper.
-//! - **Holding, Ended, Landing:** each vehicle brakes on its own and holds where it
+//! - **Holding, Stopped, Ended, Landing:** each vehicle brakes on its own and holds where it
 //!   stopped: `u = −HOLD_K_V·v + HOLD_K_P·(p_hold − p)`.
 
 use nalgebra::Vector2;
@@ -52,7 +52,10 @@ impl Swarm {
                 }
                 self.setup.saturation
             }
-            SwarmPhase::Holding(_) | SwarmPhase::Ended(_) | SwarmPhase::Landing(_) => {
+            SwarmPhase::Holding(_)
+            | SwarmPhase::Ended(_)
+            | SwarmPhase::Landing(_)
+            | SwarmPhase::Stopped(_) => {
                 for ((a, h), hold) in self
                     .accel
                     .iter_mut()
@@ -81,12 +84,10 @@ impl Swarm {
             }
             SwarmPhase::Retargeting(_) => {
                 self.keep_velocities();
-                if let Some(PlanDecision::Planned {
-                    retarget: Some((agent, v)),
-                    ..
-                }) = self.plan
-                {
-                    self.accel[agent] = RETARGET_K_V * (v - self.horizontal[agent].vel_mps);
+                if let Some(PlanDecision::Planned { retarget, .. }) = &self.plan {
+                    for &(agent, v) in retarget {
+                        self.accel[agent] = RETARGET_K_V * (v - self.horizontal[agent].vel_mps);
+                    }
                 }
                 SaturationMode::Clip
             }

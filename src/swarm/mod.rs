@@ -18,6 +18,9 @@
 //!                                        (reached, or target.timeout_s with a warning)
 //!     feasible as is ─► Consensus with the planned k;  infeasible or unstable ─► Consensus
 //!     with the configured k (warned)
+//!
+//!  Consensus ──divergence guard trips (guard.rs)──► policy hold: Stopped (brake, hover;
+//!     never resumes; the end action at the end of the duration) ; policy land: Landing
 //! ```
 //!
 //! Each control tick (`tick.rs`) takes every vehicle's fresh state (a position older than
@@ -33,6 +36,7 @@
 //! (`events.rs`).
 
 mod events;
+mod guard;
 mod laws;
 mod model;
 mod phases;
@@ -55,6 +59,7 @@ use crate::control::{AttitudeThrust, VehicleModel, attitude_thrust_from_accelera
 use crate::vehicle::{Phase, Setpoint, VehicleLink};
 use events::EventLog;
 pub use events::{MAX_KEPT_EVENTS, SwarmEvent};
+pub use guard::{DivergenceGuard, GuardLimits, GuardTrip};
 use model::FlownModel;
 pub use setup::{
     EndAction, LossPolicy, PlanDecision, Retargeted, SetpointKind, SwarmSetup, TargetVelocity,
@@ -75,6 +80,9 @@ pub enum SwarmPhase {
     Ended(SimTime),
     /// Every vehicle was told to land, at the given time.
     Landing(SimTime),
+    /// The divergence guard ended the consensus: the vehicles brake and hover in place,
+    /// since the given time, until the end of the duration.
+    Stopped(SimTime),
 }
 
 impl SwarmPhase {
@@ -87,6 +95,7 @@ impl SwarmPhase {
             Self::Holding(_) => "holding",
             Self::Ended(_) => "ended",
             Self::Landing(_) => "landing",
+            Self::Stopped(_) => "stopped",
         }
     }
 }
@@ -123,6 +132,34 @@ impl fmt::Display for SwarmFailure {
                 }
                 write!(f, "; the vehicles that flew were landed")
             }
+        }
+    }
+}
+
+/// Why the flight stopped (`summary.json`'s `stop_reason`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StopReason {
+    /// The configured duration is over.
+    DurationOver,
+    /// The divergence guard ended the consensus.
+    Guard(GuardTrip),
+    /// The handshake was not complete in time.
+    Handshake,
+    /// A vehicle was lost and the loss policy is `land`.
+    LinkLoss,
+    /// Landing was asked for from outside (Ctrl-C, a signal, the live view).
+    Requested,
+}
+
+impl StopReason {
+    /// A short name: `duration`, `guard`, `handshake`, `link_loss`, `requested`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::DurationOver => "duration",
+            Self::Guard(_) => "guard",
+            Self::Handshake => "handshake",
+            Self::LinkLoss => "link_loss",
+            Self::Requested => "requested",
         }
     }
 }
@@ -186,6 +223,10 @@ pub struct Swarm {
     timing: timing::TickTiming,
     /// Each vehicle's horizontal box in the saturation, kept between ticks.
     boxes: Vec<Vector2<f64>>,
+    /// The divergence guard, if on.
+    guard: Option<DivergenceGuard>,
+    /// Why the flight stopped (or is stopping), once it does.
+    stop: Option<StopReason>,
 }
 
 /// The finest a link timer is looked at again when it stays due: the emulator's and the
@@ -227,11 +268,18 @@ impl Swarm {
             .map(|(m, d)| {
                 // With acceleration setpoints PX4 estimates its hover thrust itself.
                 let estimate = setup.estimate_hover && setup.setpoint == SetpointKind::Attitude;
-                FlownModel::new(*m, *d, estimate, (lo, hi))
+                let allowance = 0.5 * setup.mean_velocity_gain;
+                FlownModel::new(
+                    *m,
+                    (*d, allowance),
+                    (estimate, setup.estimate_drag),
+                    (lo, hi),
+                )
             })
             .collect();
         let flown_models = setup.models.clone();
         let setup_interval = setup.control_interval;
+        let setup_guard = setup.guard;
         Self {
             w,
             setup,
@@ -268,6 +316,8 @@ impl Swarm {
             plan: None,
             timing: timing::TickTiming::new(setup_interval),
             boxes: Vec::with_capacity(n),
+            guard: setup_guard.map(DivergenceGuard::new),
+            stop: None,
         }
     }
 
@@ -328,6 +378,15 @@ impl Swarm {
         self.flown.get(i).map(FlownModel::hover_estimate)
     }
 
+    /// Vehicle `i`'s drag estimate and its standard deviation (1/s), and the drag fed
+    /// forward now (1/s).
+    pub fn drag_estimate(&self, i: usize) -> Option<(f64, f64, f64)> {
+        self.flown.get(i).map(|f| {
+            let (d, std) = f.drag_estimate();
+            (d, std, f.drag_fed_forward_per_s())
+        })
+    }
+
     /// The model vehicle `i` is flown with now.
     pub fn flown_model(&self, i: usize) -> Option<VehicleModel> {
         self.flown_models.get(i).copied()
@@ -339,8 +398,28 @@ impl Swarm {
         self.isolated.get(i).copied().unwrap_or(false)
     }
 
-    /// Tells every vehicle to land and disarm (Ctrl-C, the end action or the land policy).
+    /// Why the flight stopped, once it has (or is stopping).
+    pub fn stop_reason(&self) -> Option<StopReason> {
+        self.stop
+    }
+
+    /// Whether the divergence guard ended the consensus (`fly` and `demo` exit non-zero).
+    pub fn guard_trip(&self) -> Option<GuardTrip> {
+        match self.stop {
+            Some(StopReason::Guard(trip)) => Some(trip),
+            _ => None,
+        }
+    }
+
+    /// Tells every vehicle to land and disarm, asked from outside (Ctrl-C, a signal).
     pub fn land(&mut self, now: SimTime) {
+        self.land_because(now, StopReason::Requested);
+    }
+
+    /// Tells every vehicle to land and disarm; `reason` is kept unless the flight was
+    /// already stopping for another.
+    pub(crate) fn land_because(&mut self, now: SimTime, reason: StopReason) {
+        self.stop.get_or_insert(reason);
         if !matches!(self.phase, SwarmPhase::Landing(_)) {
             self.log
                 .push(now, false, "landing every vehicle".to_owned());

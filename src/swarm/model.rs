@@ -15,9 +15,10 @@
 //! is flown. A vehicle whose model is right is never flown on an estimate's transient
 //! error; one whose model is 10 % off is corrected within seconds.
 
+use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 
-use crate::control::{HoverThrustEkf, VehicleModel};
+use crate::control::{DragKf, HoverThrustEkf, VehicleModel};
 
 /// The acceleration is measured over this window (s): differencing noisy velocities over
 /// one report interval (20 ms) would multiply their noise by 70; over 0.2 s by 7, about
@@ -29,6 +30,11 @@ const MAX_GAP_S: f64 = 0.5;
 pub const SIGNIFICANT_FRACTION: f64 = 0.03;
 /// The estimate is settled below this standard deviation.
 pub const SETTLED_STD: f64 = 0.025;
+/// The drag estimate is settled below this standard deviation (1/s).
+pub const SETTLED_DRAG_STD: f64 = 0.05;
+/// A drag estimate closer to the configuration than this fraction of it (or 0.02 1/s)
+/// is no news.
+pub const SIGNIFICANT_DRAG_FRACTION: f64 = 0.25;
 
 /// One vehicle's flown model.
 #[derive(Debug, Clone)]
@@ -36,30 +42,79 @@ pub(super) struct FlownModel {
     configured: VehicleModel,
     drag_per_s: f64,
     ekf: HoverThrustEkf,
+    drag: DragKf,
+    /// How much more drag than the estimate's lower bound may be fed forward (1/s).
+    drag_allowance_per_s: f64,
     estimate: bool,
+    estimate_drag: bool,
     trusted: bool,
-    last: Option<(SimTime, f64)>,
+    drag_trusted: bool,
+    last: Option<(SimTime, Vector3<f64>)>,
     thrust_sum: f64,
+    /// The horizontal acceleration asked for as delivered, summed over the window's ticks
+    /// (m/s², ENU).
+    force_sum: Vector2<f64>,
     thrust_ticks: u32,
 }
 
 impl FlownModel {
-    /// Starts from the configured model; `estimate` turns the estimator on.
+    /// Starts from the configured model; `estimate` turns the hover thrust estimator on,
+    /// `estimate_drag` the drag estimator. The drag fed forward may exceed the estimate's
+    /// lower confidence bound by `drag_allowance_per_s` (half the mean-velocity gain:
+    /// docs/math.md).
     pub(super) fn new(
         configured: VehicleModel,
-        drag_per_s: f64,
-        estimate: bool,
+        (drag_per_s, drag_allowance_per_s): (f64, f64),
+        (estimate, estimate_drag): (bool, bool),
         (min, max): (f64, f64),
     ) -> Self {
         Self {
             configured,
             drag_per_s,
             ekf: HoverThrustEkf::new(configured.hover_throttle(), min, max),
+            drag: DragKf::new(drag_per_s),
+            drag_allowance_per_s,
             estimate,
+            estimate_drag,
             trusted: false,
+            drag_trusted: false,
             last: None,
             thrust_sum: 0.0,
+            force_sum: Vector2::zeros(),
             thrust_ticks: 0,
+        }
+    }
+
+    /// Whether the drag estimate is flown (it disagreed significantly with the
+    /// configuration).
+    pub(super) fn drag_trusted(&self) -> bool {
+        self.drag_trusted
+    }
+
+    /// The drag estimate and its standard deviation (1/s).
+    pub(super) fn drag_estimate(&self) -> (f64, f64) {
+        (self.drag.drag_per_s(), self.drag.std())
+    }
+
+    /// The best guess of the drag (1/s): the estimate once it is flown, the configuration
+    /// before.
+    pub(super) fn drag_best_per_s(&self) -> f64 {
+        if self.drag_trusted {
+            self.drag.drag_per_s()
+        } else {
+            self.drag_per_s
+        }
+    }
+
+    /// The drag to feed forward (1/s): the best guess, never above the estimate's lower
+    /// confidence bound plus the allowance (the configuration as it is while the
+    /// estimator is off).
+    pub(super) fn drag_fed_forward_per_s(&self) -> f64 {
+        if self.estimate_drag {
+            self.drag_best_per_s()
+                .min(self.drag.lower_bound_per_s() + self.drag_allowance_per_s)
+        } else {
+            self.drag_per_s
         }
     }
 
@@ -83,19 +138,21 @@ impl FlownModel {
         (self.ekf.hover_throttle(), self.ekf.std())
     }
 
-    /// The vertical part of the normalised thrust on this tick (commanded thrust times
-    /// the cosine of the reported tilt).
-    pub(super) fn commanded(&mut self, thrust_up: f64) {
-        if thrust_up.is_finite() {
+    /// This tick's command as delivered: the vertical part of the normalised thrust
+    /// (commanded thrust times the cosine of the reported tilt) and the horizontal
+    /// acceleration it asks for (m/s², ENU).
+    pub(super) fn commanded(&mut self, thrust_up: f64, horizontal_mps2: Vector2<f64>) {
+        if thrust_up.is_finite() && horizontal_mps2.iter().all(|x| x.is_finite()) {
             self.thrust_sum += thrust_up;
+            self.force_sum += horizontal_mps2;
             self.thrust_ticks += 1;
         }
     }
 
-    /// The latest report: when it arrived, the upward and horizontal speeds, and
-    /// whether the vehicle flew on our commands in the air since the previous one.
-    pub(super) fn observe(&mut self, at: SimTime, vz_up_mps: f64, vxy_mps: f64, ours: bool) {
-        if !self.estimate || self.last.is_some_and(|(t, _)| t == at) {
+    /// The latest report: when it arrived, the velocity (m/s, ENU), and whether the
+    /// vehicle flew on our commands in the air since the previous one.
+    pub(super) fn observe(&mut self, at: SimTime, vel_enu_mps: Vector3<f64>, ours: bool) {
+        if !(self.estimate || self.estimate_drag) || self.last.is_some_and(|(t, _)| t == at) {
             return;
         }
         let usable = ours;
@@ -105,26 +162,49 @@ impl FlownModel {
         {
             return; // the window goes on
         }
-        if let Some((t0, vz0)) = self.last
+        if let Some((t0, v0)) = self.last
             && usable
             && self.thrust_ticks > 0
         {
             let dt = (at - t0).as_secs_f64();
             if dt > 0.0 && dt <= MAX_GAP_S {
-                self.ekf.predict(dt);
-                let thrust = self.thrust_sum / f64::from(self.thrust_ticks);
-                let acc = (vz_up_mps - vz0) / dt + self.drag_per_s * 0.5 * (vz_up_mps + vz0);
-                self.ekf.fuse(acc, thrust, vz_up_mps, vxy_mps);
-                let (hover, std) = (self.ekf.hover_throttle(), self.ekf.std());
-                let configured = self.configured.hover_throttle();
-                let gap = (hover - configured).abs();
-                if std < SETTLED_STD && gap > (SIGNIFICANT_FRACTION * configured).max(2.0 * std) {
-                    self.trusted = true;
+                let ticks = f64::from(self.thrust_ticks);
+                let mean_v = 0.5 * (vel_enu_mps + v0);
+                if self.estimate {
+                    self.fuse_hover(dt, self.thrust_sum / ticks, vel_enu_mps, v0);
+                }
+                if self.estimate_drag {
+                    let made = (vel_enu_mps.xy() - v0.xy()) / dt;
+                    let shortfall = self.force_sum / ticks - made;
+                    self.drag.predict(dt);
+                    self.drag.fuse(shortfall.x, mean_v.x);
+                    self.drag.fuse(shortfall.y, mean_v.y);
+                    let (d, std) = (self.drag.drag_per_s(), self.drag.std());
+                    let gap = (d - self.drag_per_s).abs();
+                    let significant = (SIGNIFICANT_DRAG_FRACTION * self.drag_per_s).max(0.02);
+                    if std < SETTLED_DRAG_STD && gap > significant.max(3.0 * std) {
+                        self.drag_trusted = true;
+                    }
                 }
             }
         }
-        self.last = Some((at, vz_up_mps));
+        self.last = Some((at, vel_enu_mps));
         self.thrust_sum = 0.0;
+        self.force_sum = Vector2::zeros();
         self.thrust_ticks = 0;
+    }
+
+    /// One window of the hover thrust estimator: the upward acceleration made, with the
+    /// drag's share added back, against the vertical thrust commanded.
+    fn fuse_hover(&mut self, dt: f64, thrust: f64, v: Vector3<f64>, v0: Vector3<f64>) {
+        self.ekf.predict(dt);
+        let acc = (v.z - v0.z) / dt + self.drag_best_per_s() * 0.5 * (v.z + v0.z);
+        self.ekf.fuse(acc, thrust, v.z, v.xy().norm());
+        let (hover, std) = (self.ekf.hover_throttle(), self.ekf.std());
+        let configured = self.configured.hover_throttle();
+        let gap = (hover - configured).abs();
+        if std < SETTLED_STD && gap > (SIGNIFICANT_FRACTION * configured).max(2.0 * std) {
+            self.trusted = true;
+        }
     }
 }

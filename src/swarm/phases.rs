@@ -6,8 +6,8 @@ use std::time::Duration;
 use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
-use super::{EndAction, LossPolicy, PlanDecision, Swarm, SwarmFailure, SwarmPhase};
-use crate::consensus::predicted_final_velocity;
+use super::{EndAction, LossPolicy, PlanDecision, StopReason, Swarm, SwarmFailure, SwarmPhase};
+use crate::consensus::{HorizontalState, predicted_final_velocity};
 use crate::vehicle::Phase;
 
 /// How close to the commanded altitude (m) and how slow vertically (m/s) every vehicle must
@@ -75,42 +75,44 @@ impl Swarm {
                     self.plan_target(now);
                 }
             }
-            SwarmPhase::Retargeting(_) if !any_lost => {
-                let Some(PlanDecision::Planned {
-                    retarget: Some((agent, v)),
-                    ..
-                }) = self.plan
-                else {
+            SwarmPhase::Retargeting(since) if !any_lost => {
+                let Some(PlanDecision::Planned { retarget, .. }) = &self.plan else {
                     return;
                 };
                 let tolerance = self.setup.target.map_or(0.05, |t| t.tolerance_mps);
-                let reached =
-                    self.states[agent].is_some_and(|s| (s.vel_enu_mps.xy() - v).norm() < tolerance);
-                let SwarmPhase::Retargeting(since) = self.phase else {
-                    return;
+                let off = |&(agent, v): &(usize, Vector2<f64>)| {
+                    self.states[agent].map_or(f64::INFINITY, |s| (s.vel_enu_mps.xy() - v).norm())
                 };
+                let worst = retarget
+                    .iter()
+                    .map(|r| (off(r), *r))
+                    .max_by(|a, b| a.0.total_cmp(&b.0));
                 let timeout = self
                     .setup
                     .target
                     .map_or(Duration::from_secs(30), |t| t.timeout);
-                if reached {
-                    self.start_consensus(now);
-                } else if now - since >= timeout {
-                    let at = self.states[agent].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
-                    self.log.push_vehicle(
-                        now,
-                        &self.setup.links[agent],
-                        true,
-                        format!(
-                            "re-target stage timed out after {:.1} s at ({:.2}, {:.2}) m/s, planned ({:.2}, {:.2}) m/s: consensus from the velocities now",
-                            timeout.as_secs_f64(),
-                            at.x,
-                            at.y,
-                            v.x,
-                            v.y
-                        ),
-                    );
-                    self.start_consensus(now);
+                match worst {
+                    None => self.start_consensus(now),
+                    Some((error, _)) if error < tolerance => self.start_consensus(now),
+                    Some((_, (agent, v))) if now - since >= timeout => {
+                        let at =
+                            self.states[agent].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
+                        self.log.push_vehicle(
+                            now,
+                            &self.setup.links[agent],
+                            true,
+                            format!(
+                                "re-target stage timed out after {:.1} s at ({:.2}, {:.2}) m/s, planned ({:.2}, {:.2}) m/s: consensus from the velocities now",
+                                timeout.as_secs_f64(),
+                                at.x,
+                                at.y,
+                                v.x,
+                                v.y
+                            ),
+                        );
+                        self.start_consensus(now);
+                    }
+                    Some(_) => {}
                 }
             }
             SwarmPhase::Handshake | SwarmPhase::Holding(_) if all_flying => {
@@ -137,11 +139,13 @@ impl Swarm {
                             true,
                             "a vehicle is lost: landing (on_link_loss = land)".to_owned(),
                         );
-                        self.land(now);
+                        self.land_because(now, StopReason::LinkLoss);
                     }
                 }
             }
-            SwarmPhase::Consensus(_) | SwarmPhase::Holding(_) if over(self.first_consensus) => {
+            SwarmPhase::Consensus(_) | SwarmPhase::Holding(_) | SwarmPhase::Stopped(_)
+                if over(self.first_consensus) =>
+            {
                 self.end(now)
             }
             _ => {}
@@ -177,13 +181,16 @@ impl Swarm {
         };
         self.log.push(now, true, failure.to_string());
         self.failure = Some(failure);
-        self.land(now);
+        self.land_because(now, StopReason::Handshake);
         true
     }
 
     pub(super) fn start_consensus(&mut self, now: SimTime) {
         self.phase = SwarmPhase::Consensus(now);
         self.mean_velocity_integral = Vector2::zeros();
+        if let Some(guard) = self.guard.as_mut() {
+            guard.reset();
+        }
         self.first_consensus.get_or_insert(now);
         let v0: Vec<Vector2<f64>> = self
             .states
@@ -202,9 +209,57 @@ impl Swarm {
         self.log.push(now, false, text);
     }
 
+    /// The divergence guard, once per consensus tick (after the states are taken): when
+    /// it trips, the swarm applies its loss policy (hold: brake and hover, never resuming;
+    /// land) and logs the cause.
+    pub(super) fn watch_divergence(&mut self, now: SimTime) {
+        let (SwarmPhase::Consensus(_), Some(predicted)) =
+            (self.phase, self.predicted_final_velocity)
+        else {
+            return;
+        };
+        let Some(guard) = self.guard.as_mut() else {
+            return;
+        };
+        let total: f64 = self.w.iter().sum();
+        if total.abs() < 1e-12 {
+            return;
+        }
+        let mean = self
+            .w
+            .iter()
+            .zip(&self.horizontal)
+            .map(|(w, h)| *w * h.vel_mps)
+            .sum::<Vector2<f64>>()
+            / total;
+        let formation = formation_error_m(&self.horizontal);
+        let spread = self
+            .horizontal
+            .iter()
+            .map(|h| (h.vel_mps - mean).norm())
+            .fold(0.0, f64::max);
+        let Some(trip) = guard.observe(now, mean, predicted, (formation, spread)) else {
+            return;
+        };
+        self.stop = Some(StopReason::Guard(trip));
+        match self.setup.loss_policy {
+            LossPolicy::Hold => {
+                self.log
+                    .push(now, true, format!("{trip}: the swarm brakes and holds"));
+                self.hold_points.iter_mut().for_each(|p| *p = None);
+                self.phase = SwarmPhase::Stopped(now);
+            }
+            LossPolicy::Land => {
+                self.log.push(now, true, format!("{trip}: landing"));
+                self.land_because(now, StopReason::Guard(trip));
+            }
+        }
+    }
+
     fn end(&mut self, now: SimTime) {
+        self.stop.get_or_insert(StopReason::DurationOver);
         match self.setup.end_action {
-            EndAction::Land => self.land(now),
+            EndAction::Land => self.land_because(now, StopReason::DurationOver),
             EndAction::Hold => {
                 self.log
                     .push(now, false, "duration over: holding".to_owned());
@@ -213,4 +268,21 @@ impl Swarm {
             }
         }
     }
+}
+
+/// The formation error of the states flown on: the largest distance of `pᵢ − dᵢ` from
+/// their mean (m).
+fn formation_error_m(states: &[HorizontalState]) -> f64 {
+    if states.is_empty() {
+        return 0.0;
+    }
+    let centre = states
+        .iter()
+        .map(|h| h.pos_m - h.offset_m)
+        .sum::<Vector2<f64>>()
+        / states.len() as f64;
+    states
+        .iter()
+        .map(|h| (h.pos_m - h.offset_m - centre).norm())
+        .fold(0.0, f64::max)
 }

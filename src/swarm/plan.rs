@@ -4,9 +4,11 @@
 use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
+use super::model::FlownModel;
 use super::{PlanDecision, Retargeted, Swarm, SwarmPhase, TargetVelocity};
 use crate::consensus::{
-    PlanOutcome, PlanRequest, RingDigraph, RingModes, analyze, fastest_mode_per_s, k_lower_bound,
+    LeastChange, PlanOutcome, PlanRequest, RingDigraph, RingModes, analyze, fastest_mode_per_s,
+    k_lower_bound, least_change_velocities,
 };
 
 impl Swarm {
@@ -44,21 +46,26 @@ impl Swarm {
             }
         };
         if let PlanDecision::Planned { k, retarget } = &decision {
-            let text = match retarget {
-                Some((agent, v)) => format!(
-                    "plan: k = {k:.6}, vehicle {} re-targeted to ({:.3}, {:.3}) m/s",
-                    self.setup.links[*agent].system_id, v.x, v.y
-                ),
-                None => format!("plan: k = {k:.6}, no re-target needed"),
-            };
+            let mut text = format!("plan: k = {k:.6}, ");
+            if retarget.is_empty() {
+                text.push_str("no re-target needed");
+            }
+            for (j, (agent, v)) in retarget.iter().enumerate() {
+                let sep = if j == 0 { "" } else { ", " };
+                let was = self.keep_velocity[*agent].unwrap_or_default();
+                text.push_str(&format!(
+                    "{sep}vehicle {} re-targeted to ({:.3}, {:.3}) m/s (by {:.3} m/s)",
+                    self.setup.links[*agent].system_id,
+                    v.x,
+                    v.y,
+                    (v - was).norm()
+                ));
+            }
             self.log.push(now, false, text);
         }
         let retargeting = matches!(
-            decision,
-            PlanDecision::Planned {
-                retarget: Some(_),
-                ..
-            }
+            &decision,
+            PlanDecision::Planned { retarget, .. } if !retarget.is_empty()
         );
         self.plan = Some(decision);
         if retargeting {
@@ -68,19 +75,19 @@ impl Swarm {
         }
     }
 
+    /// The paper's plan (one agent re-targeted, or none) when it keeps every speed
+    /// within its limit; otherwise the least change of every agent's velocity with the
+    /// configured `k` (kept within the planner's range).
     fn planned_ring(
         &self,
         target: &TargetVelocity,
         velocities: Vec<Vector2<f64>>,
-    ) -> Result<(RingDigraph, Option<Retargeted>), String> {
-        let airframe = self.airframe_speed_limit_mps();
-        let max_speed_mps = match (target.max_speed_mps, airframe) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        };
+    ) -> Result<(RingDigraph, Vec<Retargeted>), String> {
+        let limits = self.speed_limits_mps(target);
+        let max_speed_mps = limits.iter().copied().reduce(f64::min);
         let k_max = self.k_max_the_airframes_fly(target)?;
         let plan = crate::consensus::plan(&PlanRequest {
-            velocities_mps: velocities,
+            velocities_mps: velocities.clone(),
             target_mps: target.velocity_mps,
             k_margin: target.k_margin,
             k_max,
@@ -88,8 +95,41 @@ impl Swarm {
         })
         .map_err(|e| e.to_string())?;
         let (k, retarget) = match plan.outcome {
-            PlanOutcome::Feasible { k, retarget, .. } => (k, retarget),
-            PlanOutcome::Infeasible { reason } => return Err(reason),
+            PlanOutcome::Feasible { k, retarget, .. } => (
+                k,
+                retarget
+                    .map(|r| vec![(r.agent, r.new_velocity_mps)])
+                    .unwrap_or_default(),
+            ),
+            PlanOutcome::Infeasible { reason } => {
+                let k_lo = plan.k_min + target.k_margin;
+                let k = self.setup.ring.k().clamp(k_lo.min(k_max), k_max);
+                let ring = RingDigraph::new(self.setup.ring.macro_vertices(), k)
+                    .map_err(|e| e.to_string())?;
+                let w: Vec<f64> = (0..velocities.len()).map(|i| ring.w(i)).collect();
+                let limits: Vec<f64> = if limits.is_empty() {
+                    vec![crate::config::MAX_SPEED_MPS; velocities.len()]
+                } else {
+                    limits
+                };
+                match least_change_velocities(&velocities, &w, target.velocity_mps, &limits)
+                    .map_err(|e| e.to_string())?
+                {
+                    LeastChange::Reached { velocities_mps, .. } => (
+                        k,
+                        velocities_mps
+                            .into_iter()
+                            .enumerate()
+                            .filter(|(i, v)| (v - velocities[*i]).norm() > 1e-9)
+                            .collect(),
+                    ),
+                    LeastChange::Unreachable { reason: all, .. } => {
+                        return Err(format!(
+                            "{reason}; re-targeting every vehicle with k = {k:.6}: {all}"
+                        ));
+                    }
+                }
+            }
         };
         let ring =
             RingDigraph::new(self.setup.ring.macro_vertices(), k).map_err(|e| e.to_string())?;
@@ -100,7 +140,28 @@ impl Swarm {
                 self.setup.gains.alpha, self.setup.gains.beta
             ));
         }
-        Ok((ring, retarget.map(|r| (r.agent, r.new_velocity_mps))))
+        Ok((ring, retarget))
+    }
+
+    /// Each vehicle's speed limit for the planner (m/s): `target.max_speed_mps` and its
+    /// drag-limited top speed ([`Swarm::vehicle_speed_limit_mps`]), the smaller; empty
+    /// when neither is known.
+    fn speed_limits_mps(&self, target: &TargetVelocity) -> Vec<f64> {
+        let limits: Vec<Option<f64>> = (0..self.links.len())
+            .map(
+                |i| match (target.max_speed_mps, self.vehicle_speed_limit_mps(i)) {
+                    (Some(a), Some(b)) => Some(a.min(b)),
+                    (a, b) => a.or(b),
+                },
+            )
+            .collect();
+        if limits.iter().all(Option::is_none) {
+            return Vec::new();
+        }
+        limits
+            .into_iter()
+            .map(|l| l.unwrap_or(crate::config::MAX_SPEED_MPS))
+            .collect()
     }
 
     /// `target.k_max`, lowered if needed so that the law's fastest mode stays within what
@@ -138,17 +199,14 @@ impl Swarm {
         Ok(lo)
     }
 
-    /// The fastest any vehicle can fly level against its drag, with a margin:
-    /// [`SPEED_MARGIN`]` · a_h / drag`, where `a_h` is the horizontal acceleration the
-    /// envelope allows at hover (`g·tan θ_max` when thrust allows). `None` without drag.
-    pub(super) fn airframe_speed_limit_mps(&self) -> Option<f64> {
-        self.setup
-            .drag_per_s
-            .iter()
-            .zip(&self.flown_models)
-            .filter(|(d, _)| **d > 0.0)
-            .map(|(d, m)| SPEED_MARGIN * self.setup.envelope.horizontal_limit_mps2(0.0, m) / d)
-            .reduce(f64::min)
+    /// Vehicle `i`'s top speed level against its drag (the estimate once it is flown, the
+    /// configuration before), with a margin: [`SPEED_MARGIN`]` · a_h / drag`, where `a_h`
+    /// is the horizontal acceleration the envelope allows at hover (`g·tan θ_max` when
+    /// thrust allows). `None` without drag.
+    fn vehicle_speed_limit_mps(&self, i: usize) -> Option<f64> {
+        let d = self.flown.get(i).map(FlownModel::drag_best_per_s)?;
+        let model = self.flown_models.get(i)?;
+        (d > 0.0).then(|| SPEED_MARGIN * self.setup.envelope.horizontal_limit_mps2(0.0, model) / d)
     }
 }
 

@@ -42,6 +42,9 @@ pub struct SwarmSetup {
     pub handshake_timeout: Duration,
     /// Estimate each vehicle's hover thrust in flight and fly with it.
     pub estimate_hover: bool,
+    /// Estimate each vehicle's drag in flight; the drag fed forward never exceeds the
+    /// estimate's lower confidence bound.
+    pub estimate_drag: bool,
     /// Rate (1/s) at which the w-weighted mean velocity is driven to the predicted final
     /// velocity during consensus; 0 flies the paper's law as printed.
     pub mean_velocity_gain: f64,
@@ -56,10 +59,13 @@ pub struct SwarmSetup {
     pub loss_policy: LossPolicy,
     /// A final velocity to reach with the planner (stage 1), if any.
     pub target: Option<TargetVelocity>,
+    /// The divergence guard's bounds (`None`: off).
+    pub guard: Option<super::GuardLimits>,
 }
 
 /// The planner's job: reach `velocity_mps` by choosing `k` and, if needed, re-targeting
-/// one agent before consensus starts.
+/// one agent (the paper's plan) or several (the least change of every velocity) before
+/// consensus starts.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TargetVelocity {
     /// Desired final velocity (m/s, ENU).
@@ -70,7 +76,8 @@ pub struct TargetVelocity {
     pub k_max: f64,
     /// Largest speed a re-targeted agent may be asked for (m/s).
     pub max_speed_mps: Option<f64>,
-    /// Stage 1 ends when the re-targeted agent is this close to its planned velocity (m/s).
+    /// Stage 1 ends when every re-targeted agent is this close to its planned velocity
+    /// (m/s).
     pub tolerance_mps: f64,
     /// Stage 1 ends at the latest after this long; consensus then starts from the
     /// velocities reached (with a warning).
@@ -86,12 +93,14 @@ pub type Retargeted = (usize, Vector2<f64>);
 /// What the planner decided when consensus was about to start.
 #[derive(Debug, Clone, PartialEq)]
 pub enum PlanDecision {
-    /// Flying the planned `k`, after re-targeting `agent` (0-based) to `velocity_mps`.
+    /// Flying the planned `k`, after re-targeting the listed agents (0-based) to their
+    /// planned velocities: none, the paper's one agent, or as many as the least change
+    /// of every velocity needs.
     Planned {
         /// The gain flown.
         k: f64,
-        /// The re-targeted agent and its planned velocity, if any.
-        retarget: Option<Retargeted>,
+        /// The re-targeted agents and their planned velocities (empty: none).
+        retarget: Vec<Retargeted>,
     },
     /// Not used: the configured `k` is flown. Why, in words.
     Rejected(String),

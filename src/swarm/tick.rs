@@ -7,7 +7,9 @@ use ringswarm_wire::time::SimTime;
 
 use super::{Swarm, SwarmPhase};
 use crate::consensus::HorizontalState;
-use crate::control::{attitude_thrust_from_acceleration, enu_to_ned, saturate_with, tilt_cos};
+use crate::control::{
+    attitude_thrust_from_acceleration, enu_to_ned, saturate_with, thrust_direction_enu, tilt_cos,
+};
 use crate::swarm::SetpointKind;
 use crate::vehicle::{Phase, Setpoint};
 
@@ -43,6 +45,7 @@ impl Swarm {
                 offset_m: self.setup.offsets_m[i],
             };
         }
+        self.watch_divergence(now);
         let saturation = self.horizontal_law();
         for (i, state) in self.states.iter().enumerate() {
             let s = state.unwrap_or_default();
@@ -53,7 +56,7 @@ impl Swarm {
                 self.altitude_integral[i],
             );
             self.u_z[i] = u_z;
-            let drag = s.vel_enu_mps * self.setup.drag_per_s[i];
+            let drag = s.vel_enu_mps * self.flown[i].drag_fed_forward_per_s();
             self.commands[i] = Vector3::new(self.accel[i].x, self.accel[i].y, u_z) + drag;
         }
         self.isolate_non_finite(now, "the law's command");
@@ -93,9 +96,18 @@ impl Swarm {
             if link.phase() == Phase::Flying
                 && let Some(q) = link.state().attitude
             {
-                // The thrust's vertical part on the reported tilt: the vehicle's attitude
-                // may lag the command, its motors hardly.
-                self.flown[i].commanded(sp.thrust_norm * tilt_cos(&q));
+                // The thrust along the reported tilt: the vehicle's attitude may lag the
+                // command, its motors hardly. An acceleration setpoint is the vehicle's
+                // own to turn into thrust: the horizontal part asked for is the setpoint.
+                let horizontal = match self.setup.setpoint {
+                    SetpointKind::Attitude => {
+                        let specific =
+                            sp.thrust_norm * self.flown_models[i].max_specific_thrust_mps2();
+                        specific * thrust_direction_enu(&q).xy()
+                    }
+                    SetpointKind::Acceleration => command.xy(),
+                };
+                self.flown[i].commanded(sp.thrust_norm * tilt_cos(&q), horizontal);
             }
         }
         // The links' events are drained by `handle_timeout` right after.
@@ -113,8 +125,21 @@ impl Swarm {
         for i in 0..self.links.len() {
             let ours = self.ours_in_air(i);
             let trusted = self.flown[i].trusted();
+            let drag_trusted = self.flown[i].drag_trusted();
             if let (Some(s), Some(at)) = (self.states[i], self.links[i].state().last_position) {
-                self.flown[i].observe(at, s.vel_enu_mps.z, s.vel_enu_mps.xy().norm(), ours);
+                self.flown[i].observe(at, s.vel_enu_mps, ours);
+            }
+            if !drag_trusted && self.flown[i].drag_trusted() {
+                let (drag, std) = self.flown[i].drag_estimate();
+                self.log.push_vehicle(
+                    now,
+                    &self.setup.links[i],
+                    true,
+                    format!(
+                        "drag estimated at {drag:.3} ± {std:.3} 1/s, not the configured {:.3}: flying the estimate",
+                        self.setup.drag_per_s[i]
+                    ),
+                );
             }
             if !trusted && self.flown[i].trusted() {
                 let (hover, std) = self.flown[i].hover_estimate();
@@ -144,10 +169,9 @@ impl Swarm {
             if !self.ours_in_air(i) {
                 continue;
             }
+            let drag = self.flown[i].drag_fed_forward_per_s();
             let saturated =
-                (self.commands[i].z - self.u_z[i] - s.vel_enu_mps.z * self.setup.drag_per_s[i])
-                    .abs()
-                    > 1e-9;
+                (self.commands[i].z - self.u_z[i] - s.vel_enu_mps.z * drag).abs() > 1e-9;
             self.altitude_integral[i] = self.setup.altitude_gains.integrate(
                 self.altitude_integral[i],
                 s.pos_enu_m.z,
