@@ -70,8 +70,11 @@ pub struct GuardSection {
     /// Whether the guard watches (default true).
     pub enabled: bool,
     /// Bound on `|v̄_w − v_f|`, the w-weighted mean velocity against the predicted final
-    /// velocity (m/s, default 1.0).
+    /// velocity (m/s, default 1.0), or this fraction of the predicted speed, the larger
+    /// (default 0.1) ...
     pub velocity_error_mps: f64,
+    /// See `velocity_error_mps`.
+    pub velocity_error_fraction: f64,
     /// How long the velocity error may stay beyond its bound (s, default 1.0).
     pub velocity_error_s: f64,
     /// How far the formation error may rise above the lowest it reached in this
@@ -89,6 +92,7 @@ impl Default for GuardSection {
         Self {
             enabled: true,
             velocity_error_mps: 1.0,
+            velocity_error_fraction: 0.1,
             velocity_error_s: 1.0,
             formation_growth_m: 2.0,
             formation_growth_fraction: 0.5,

@@ -259,6 +259,12 @@ impl Config {
             " m/s",
         ) & p.positive("guard.velocity_error_s", g.velocity_error_s, 3600.0, " s")
             & p.positive(
+                "guard.velocity_error_fraction",
+                g.velocity_error_fraction,
+                10.0,
+                "",
+            )
+            & p.positive(
                 "guard.formation_growth_fraction",
                 g.formation_growth_fraction,
                 100.0,
@@ -280,7 +286,11 @@ impl Config {
             return None;
         }
         GuardLimits::new(
-            (g.velocity_error_mps, g.velocity_error_s),
+            (
+                g.velocity_error_mps,
+                g.velocity_error_fraction,
+                g.velocity_error_s,
+            ),
             (
                 g.formation_growth_m,
                 g.formation_growth_fraction,

@@ -163,9 +163,9 @@ mod tests {
 
     #[test]
     fn a_ten_times_overestimate_is_learnt_within_seconds() {
-        // Truth 0.1/s, configured 1.0/s, speeds 1..4 m/s, 0.3 m/s² of noise: 25 windows
-        // (5 s).
-        let kf = run(1.0, 0.1, &[1.0, -2.0, 3.0, 4.0], 0.3, 25);
+        // Truth 0.1/s, configured 1.0/s, speeds 1..4 m/s, 0.3 m/s² of noise: 50 axes, as
+        // 25 windows of two axes give in 5 s of flight.
+        let kf = run(1.0, 0.1, &[1.0, -2.0, 3.0, 4.0], 0.3, 50);
         assert!((kf.drag_per_s() - 0.1).abs() < 0.05, "{kf:?}");
         assert!(kf.std() < 0.05, "{kf:?}");
         assert!(kf.lower_bound_per_s() <= 0.1, "{kf:?}");

@@ -5,8 +5,9 @@
 //! Two symptoms, both watched only during consensus, once per control tick:
 //!
 //! - **Velocity:** the w-weighted mean velocity `v̄_w = Σwᵢvᵢ / Σwᵢ` leaves the predicted
-//!   final velocity `v_f` by more than `velocity_error_mps` for longer than
-//!   `velocity_error_s`. The law keeps `w·v` exactly for a vehicle that is the model, so
+//!   final velocity `v_f` by more than `velocity_error_mps` (or `velocity_error_fraction`
+//!   of `|v_f|`, the larger: an airframe's own loops dip a fast swarm's speed by a few
+//!   percent while the formation turns) for longer than `velocity_error_s`. The law keeps `w·v` exactly for a vehicle that is the model, so
 //!   on the emulator with a matched model the error is zero, and the mean-velocity
 //!   correction holds it within a few centimetres a second against model error; a
 //!   growing error is positive feedback the correction cannot beat.
@@ -39,6 +40,7 @@ use ringswarm_wire::time::SimTime;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GuardLimits {
     velocity_error_mps: f64,
+    velocity_error_fraction: f64,
     velocity_error_time: Duration,
     formation_growth_m: f64,
     formation_growth_fraction: f64,
@@ -52,7 +54,7 @@ impl GuardLimits {
     /// # Errors
     /// A message naming the bound and its value.
     pub fn new(
-        (velocity_error_mps, velocity_error_s): (f64, f64),
+        (velocity_error_mps, velocity_error_fraction, velocity_error_s): (f64, f64, f64),
         (formation_growth_m, formation_growth_fraction, formation_growth_s): (f64, f64, f64),
     ) -> Result<Self, String> {
         let positive = |name: &str, v: f64, hi: f64| {
@@ -67,6 +69,11 @@ impl GuardLimits {
         let day_s = 86_400.0;
         Ok(Self {
             velocity_error_mps: positive("velocity_error_mps", velocity_error_mps, 100.0)?,
+            velocity_error_fraction: positive(
+                "velocity_error_fraction",
+                velocity_error_fraction,
+                10.0,
+            )?,
             velocity_error_time: Duration::from_secs_f64(positive(
                 "velocity_error_s",
                 velocity_error_s,
@@ -86,9 +93,11 @@ impl GuardLimits {
         })
     }
 
-    /// The velocity bound (m/s).
-    pub fn velocity_error_mps(&self) -> f64 {
+    /// The velocity bound for a prediction (m/s): `velocity_error_mps`, or
+    /// `velocity_error_fraction` of the predicted speed, the larger.
+    pub fn velocity_bound_mps(&self, predicted_mps: Vector2<f64>) -> f64 {
         self.velocity_error_mps
+            .max(self.velocity_error_fraction * predicted_mps.norm())
     }
 }
 
@@ -137,7 +146,7 @@ impl fmt::Display for GuardTrip {
                 for_s,
             } => write!(
                 f,
-                "divergence guard: the mean velocity ({:.2}, {:.2}) m/s is {:.2} m/s off the predicted ({:.2}, {:.2}) m/s, beyond {bound_mps} m/s for {for_s:.1} s",
+                "divergence guard: the mean velocity ({:.2}, {:.2}) m/s is {:.2} m/s off the predicted ({:.2}, {:.2}) m/s, beyond {bound_mps:.2} m/s for {for_s:.1} s",
                 mean_mps.x,
                 mean_mps.y,
                 (mean_mps - predicted_mps).norm(),
@@ -194,14 +203,15 @@ impl DivergenceGuard {
         (formation_m, spread_mps): (f64, f64),
     ) -> Option<GuardTrip> {
         let error = (mean_mps - predicted_mps).norm();
-        if error > self.limits.velocity_error_mps || !error.is_finite() {
+        let bound = self.limits.velocity_bound_mps(predicted_mps);
+        if error > bound || !error.is_finite() {
             let since = *self.velocity_beyond_since.get_or_insert(now);
             let for_time = now.saturating_since(since);
             if for_time >= self.limits.velocity_error_time {
                 return Some(GuardTrip::Velocity {
                     mean_mps,
                     predicted_mps,
-                    bound_mps: self.limits.velocity_error_mps,
+                    bound_mps: bound,
                     for_s: for_time.as_secs_f64(),
                 });
             }
@@ -242,7 +252,7 @@ mod tests {
     use super::*;
 
     fn limits() -> GuardLimits {
-        GuardLimits::new((1.0, 1.0), (2.0, 0.5, 5.0)).unwrap()
+        GuardLimits::new((1.0, 0.1, 1.0), (2.0, 0.5, 5.0)).unwrap()
     }
 
     fn at(ms: u64) -> SimTime {
@@ -251,15 +261,17 @@ mod tests {
 
     #[test]
     fn bad_bounds_are_refused_by_name() {
-        let e = GuardLimits::new((f64::NAN, 1.0), (2.0, 0.5, 5.0)).unwrap_err();
+        let e = GuardLimits::new((f64::NAN, 0.1, 1.0), (2.0, 0.5, 5.0)).unwrap_err();
         assert!(e.starts_with("velocity_error_mps"), "{e}");
-        let e = GuardLimits::new((1.0, 0.0), (2.0, 0.5, 5.0)).unwrap_err();
+        let e = GuardLimits::new((1.0, 0.1, 0.0), (2.0, 0.5, 5.0)).unwrap_err();
         assert!(e.starts_with("velocity_error_s"), "{e}");
-        let e = GuardLimits::new((1.0, 1.0), (-2.0, 0.5, 5.0)).unwrap_err();
+        let e = GuardLimits::new((1.0, -0.1, 1.0), (2.0, 0.5, 5.0)).unwrap_err();
+        assert!(e.starts_with("velocity_error_fraction"), "{e}");
+        let e = GuardLimits::new((1.0, 0.1, 1.0), (-2.0, 0.5, 5.0)).unwrap_err();
         assert!(e.starts_with("formation_growth_m"), "{e}");
-        let e = GuardLimits::new((1.0, 1.0), (2.0, f64::INFINITY, 5.0)).unwrap_err();
+        let e = GuardLimits::new((1.0, 0.1, 1.0), (2.0, f64::INFINITY, 5.0)).unwrap_err();
         assert!(e.starts_with("formation_growth_fraction"), "{e}");
-        let e = GuardLimits::new((1.0, 1.0), (2.0, 0.5, 1e9)).unwrap_err();
+        let e = GuardLimits::new((1.0, 0.1, 1.0), (2.0, 0.5, 1e9)).unwrap_err();
         assert!(e.starts_with("formation_growth_s"), "{e}");
     }
 
@@ -282,6 +294,27 @@ mod tests {
             unreachable!()
         };
         assert_eq!(for_s, 1.0);
+    }
+
+    #[test]
+    fn a_fast_swarm_gets_a_proportional_velocity_bound() {
+        let mut g = DivergenceGuard::new(limits());
+        // At 14 m/s the bound is 1.4 m/s: 1.3 m/s off never trips, 1.5 m/s does.
+        let v_f = Vector2::new(14.0, 0.0);
+        for ms in (0..3000).step_by(20) {
+            assert_eq!(
+                g.observe(at(ms), Vector2::new(12.7, 0.0), v_f, (1.0, 0.5)),
+                None
+            );
+        }
+        assert_eq!(
+            g.observe(at(3000), Vector2::new(12.5, 0.0), v_f, (1.0, 0.5)),
+            None
+        );
+        assert!(
+            g.observe(at(4000), Vector2::new(12.5, 0.0), v_f, (1.0, 0.5))
+                .is_some()
+        );
     }
 
     #[test]

@@ -18,7 +18,17 @@
 use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 
-use crate::control::{DragKf, HoverThrustEkf, VehicleModel};
+use crate::control::{DragKf, GRAVITY_MPS2, HoverThrustEkf, VehicleModel};
+
+/// What drives a vehicle horizontally on one tick, as far as the coordinator can tell.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum HorizontalDrive {
+    /// The specific thrust commanded along the reported tilt, horizontal part (m/s², ENU).
+    Acceleration(Vector2<f64>),
+    /// The reported thrust direction's horizontal part over its vertical part (ENU): the
+    /// vehicle chose the thrust (acceleration setpoints).
+    TiltPerVertical(Vector2<f64>),
+}
 
 /// The acceleration is measured over this window (s): differencing noisy velocities over
 /// one report interval (20 ms) would multiply their noise by 70; over 0.2 s by 7, about
@@ -52,8 +62,11 @@ pub(super) struct FlownModel {
     last: Option<(SimTime, Vector3<f64>)>,
     thrust_sum: f64,
     /// The horizontal acceleration asked for as delivered, summed over the window's ticks
-    /// (m/s², ENU).
+    /// (m/s², ENU), or with acceleration setpoints the thrust's horizontal direction per
+    /// unit of its vertical part (the vehicle chooses the thrust, its tilt shows it).
     force_sum: Vector2<f64>,
+    /// Whether `force_sum` holds tilts (acceleration setpoints) instead of accelerations.
+    tilt_only: bool,
     thrust_ticks: u32,
 }
 
@@ -81,6 +94,7 @@ impl FlownModel {
             last: None,
             thrust_sum: 0.0,
             force_sum: Vector2::zeros(),
+            tilt_only: false,
             thrust_ticks: 0,
         }
     }
@@ -139,12 +153,17 @@ impl FlownModel {
     }
 
     /// This tick's command as delivered: the vertical part of the normalised thrust
-    /// (commanded thrust times the cosine of the reported tilt) and the horizontal
-    /// acceleration it asks for (m/s², ENU).
-    pub(super) fn commanded(&mut self, thrust_up: f64, horizontal_mps2: Vector2<f64>) {
-        if thrust_up.is_finite() && horizontal_mps2.iter().all(|x| x.is_finite()) {
+    /// (commanded thrust times the cosine of the reported tilt) and what drives the
+    /// vehicle horizontally.
+    pub(super) fn commanded(&mut self, thrust_up: f64, horizontal: HorizontalDrive) {
+        let (value, tilt_only) = match horizontal {
+            HorizontalDrive::Acceleration(a) => (a, false),
+            HorizontalDrive::TiltPerVertical(t) => (t, true),
+        };
+        if thrust_up.is_finite() && value.iter().all(|x| x.is_finite()) {
             self.thrust_sum += thrust_up;
-            self.force_sum += horizontal_mps2;
+            self.force_sum += value;
+            self.tilt_only = tilt_only;
             self.thrust_ticks += 1;
         }
     }
@@ -175,7 +194,17 @@ impl FlownModel {
                 }
                 if self.estimate_drag {
                     let made = (vel_enu_mps.xy() - v0.xy()) / dt;
-                    let shortfall = self.force_sum / ticks - made;
+                    let asked = if self.tilt_only {
+                        // The vertical specific force is what held the climb: g plus the
+                        // upward acceleration made plus the vertical drag.
+                        let up = GRAVITY_MPS2
+                            + (vel_enu_mps.z - v0.z) / dt
+                            + self.drag_best_per_s() * mean_v.z;
+                        self.force_sum / ticks * up
+                    } else {
+                        self.force_sum / ticks
+                    };
+                    let shortfall = asked - made;
                     self.drag.predict(dt);
                     self.drag.fuse(shortfall.x, mean_v.x);
                     self.drag.fuse(shortfall.y, mean_v.y);

@@ -5,6 +5,7 @@
 use nalgebra::Vector3;
 use ringswarm_wire::time::SimTime;
 
+use super::model::HorizontalDrive;
 use super::{Swarm, SwarmPhase};
 use crate::consensus::HorizontalState;
 use crate::control::{
@@ -98,14 +99,17 @@ impl Swarm {
             {
                 // The thrust along the reported tilt: the vehicle's attitude may lag the
                 // command, its motors hardly. An acceleration setpoint is the vehicle's
-                // own to turn into thrust: the horizontal part asked for is the setpoint.
+                // own to turn into thrust: only its tilt is known.
+                let direction = thrust_direction_enu(&q);
                 let horizontal = match self.setup.setpoint {
                     SetpointKind::Attitude => {
                         let specific =
                             sp.thrust_norm * self.flown_models[i].max_specific_thrust_mps2();
-                        specific * thrust_direction_enu(&q).xy()
+                        HorizontalDrive::Acceleration(specific * direction.xy())
                     }
-                    SetpointKind::Acceleration => command.xy(),
+                    SetpointKind::Acceleration => {
+                        HorizontalDrive::TiltPerVertical(direction.xy() / direction.z.max(0.1))
+                    }
                 };
                 self.flown[i].commanded(sp.thrust_norm * tilt_cos(&q), horizontal);
             }
