@@ -107,23 +107,32 @@ impl Swarm {
         }
     }
 
+    /// The w-weighted mean velocity `Σwᵢvᵢ / Σwᵢ` of the states flown on this tick (m/s,
+    /// ENU); `None` when the weights sum to zero.
+    pub(super) fn weighted_mean_velocity(&self) -> Option<Vector2<f64>> {
+        let total: f64 = self.w.iter().sum();
+        if total.abs() < 1e-12 {
+            return None;
+        }
+        let sum = self
+            .w
+            .iter()
+            .zip(&self.horizontal)
+            .map(|(w, h)| *w * h.vel_mps)
+            .sum::<Vector2<f64>>();
+        Some(sum / total)
+    }
+
     /// The uniform correction of the w-weighted mean velocity, if it is on: a PI loop on
     /// `e = v̄_w − v_f`, `−k·e − (k²/2)·∫e` (damping 0.707), the integral kept within
     /// [`MEAN_INTEGRAL_LIMIT_MPS2`] and reset when consensus (re)starts.
     fn mean_velocity_correction(&mut self, dt_s: f64) -> Option<Vector2<f64>> {
         let k = self.setup.mean_velocity_gain;
         let target = self.predicted_final_velocity?;
-        let total: f64 = self.w.iter().sum();
-        if k == 0.0 || total.abs() < 1e-12 {
+        if k == 0.0 {
             return None;
         }
-        let mean = self
-            .w
-            .iter()
-            .zip(&self.horizontal)
-            .map(|(w, h)| *w * h.vel_mps)
-            .sum::<Vector2<f64>>()
-            / total;
+        let mean = self.weighted_mean_velocity()?;
         let error = mean - target;
         let k_i = 0.5 * k * k;
         let limit = MEAN_INTEGRAL_LIMIT_MPS2 / k_i;

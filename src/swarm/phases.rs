@@ -218,20 +218,15 @@ impl Swarm {
         else {
             return;
         };
+        if self.guard.is_none() {
+            return;
+        }
+        let Some(mean) = self.weighted_mean_velocity() else {
+            return;
+        };
         let Some(guard) = self.guard.as_mut() else {
             return;
         };
-        let total: f64 = self.w.iter().sum();
-        if total.abs() < 1e-12 {
-            return;
-        }
-        let mean = self
-            .w
-            .iter()
-            .zip(&self.horizontal)
-            .map(|(w, h)| *w * h.vel_mps)
-            .sum::<Vector2<f64>>()
-            / total;
         let formation = formation_error_m(&self.horizontal);
         let spread = self
             .horizontal
