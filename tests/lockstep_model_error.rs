@@ -109,6 +109,7 @@ fn a_ten_percent_hover_error_flies_like_the_matched_model() {
     pure.swarm.estimate_hover = false;
     pure.gains.k_iz = Some(0.0);
     pure.gains.k_vmean = 0.0;
+    pure.swarm.disturbance_time_constant_s = 0.0;
     let pure = fly(&pure);
     eprintln!("pure {pure:?}");
     assert!(pure.altitude_m > 0.9, "{pure:?}");
@@ -140,6 +141,7 @@ fn drag_the_model_does_not_know_does_not_make_the_velocity_drift() {
     // A drag the model knows is what keeps a formation at speed.
     let mut pure = config.clone();
     pure.gains.k_vmean = 0.0;
+    pure.swarm.disturbance_time_constant_s = 0.0;
     let pure = fly(&pure);
     eprintln!("drag mismatch, pure law {pure:?}");
     assert!(pure.velocity_error > 0.02, "{pure:?}");

@@ -182,6 +182,7 @@ fn the_learnt_drag_is_the_airframes() {
 fn without_the_estimator_the_guard_stops_the_runaway_within_seconds() {
     let mut config = config(2.0, 0.5, 1.0, true);
     config.swarm.estimate_drag = false;
+    config.swarm.disturbance_time_constant_s = 0.0;
     let mut run = Lockstep::from_config(&config).unwrap();
     run.run_until(SimTime::from_millis(120_000), |_| {});
     let swarm = run.swarm();

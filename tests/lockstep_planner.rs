@@ -152,6 +152,7 @@ fn a_retarget_stage_that_cannot_finish_times_out_into_consensus() {
     // (With the drag estimator on, the drag is learnt and the stage ends in 5.3 s.)
     let mut run = ground_start(|c| {
         c.swarm.estimate_drag = false;
+        c.swarm.disturbance_time_constant_s = 0.0;
         for v in &mut c.vehicle {
             v.airframe = Some(ringswarm::config::AirframeSection {
                 drag_per_s: Some(1.0),

@@ -133,6 +133,7 @@ fn hexagon_x500_conserve_reaches_the_prediction_and_clip_misses_it() {
             // from the start, no estimate.
             config.gains.k_vmean = k;
             config.swarm.estimate_drag = false;
+            config.swarm.disturbance_time_constant_s = 0.0;
         }
         let mut run = Lockstep::from_config(&config).unwrap();
         let seen = fly(&mut run, 61.2);

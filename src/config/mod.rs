@@ -126,8 +126,9 @@ pub struct TargetSection {
     pub k_max: f64,
     /// Largest speed a re-targeted agent may be asked for (m/s).
     pub max_speed_mps: Option<f64>,
-    /// Stage 1 ends when the re-targeted agent is this close to its velocity (default
-    /// 0.05 m/s).
+    /// Stage 1 ends when the w-weighted mean velocity is this close to the target, times
+    /// the re-targeted agents' share of the weights (default 0.05 m/s), and every
+    /// re-targeted agent within 0.5 m/s of its planned one.
     #[serde(default = "default_tolerance")]
     pub tolerance_mps: f64,
     /// Stage 1 ends at the latest after this long (s, default 30): consensus then starts
@@ -205,6 +206,11 @@ pub struct SwarmSection {
     /// is then never more than the estimate's lower confidence bound, and the estimate is
     /// flown once it is settled and differs from `drag_per_s`.
     pub estimate_drag: bool,
+    /// Time constant (s) of each vehicle's disturbance observer (default 1; 0 turns it
+    /// off): the horizontal acceleration the commands do not explain (a vehicle's own
+    /// attitude estimate off the truth, a drag mistaken), low-pass filtered and taken off
+    /// the next commands.
+    pub disturbance_time_constant_s: f64,
     /// What is streamed: `attitude` (SET_ATTITUDE_TARGET, the paper's outputs; default)
     /// or `acceleration` (SET_POSITION_TARGET_LOCAL_NED: PX4 closes thrust itself).
     pub setpoint: SetpointKind,
@@ -226,6 +232,7 @@ impl Default for SwarmSection {
             retake_offboard: false,
             estimate_hover: true,
             estimate_drag: true,
+            disturbance_time_constant_s: 1.0,
             setpoint: SetpointKind::Attitude,
         }
     }

@@ -239,6 +239,7 @@ impl Config {
             handshake_timeout: timing.handshake_timeout,
             estimate_hover: s.estimate_hover,
             estimate_drag: s.estimate_drag,
+            disturbance_time_constant_s: s.disturbance_time_constant_s,
             mean_velocity_gain: g.k_vmean,
             setpoint: s.setpoint,
             bandwidth,
@@ -340,6 +341,14 @@ impl Config {
             state_lo,
             s.link_timeout_ms as f64,
             " ms (three control periods up to swarm.link_timeout_ms)",
+        );
+        // 0 turns the observer off; above a minute it would follow nothing a flight shows.
+        p.within(
+            "swarm.disturbance_time_constant_s",
+            s.disturbance_time_constant_s,
+            0.0,
+            60.0,
+            " s (0 turns the disturbance observer off)",
         );
         if s.gcs_system_id == 0 {
             p.push("swarm.gcs_system_id must be 1..=255, got 0".to_owned());

@@ -6,6 +6,7 @@
 
 mod altitude;
 mod attitude;
+mod disturbance;
 mod drag;
 mod envelope;
 mod frames;
@@ -16,6 +17,7 @@ pub use altitude::AltitudeGains;
 pub use attitude::{
     AttitudeThrust, attitude_thrust_from_acceleration, thrust_direction_enu, tilt_cos,
 };
+pub use disturbance::{DISTURBANCE_LIMIT_MPS2, DisturbanceObserver};
 pub use drag::DragKf;
 pub use envelope::{Envelope, SaturationMode, SaturationSummary, saturate, saturate_with};
 pub use frames::{enu_to_ned, euler_ned_frd, ned_to_enu, quaternion_to_wxyz};

@@ -272,7 +272,11 @@ impl Swarm {
                 FlownModel::new(
                     *m,
                     (*d, allowance),
-                    (estimate, setup.estimate_drag),
+                    (
+                        estimate,
+                        setup.estimate_drag,
+                        setup.disturbance_time_constant_s,
+                    ),
                     (lo, hi),
                 )
             })

@@ -18,7 +18,9 @@
 use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 
-use crate::control::{DragKf, GRAVITY_MPS2, HoverThrustEkf, VehicleModel};
+use crate::control::{
+    DISTURBANCE_LIMIT_MPS2, DisturbanceObserver, DragKf, GRAVITY_MPS2, HoverThrustEkf, VehicleModel,
+};
 
 /// What drives a vehicle horizontally on one tick, as far as the coordinator can tell.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -53,6 +55,8 @@ pub(super) struct FlownModel {
     drag_per_s: f64,
     ekf: HoverThrustEkf,
     drag: DragKf,
+    /// The acceleration the command does not explain (`None`: off).
+    disturbance: Option<DisturbanceObserver>,
     /// How much more drag than the estimate's lower bound may be fed forward (1/s).
     drag_allowance_per_s: f64,
     estimate: bool,
@@ -72,13 +76,14 @@ pub(super) struct FlownModel {
 
 impl FlownModel {
     /// Starts from the configured model; `estimate` turns the hover thrust estimator on,
-    /// `estimate_drag` the drag estimator. The drag fed forward may exceed the estimate's
-    /// lower confidence bound by `drag_allowance_per_s` (half the mean-velocity gain:
+    /// `estimate_drag` the drag estimator, a positive `disturbance_time_constant_s` the
+    /// disturbance observer. The drag fed forward may exceed the estimate's lower
+    /// confidence bound by `drag_allowance_per_s` (half the mean-velocity gain:
     /// docs/math.md).
     pub(super) fn new(
         configured: VehicleModel,
         (drag_per_s, drag_allowance_per_s): (f64, f64),
-        (estimate, estimate_drag): (bool, bool),
+        (estimate, estimate_drag, disturbance_time_constant_s): (bool, bool, f64),
         (min, max): (f64, f64),
     ) -> Self {
         Self {
@@ -86,6 +91,9 @@ impl FlownModel {
             drag_per_s,
             ekf: HoverThrustEkf::new(configured.hover_throttle(), min, max),
             drag: DragKf::new(drag_per_s),
+            disturbance: (disturbance_time_constant_s > 0.0).then(|| {
+                DisturbanceObserver::new(disturbance_time_constant_s, DISTURBANCE_LIMIT_MPS2)
+            }),
             drag_allowance_per_s,
             estimate,
             estimate_drag,
@@ -132,6 +140,20 @@ impl FlownModel {
         }
     }
 
+    /// The acceleration the commands do not explain, to take off the next command
+    /// (m/s², ENU; zero while the observer is off).
+    pub(super) fn disturbance_mps2(&self) -> Vector2<f64> {
+        self.disturbance
+            .map_or(Vector2::zeros(), |o| o.estimate_mps2())
+    }
+
+    /// Forgets the disturbance (the vehicle is not flown on our commands in the air).
+    pub(super) fn forget_disturbance(&mut self) {
+        if let Some(o) = &mut self.disturbance {
+            o.reset();
+        }
+    }
+
     /// Whether the estimate is flown (it disagreed significantly with the configuration).
     pub(super) fn trusted(&self) -> bool {
         self.trusted
@@ -171,7 +193,11 @@ impl FlownModel {
     /// The latest report: when it arrived, the velocity (m/s, ENU), and whether the
     /// vehicle flew on our commands in the air since the previous one.
     pub(super) fn observe(&mut self, at: SimTime, vel_enu_mps: Vector3<f64>, ours: bool) {
-        if !(self.estimate || self.estimate_drag) || self.last.is_some_and(|(t, _)| t == at) {
+        if !ours {
+            self.forget_disturbance();
+        }
+        let horizontal = self.estimate_drag || self.disturbance.is_some();
+        if !(self.estimate || horizontal) || self.last.is_some_and(|(t, _)| t == at) {
             return;
         }
         let usable = ours;
@@ -192,7 +218,7 @@ impl FlownModel {
                 if self.estimate {
                     self.fuse_hover(dt, self.thrust_sum / ticks, vel_enu_mps, v0);
                 }
-                if self.estimate_drag {
+                if horizontal {
                     let made = (vel_enu_mps.xy() - v0.xy()) / dt;
                     let asked = if self.tilt_only {
                         // The vertical specific force is what held the climb: g plus the
@@ -204,15 +230,12 @@ impl FlownModel {
                     } else {
                         self.force_sum / ticks
                     };
-                    let shortfall = asked - made;
-                    self.drag.predict(dt);
-                    self.drag.fuse(shortfall.x, mean_v.x);
-                    self.drag.fuse(shortfall.y, mean_v.y);
-                    let (d, std) = (self.drag.drag_per_s(), self.drag.std());
-                    let gap = (d - self.drag_per_s).abs();
-                    let significant = (SIGNIFICANT_DRAG_FRACTION * self.drag_per_s).max(0.02);
-                    if std < SETTLED_DRAG_STD && gap > significant.max(3.0 * std) {
-                        self.drag_trusted = true;
+                    let fed_forward = self.drag_fed_forward_per_s() * mean_v.xy();
+                    if let Some(o) = &mut self.disturbance {
+                        o.update(dt, made - (asked - fed_forward));
+                    }
+                    if self.estimate_drag {
+                        self.fuse_drag(dt, asked - made, mean_v.xy());
                     }
                 }
             }
@@ -221,6 +244,20 @@ impl FlownModel {
         self.thrust_sum = 0.0;
         self.force_sum = Vector2::zeros();
         self.thrust_ticks = 0;
+    }
+
+    /// One window of the drag estimator: the acceleration asked for less the one made,
+    /// per axis, against the mean velocity.
+    fn fuse_drag(&mut self, dt: f64, shortfall: Vector2<f64>, mean_v: Vector2<f64>) {
+        self.drag.predict(dt);
+        self.drag.fuse(shortfall.x, mean_v.x);
+        self.drag.fuse(shortfall.y, mean_v.y);
+        let (d, std) = (self.drag.drag_per_s(), self.drag.std());
+        let gap = (d - self.drag_per_s).abs();
+        let significant = (SIGNIFICANT_DRAG_FRACTION * self.drag_per_s).max(0.02);
+        if std < SETTLED_DRAG_STD && gap > significant.max(3.0 * std) {
+            self.drag_trusted = true;
+        }
     }
 
     /// One window of the hover thrust estimator: the upward acceleration made, with the

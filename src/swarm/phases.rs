@@ -18,6 +18,12 @@ pub const PLAN_CLIMB_MPS: f64 = 0.5;
 /// The planner plans anyway after this long with every vehicle flying.
 pub const PLAN_ALTITUDE_WAIT: Duration = Duration::from_secs(30);
 
+/// Stage 1 ends once the w-weighted mean velocity is within `target.tolerance_mps` times
+/// the re-targeted agents' share of the weights of the target (the prediction one agent
+/// within the tolerance would give), and every re-targeted agent within this much of its
+/// planned velocity (m/s).
+pub const RETARGET_AGENT_TOLERANCE_MPS: f64 = 0.5;
+
 impl Swarm {
     /// Every vehicle within [`PLAN_ALTITUDE_M`] of the commanded altitude and slower than
     /// [`PLAN_CLIMB_MPS`] vertically.
@@ -80,6 +86,7 @@ impl Swarm {
                     return;
                 };
                 let tolerance = self.setup.target.map_or(0.05, |t| t.tolerance_mps);
+                let target = self.setup.target.map(|t| t.velocity_mps);
                 let off = |&(agent, v): &(usize, Vector2<f64>)| {
                     self.states[agent].map_or(f64::INFINITY, |s| (s.vel_enu_mps.xy() - v).norm())
                 };
@@ -87,23 +94,42 @@ impl Swarm {
                     .iter()
                     .map(|r| (off(r), *r))
                     .max_by(|a, b| a.0.total_cmp(&b.0));
+                // The prediction is the w-weighted mean at the start of consensus: that
+                // mean is what has to reach the target. An agent still off its planned
+                // velocity only starts the formation from a little further away.
+                // Held to the re-targeted agents' share of the weights, the bound on the
+                // prediction is what one agent within `tolerance` would give.
+                let total: f64 = self.w.iter().sum();
+                let share: f64 = retarget.iter().map(|(a, _)| self.w[*a]).sum::<f64>() / total;
+                let mean = self.weighted_mean_velocity();
+                let mean_off = match (mean, target) {
+                    (Some(m), Some(t)) => (m - t).norm(),
+                    _ => 0.0,
+                };
                 let timeout = self
                     .setup
                     .target
                     .map_or(Duration::from_secs(30), |t| t.timeout);
                 match worst {
                     None => self.start_consensus(now),
-                    Some((error, _)) if error < tolerance => self.start_consensus(now),
+                    Some((error, _))
+                        if mean_off < tolerance * share && error < RETARGET_AGENT_TOLERANCE_MPS =>
+                    {
+                        self.start_consensus(now)
+                    }
                     Some((_, (agent, v))) if now - since >= timeout => {
                         let at =
                             self.states[agent].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
+                        let m = mean.unwrap_or_default();
                         self.log.push_vehicle(
                             now,
                             &self.setup.links[agent],
                             true,
                             format!(
-                                "re-target stage timed out after {:.1} s at ({:.2}, {:.2}) m/s, planned ({:.2}, {:.2}) m/s: consensus from the velocities now",
+                                "re-target stage timed out after {:.1} s with the weighted mean velocity at ({:.2}, {:.2}) m/s and this vehicle at ({:.2}, {:.2}) m/s, planned ({:.2}, {:.2}) m/s: consensus from the velocities now",
                                 timeout.as_secs_f64(),
+                                m.x,
+                                m.y,
                                 at.x,
                                 at.y,
                                 v.x,

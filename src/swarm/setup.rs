@@ -45,6 +45,9 @@ pub struct SwarmSetup {
     /// Estimate each vehicle's drag in flight; the drag fed forward never exceeds the
     /// estimate's lower confidence bound.
     pub estimate_drag: bool,
+    /// Time constant (s) of each vehicle's disturbance observer, whose estimate is taken
+    /// off the commands; 0: off.
+    pub disturbance_time_constant_s: f64,
     /// Rate (1/s) at which the w-weighted mean velocity is driven to the predicted final
     /// velocity during consensus; 0 flies the paper's law as printed.
     pub mean_velocity_gain: f64,

@@ -58,7 +58,9 @@ impl Swarm {
             );
             self.u_z[i] = u_z;
             let drag = s.vel_enu_mps * self.flown[i].drag_fed_forward_per_s();
-            self.commands[i] = Vector3::new(self.accel[i].x, self.accel[i].y, u_z) + drag;
+            let b = self.flown[i].disturbance_mps2();
+            self.commands[i] =
+                Vector3::new(self.accel[i].x - b.x, self.accel[i].y - b.y, u_z) + drag;
         }
         self.isolate_non_finite(now, "the law's command");
         self.law_commands.copy_from_slice(&self.commands);
