@@ -50,9 +50,8 @@ impl DisturbanceObserver {
     /// Fuses one window of `dt_s` seconds whose unexplained acceleration was
     /// `measured_mps2` (m/s²). Non-finite or non-positive inputs are ignored.
     pub fn update(&mut self, dt_s: f64, measured_mps2: Vector2<f64>) {
-        let usable = dt_s > 0.0
-            && self.time_constant_s > 0.0
-            && measured_mps2.iter().all(|x| x.is_finite());
+        let usable =
+            dt_s > 0.0 && self.time_constant_s > 0.0 && measured_mps2.iter().all(|x| x.is_finite());
         if !usable {
             return;
         }

@@ -11,6 +11,7 @@ mod drag;
 mod envelope;
 mod frames;
 mod hover;
+mod response;
 mod vehicle;
 
 pub use altitude::AltitudeGains;
@@ -22,4 +23,5 @@ pub use drag::DragKf;
 pub use envelope::{Envelope, SaturationMode, SaturationSummary, saturate, saturate_with};
 pub use frames::{enu_to_ned, euler_ned_frd, ned_to_enu, quaternion_to_wxyz};
 pub use hover::HoverThrustEkf;
+pub use response::{AttitudeResponse, ResponseFit};
 pub use vehicle::{GRAVITY_MPS2, VehicleModel};

@@ -215,6 +215,8 @@ pub struct Summary {
     pub stop_reason: Option<String>,
     /// What the divergence guard saw when it ended the consensus, if it did.
     pub guard: Option<String>,
+    /// What the coordinator learnt about each vehicle, at the end.
+    pub models: Vec<ModelReport>,
     /// Warnings in `events.csv`.
     pub warnings: usize,
     /// The control loop's punctuality (in lockstep every tick is on time).
@@ -252,10 +254,60 @@ impl Summary {
             failure: swarm.failure().map(ToString::to_string),
             stop_reason: swarm.stop_reason().map(|r| r.name().to_owned()),
             guard: swarm.guard_trip().map(|t| t.to_string()),
+            models: ModelReport::of(swarm),
             warnings: swarm.events().iter().filter(|e| e.warning).count(),
             timing: swarm.timing(),
             mirrors: Vec::new(),
         }
+    }
+}
+
+/// What the coordinator learnt about one vehicle in flight (`summary.json`'s `models`).
+#[derive(Debug, Clone, Serialize)]
+pub struct ModelReport {
+    /// The vehicle's MAVLink system id.
+    pub system_id: u8,
+    /// Hover thrust estimate (normalised) and its standard deviation.
+    pub hover_throttle: f64,
+    /// See `hover_throttle`.
+    pub hover_throttle_std: f64,
+    /// Linear drag estimate (1/s) and its standard deviation.
+    pub drag_per_s: f64,
+    /// See `drag_per_s`.
+    pub drag_std_per_s: f64,
+    /// The drag fed forward at the end (1/s).
+    pub drag_fed_forward_per_s: f64,
+    /// The disturbance observer's last estimate in the air (m/s², east and north).
+    pub disturbance_enu_mps2: [f64; 2],
+    /// The attitude response measured in flight (`null` before enough motion, or with
+    /// acceleration setpoints).
+    pub attitude_response: Option<crate::control::AttitudeResponse>,
+}
+
+impl ModelReport {
+    /// One report per vehicle of `swarm`.
+    pub fn of(swarm: &Swarm) -> Vec<Self> {
+        swarm
+            .setup()
+            .links
+            .iter()
+            .enumerate()
+            .filter_map(|(i, link)| {
+                let (hover, hover_std) = swarm.hover_estimate(i)?;
+                let (drag, drag_std, fed) = swarm.drag_estimate(i)?;
+                let b = swarm.disturbance_estimate_mps2(i)?;
+                Some(Self {
+                    system_id: link.system_id,
+                    hover_throttle: hover,
+                    hover_throttle_std: hover_std,
+                    drag_per_s: drag,
+                    drag_std_per_s: drag_std,
+                    drag_fed_forward_per_s: fed,
+                    disturbance_enu_mps2: [b.x, b.y],
+                    attitude_response: swarm.attitude_response(i),
+                })
+            })
+            .collect()
     }
 }
 

@@ -225,6 +225,12 @@ pub struct Swarm {
     boxes: Vec<Vector2<f64>>,
     /// The divergence guard, if on.
     guard: Option<DivergenceGuard>,
+    /// Each vehicle's attitude response as measured so far, and its latest attitude
+    /// report (to tell a new one from the same).
+    responses: Vec<(
+        crate::control::ResponseFit,
+        Option<nalgebra::UnitQuaternion<f64>>,
+    )>,
     /// Why the flight stopped (or is stopping), once it does.
     stop: Option<StopReason>,
 }
@@ -321,6 +327,13 @@ impl Swarm {
             timing: timing::TickTiming::new(setup_interval),
             boxes: Vec::with_capacity(n),
             guard: setup_guard.map(DivergenceGuard::new),
+            responses: vec![
+                (
+                    crate::control::ResponseFit::new(setup_interval.as_secs_f64()),
+                    None
+                );
+                n
+            ],
             stop: None,
         }
     }
@@ -391,6 +404,13 @@ impl Swarm {
         })
     }
 
+    /// The acceleration vehicle `i`'s commands do not explain, as its disturbance observer
+    /// estimated it last while the vehicle flew on our commands in the air (m/s², ENU;
+    /// zero while the observer is off).
+    pub fn disturbance_estimate_mps2(&self, i: usize) -> Option<Vector2<f64>> {
+        self.flown.get(i).map(FlownModel::disturbance_seen_mps2)
+    }
+
     /// The model vehicle `i` is flown with now.
     pub fn flown_model(&self, i: usize) -> Option<VehicleModel> {
         self.flown_models.get(i).copied()
@@ -405,6 +425,12 @@ impl Swarm {
     /// Why the flight stopped, once it has (or is stopping).
     pub fn stop_reason(&self) -> Option<StopReason> {
         self.stop
+    }
+
+    /// Vehicle `i`'s attitude response as measured so far (`None` before enough
+    /// commanded motion has been seen, or with acceleration setpoints).
+    pub fn attitude_response(&self, i: usize) -> Option<crate::control::AttitudeResponse> {
+        self.responses.get(i).and_then(|(fit, _)| fit.fit())
     }
 
     /// Whether the divergence guard ended the consensus (`fly` and `demo` exit non-zero).

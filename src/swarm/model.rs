@@ -57,6 +57,8 @@ pub(super) struct FlownModel {
     drag: DragKf,
     /// The acceleration the command does not explain (`None`: off).
     disturbance: Option<DisturbanceObserver>,
+    /// The observer's latest estimate while the vehicle flew on our commands (m/s², ENU).
+    disturbance_seen: Vector2<f64>,
     /// How much more drag than the estimate's lower bound may be fed forward (1/s).
     drag_allowance_per_s: f64,
     estimate: bool,
@@ -94,6 +96,7 @@ impl FlownModel {
             disturbance: (disturbance_time_constant_s > 0.0).then(|| {
                 DisturbanceObserver::new(disturbance_time_constant_s, DISTURBANCE_LIMIT_MPS2)
             }),
+            disturbance_seen: Vector2::zeros(),
             drag_allowance_per_s,
             estimate,
             estimate_drag,
@@ -145,6 +148,12 @@ impl FlownModel {
     pub(super) fn disturbance_mps2(&self) -> Vector2<f64> {
         self.disturbance
             .map_or(Vector2::zeros(), |o| o.estimate_mps2())
+    }
+
+    /// The observer's latest estimate while the vehicle flew on our commands in the air
+    /// (m/s², ENU; kept after it landed, for the summary).
+    pub(super) fn disturbance_seen_mps2(&self) -> Vector2<f64> {
+        self.disturbance_seen
     }
 
     /// Forgets the disturbance (the vehicle is not flown on our commands in the air).
@@ -233,6 +242,7 @@ impl FlownModel {
                     let fed_forward = self.drag_fed_forward_per_s() * mean_v.xy();
                     if let Some(o) = &mut self.disturbance {
                         o.update(dt, made - (asked - fed_forward));
+                        self.disturbance_seen = o.estimate_mps2();
                     }
                     if self.estimate_drag {
                         self.fuse_drag(dt, asked - made, mean_v.xy());

@@ -9,7 +9,8 @@ use super::model::HorizontalDrive;
 use super::{Swarm, SwarmPhase};
 use crate::consensus::HorizontalState;
 use crate::control::{
-    attitude_thrust_from_acceleration, enu_to_ned, saturate_with, thrust_direction_enu, tilt_cos,
+    attitude_thrust_from_acceleration, enu_to_ned, euler_ned_frd, saturate_with,
+    thrust_direction_enu, tilt_cos,
 };
 use crate::swarm::SetpointKind;
 use crate::vehicle::{Phase, Setpoint};
@@ -88,6 +89,25 @@ impl Swarm {
             };
             let sp = attitude_thrust_from_acceleration(command, 0.0, &self.flown_models[i]);
             self.setpoints[i] = sp;
+            let usable = self.setup.setpoint == SetpointKind::Attitude
+                && link.phase() == Phase::Flying
+                && !link.state().landed
+                && !self.isolated[i]
+                && self.states[i].is_some();
+            let (fit, last) = &mut self.responses[i];
+            let reported = link.state().attitude.filter(|q| Some(*q) != *last);
+            if reported.is_some() {
+                *last = reported;
+            }
+            let (sp_roll, sp_pitch, _) = euler_ned_frd(&sp.attitude_ned_frd);
+            fit.tick(
+                reported.map(|q| {
+                    let (roll, pitch, _) = euler_ned_frd(&q);
+                    ([roll, pitch], now.as_secs_f64())
+                }),
+                [sp_roll, sp_pitch],
+                usable,
+            );
             if self.states[i].is_some() || link.phase() == Phase::Flying {
                 match self.setup.setpoint {
                     SetpointKind::Attitude => link.set_setpoint(now, sp),

@@ -1,0 +1,226 @@
+//! A vehicle's attitude response, measured in flight: a pure delay plus a first-order lag
+//! fitted to the roll and pitch the coordinator commanded and the ones the vehicle
+//! reported back.
+//!
+//! Model: `θ̇(t) = (θ_sp(t − L) − θ(t)) / T`. Everything between a command and the report
+//! that shows it is in `L` and `T`: the uplink, the vehicle's attitude and rate loops, its
+//! estimator, the attitude report's own delay, the downlink. `summary.json` reports it per
+//! vehicle (`models[].attitude_response`); docs/math.md ("The bandwidth gate") says what
+//! it measured on the emulator and on PX4 SIH, and why the gate keeps the attitude P gain.
+//!
+//! Fit: for every candidate delay `L = j·Δ` (`j = 0..=`[`MAX_DELAY_STEPS`], `Δ` the
+//! control period), least squares of `y = (θ₁ − θ₀)/(t₁ − t₀)` (two consecutive reports)
+//! on `x = θ_sp[k₀ − j] − θ₀` (`k₀` the tick of the first report), through the origin:
+//! `1/T = Σxy/Σxx`, residual `Σyy − (Σxy)²/Σxx`. The delay with the least residual wins.
+//! Running sums only: constant memory, no allocation, roll and pitch pooled.
+
+/// Longest delay tried (control periods): 0.32 s at 50 Hz.
+pub const MAX_DELAY_STEPS: usize = 16;
+/// Fewest report pairs before a fit is given.
+pub const MIN_SAMPLES: u64 = 250;
+/// Least mean square excitation `Σxx / n` (rad²) before a fit is given: a hovering
+/// vehicle's commands hardly move, and noise alone would fit anything.
+pub const MIN_EXCITATION_RAD2: f64 = 1e-5;
+
+/// Report pairs whose attitude moved faster than this (rad/s) on either axis are left
+/// out: the vehicle's rate limit (PX4's MC_ROLLRATE_MAX is 220°/s) or its motors
+/// saturate there, and a saturated step looks like a slow loop.
+pub const MAX_RATE_RPS: f64 = 2.0;
+/// Report pairs with a tracking error larger than this (rad) on either axis are left out,
+/// for the same reason.
+pub const MAX_ERROR_RAD: f64 = 0.3;
+
+const HISTORY: usize = MAX_DELAY_STEPS + 8;
+
+/// The fitted response.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct AttitudeResponse {
+    /// The pure delay `L` (s).
+    pub delay_s: f64,
+    /// The first-order time constant `T` (s).
+    pub time_constant_s: f64,
+    /// `L + T` (s): the lag the law sees.
+    pub response_s: f64,
+    /// Report pairs fitted.
+    pub samples: u64,
+}
+
+/// The running fit of one vehicle.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResponseFit {
+    step_s: f64,
+    tick: u64,
+    /// Commanded (roll, pitch) of the latest ticks (rad), by `tick % HISTORY`.
+    commanded: [[f64; 2]; HISTORY],
+    /// The previous report: its (roll, pitch) (rad), arrival (s) and tick.
+    last: Option<([f64; 2], f64, u64)>,
+    sxx: [f64; MAX_DELAY_STEPS + 1],
+    sxy: [f64; MAX_DELAY_STEPS + 1],
+    syy: f64,
+    samples: u64,
+}
+
+impl ResponseFit {
+    /// A fit for commands sent every `step_s` seconds (the control period, > 0).
+    pub fn new(step_s: f64) -> Self {
+        Self {
+            step_s,
+            tick: 0,
+            commanded: [[0.0; 2]; HISTORY],
+            last: None,
+            sxx: [0.0; MAX_DELAY_STEPS + 1],
+            sxy: [0.0; MAX_DELAY_STEPS + 1],
+            syy: 0.0,
+            samples: 0,
+        }
+    }
+
+    /// One control tick: the attitude reported since the previous tick, if a new report
+    /// came (roll and pitch in rad, arrival in s), then the attitude commanded on this
+    /// tick (rad). Non-finite values break the chain of reports; `None` for `reported`
+    /// with `usable = false` (not flown on our attitude commands) does too.
+    pub fn tick(&mut self, reported: Option<([f64; 2], f64)>, commanded: [f64; 2], usable: bool) {
+        if !usable || !commanded.iter().all(|x| x.is_finite()) {
+            self.last = None;
+        }
+        if usable && let Some((theta, at_s)) = reported {
+            if theta.iter().all(|x| x.is_finite()) && at_s.is_finite() {
+                if let Some((theta0, t0, k0)) = self.last {
+                    self.fuse(theta, at_s, theta0, t0, k0);
+                }
+                self.last = Some((theta, at_s, self.tick));
+            } else {
+                self.last = None;
+            }
+        }
+        self.commanded[(self.tick % HISTORY as u64) as usize] = commanded;
+        self.tick += 1;
+    }
+
+    fn fuse(&mut self, theta: [f64; 2], at_s: f64, theta0: [f64; 2], t0: f64, k0: u64) {
+        let dt = at_s - t0;
+        // A report pair further apart than the history covers says nothing exact.
+        if !(dt > 0.0 && dt < 0.5) || self.tick - k0 + MAX_DELAY_STEPS as u64 >= HISTORY as u64 {
+            return;
+        }
+        let k_now = (k0 % HISTORY as u64) as usize;
+        let linear = (0..2).all(|axis| {
+            ((theta[axis] - theta0[axis]) / dt).abs() <= MAX_RATE_RPS
+                && (self.commanded[k_now][axis] - theta0[axis]).abs() <= MAX_ERROR_RAD
+        });
+        if !linear {
+            return;
+        }
+        for axis in 0..2 {
+            let y = (theta[axis] - theta0[axis]) / dt;
+            self.syy += y * y;
+            for j in 0..=MAX_DELAY_STEPS {
+                let Some(k) = k0.checked_sub(j as u64) else {
+                    break;
+                };
+                let x = self.commanded[(k % HISTORY as u64) as usize][axis] - theta0[axis];
+                self.sxx[j] += x * x;
+                self.sxy[j] += x * y;
+            }
+        }
+        self.samples += 1;
+    }
+
+    /// The best fit so far, once there are [`MIN_SAMPLES`] report pairs with
+    /// [`MIN_EXCITATION_RAD2`] of excitation and a lag that is positive and finite.
+    pub fn fit(&self) -> Option<AttitudeResponse> {
+        if self.samples < MIN_SAMPLES {
+            return None;
+        }
+        let n = 2.0 * self.samples as f64;
+        let mut best: Option<(f64, usize, f64)> = None;
+        for j in 0..=MAX_DELAY_STEPS {
+            if self.sxx[j] / n < MIN_EXCITATION_RAD2 {
+                continue;
+            }
+            let rate = self.sxy[j] / self.sxx[j];
+            let residual = self.syy - self.sxy[j] * rate;
+            if rate > 0.0 && rate.is_finite() && best.is_none_or(|(r, _, _)| residual < r) {
+                best = Some((residual, j, rate));
+            }
+        }
+        let (_, j, rate) = best?;
+        let delay_s = j as f64 * self.step_s;
+        Some(AttitudeResponse {
+            delay_s,
+            time_constant_s: 1.0 / rate,
+            response_s: delay_s + 1.0 / rate,
+            samples: self.samples,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A vehicle that turns the command of tick `k − delay` into its attitude with a
+    /// first-order lag `t_s`, exactly integrated over one 20 ms period, reported every
+    /// tick; the command a sum of sines (rad).
+    fn simulate(delay: usize, t_s: f64, ticks: usize) -> ResponseFit {
+        let dt = 0.02;
+        let mut fit = ResponseFit::new(dt);
+        let mut sent = vec![[0.0; 2]; ticks];
+        let mut theta = [0.0f64; 2];
+        let decay = (-dt / t_s).exp();
+        for k in 0..ticks {
+            let t = k as f64 * dt;
+            let cmd = [
+                0.1 * (1.3 * t).sin() + 0.05 * (4.1 * t).sin(),
+                0.08 * (0.9 * t).cos() + 0.04 * (3.3 * t).sin(),
+            ];
+            fit.tick(Some((theta, t)), cmd, true);
+            sent[k] = cmd;
+            let sp = if k >= delay {
+                sent[k - delay]
+            } else {
+                [0.0; 2]
+            };
+            for a in 0..2 {
+                theta[a] = sp[a] + (theta[a] - sp[a]) * decay;
+            }
+        }
+        fit
+    }
+
+    #[test]
+    fn a_known_delay_and_lag_are_found() {
+        // 6 ticks (120 ms) and T = 0.18 s: the exact discrete response makes the forward
+        // difference (1 − e^(−Δ/T))/Δ per radian of error, not 1/T; that is the rate the
+        // least squares must find: 1/T' = (1 − e^(−0.02/0.18))/0.02 = 5.2573 1/s.
+        let fit = simulate(6, 0.18, 3000).fit().expect("a fit");
+        assert!((fit.delay_s - 0.12).abs() < 1e-12, "{fit:?}");
+        let rate = (1.0 - (-0.02f64 / 0.18).exp()) / 0.02;
+        assert!((1.0 / fit.time_constant_s - rate).abs() < 1e-6, "{fit:?}");
+        assert!((fit.response_s - (0.12 + 1.0 / rate)).abs() < 1e-6);
+        assert_eq!(fit.samples, 2999);
+    }
+
+    #[test]
+    fn no_fit_without_samples_or_excitation() {
+        assert_eq!(simulate(2, 0.1, 100).fit(), None);
+        let mut still = ResponseFit::new(0.02);
+        for k in 0..1000 {
+            still.tick(Some(([0.0, 0.0], k as f64 * 0.02)), [0.0, 0.0], true);
+        }
+        assert_eq!(still.fit(), None);
+    }
+
+    #[test]
+    fn unusable_ticks_and_bad_numbers_break_the_chain() {
+        let mut fit = ResponseFit::new(0.02);
+        fit.tick(Some(([0.1, 0.0], 0.0)), [0.2, 0.0], true);
+        fit.tick(Some(([f64::NAN, 0.0], 0.02)), [0.2, 0.0], true);
+        fit.tick(Some(([0.1, 0.0], 0.04)), [0.2, 0.0], true);
+        fit.tick(Some(([0.1, 0.0], 0.06)), [0.2, 0.0], false);
+        fit.tick(Some(([0.1, 0.0], 0.08)), [0.2, 0.0], true);
+        assert_eq!(fit.samples, 0);
+        fit.tick(Some(([0.12, 0.0], 0.10)), [0.2, 0.0], true);
+        assert_eq!(fit.samples, 1);
+    }
+}
