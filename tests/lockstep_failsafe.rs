@@ -169,6 +169,44 @@ fn a_vehicle_whose_position_stops_while_its_heartbeat_goes_on_is_lost_within_the
     assert!(w.max_height_loss_m < 1.0, "fell {} m", w.max_height_loss_m);
 }
 
+#[test]
+fn a_vehicle_whose_estimator_loses_its_position_is_not_flown_on_its_dead_reckoning() {
+    // From 10.5 s vehicle 3's estimator keeps only its attitude (ESTIMATOR_STATUS flags
+    // 0x001, sent at 1 Hz on the whole seconds) while its LOCAL_POSITION_NED goes on, 1 m/s
+    // off north and drifting: fresh, plausible, and wrong. The status at 11 s arrives on
+    // the coordinator's first 4 ms tick after it: vehicle 3 goes to its own Hold then.
+    let fault = "[[emulator.fault]]\nvehicle = 3\nfrom_s = 10.5\nuntil_s = 13.5\nkind = \"position_lost\"\n";
+    let mut run = build("", fault);
+    let w = watch(&mut run, 13.0, 2);
+    let held = w.held_at.expect("never held").as_secs_f64();
+    assert!((11.0..=11.004).contains(&held), "held at {held} s");
+    assert_eq!(run.swarm().links()[2].phase(), Phase::VehicleHold);
+    assert_eq!(run.vehicles()[2].status().mode, FlightMode::Hold);
+    let told = warnings(&run, 3);
+    assert_eq!(
+        told.first().map(String::as_str),
+        Some(
+            "estimator reports no good position and velocity (ESTIMATOR_STATUS flags 0x001): not flown on"
+        ),
+        "{told:?}"
+    );
+    assert!(
+        told.iter()
+            .any(|t| t == "handed to its own Hold: its estimator lost its position (flags 0x001)"),
+        "{told:?}"
+    );
+    // Before the status the coordinator flew 0.5 s on the drifting report: 1 m/s of
+    // velocity error for at most 0.5 s. Nobody fell, nobody's thrust was cut.
+    assert!(w.max_height_loss_m < 1.0, "fell {} m", w.max_height_loss_m);
+    assert!(w.min_thrust >= 0.1 - 1e-9, "thrust {}", w.min_thrust);
+    // Good again from the 14 s status: our Hold, so vehicle 3 is taken back (1.2 s of
+    // stream, then OFFBOARD).
+    let w = watch(&mut run, 18.0, 2);
+    let resumed = w.resumed_at.expect("never resumed").as_secs_f64();
+    assert!((15.2..15.6).contains(&resumed), "resumed at {resumed} s");
+    assert_eq!(run.vehicles()[2].status().mode, FlightMode::Offboard);
+}
+
 /// The common-frame position the coordinator flies vehicle `i` on, against the truth.
 fn common_error_m(run: &Lockstep, i: usize) -> f64 {
     let truth = ringswarm::control::ned_to_enu(run.vehicles()[i].status().pos_world_ned_m);

@@ -191,16 +191,17 @@ fn the_link_turns_off_the_streams_it_does_not_read_and_waits_for_the_origin() {
         assert!(off.contains(&id), "{id} not turned off: {off:?}");
     }
     // None of them is one it reads.
-    for id in [0.0, 31.0, 32.0, 49.0, 77.0, 245.0] {
+    for id in [0.0, 31.0, 32.0, 49.0, 77.0, 230.0, 245.0] {
         assert!(!off.contains(&id), "{id} turned off");
     }
     // And the vehicle stopped sending the ones it has: over a second only heartbeats,
-    // the two asked for, EXTENDED_SYS_STATE (5 Hz), GPS_GLOBAL_ORIGIN (0.2 Hz) and the
-    // acknowledgements remain.
+    // the two asked for, EXTENDED_SYS_STATE (5 Hz), GPS_GLOBAL_ORIGIN (0.2 Hz),
+    // ESTIMATOR_STATUS (1 Hz: whether the position is good) and the acknowledgements
+    // remain.
     let seen = h.ids_sent_by_vehicle(Duration::from_secs(1));
     for id in &seen {
         assert!(
-            [0, 31, 32, 49, 77, 245, 42].contains(id),
+            [0, 31, 32, 49, 77, 245, 42, 230].contains(id),
             "{id} still sent: {seen:?}"
         );
     }

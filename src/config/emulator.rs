@@ -272,6 +272,7 @@ impl Config {
             let kind = match f.kind {
                 FaultKindName::NanPosition => FaultKind::NanPosition,
                 FaultKindName::NoPosition => FaultKind::NoPosition,
+                FaultKindName::PositionLost => FaultKind::PositionLost,
                 FaultKindName::OriginShift => {
                     let Some(shift) = f.shift_ned_m else {
                         p.push(format!(

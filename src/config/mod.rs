@@ -388,7 +388,9 @@ pub struct FaultSection {
     /// End (s).
     pub until_s: f64,
     /// `nan_position` (LOCAL_POSITION_NED all NaN), `no_position` (not sent, the
-    /// heartbeat goes on) or `origin_shift` (GPS_GLOBAL_ORIGIN moves by `shift_ned_m`).
+    /// heartbeat goes on), `origin_shift` (GPS_GLOBAL_ORIGIN moves by `shift_ned_m`) or
+    /// `position_lost` (ESTIMATOR_STATUS says only the attitude is good while
+    /// LOCAL_POSITION_NED goes on, dead-reckoned).
     pub kind: FaultKindName,
     /// For `origin_shift`: where the new origin is from the old one (m, NED).
     pub shift_ned_m: Option<[f64; 3]>,
@@ -412,6 +414,8 @@ pub enum FaultKindName {
     NoPosition,
     /// The estimator's origin moves.
     OriginShift,
+    /// The estimator loses its position; its reports go on, dead-reckoned.
+    PositionLost,
 }
 
 impl Default for EmulatorSection {

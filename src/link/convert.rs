@@ -124,6 +124,14 @@ pub enum Inbound {
     Origin(Geodetic),
     /// EXTENDED_SYS_STATE: on the ground or not.
     Landed(bool),
+    /// ESTIMATOR_STATUS: whether the estimate the coordinator flies on is good.
+    Estimator {
+        /// Attitude, horizontal and vertical velocity and relative horizontal position
+        /// all flagged good ([`ESTIMATE_NEEDED`]).
+        usable: bool,
+        /// The flags as sent (ESTIMATOR_STATUS_FLAGS bits).
+        flags: u16,
+    },
     /// COMMAND_ACK.
     Ack {
         /// MAV_CMD id.
@@ -132,6 +140,12 @@ pub enum Inbound {
         result: u8,
     },
 }
+
+/// The ESTIMATOR_STATUS flags the coordinator needs set: attitude (1), horizontal
+/// velocity (2), vertical velocity (4) and relative horizontal position (8). PX4 sends
+/// LOCAL_POSITION_NED whatever its estimator's state (mavlink's LOCAL_POSITION_NED stream),
+/// so these flags are what tells a dead-reckoned position from a good one.
+pub const ESTIMATE_NEEDED: u16 = 0x0f;
 
 /// Converts an inbound message; `None` for messages the coordinator does not use or
 /// cannot trust (a non-finite attitude). Positions and origins are checked by the
@@ -176,6 +190,13 @@ pub fn inbound(msg: &MavMessage) -> Option<Inbound> {
         MavMessage::EXTENDED_SYS_STATE(s) => Some(Inbound::Landed(
             s.landed_state == mavlink::dialects::common::MavLandedState::MAV_LANDED_STATE_ON_GROUND,
         )),
+        MavMessage::ESTIMATOR_STATUS(e) => {
+            let flags = e.flags.bits();
+            Some(Inbound::Estimator {
+                usable: flags & ESTIMATE_NEEDED == ESTIMATE_NEEDED,
+                flags,
+            })
+        }
         MavMessage::COMMAND_ACK(a) => Some(Inbound::Ack {
             command: a.command as u16,
             result: a.result as u8,

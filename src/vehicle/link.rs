@@ -139,10 +139,11 @@ impl VehicleLink {
         self.refused_reports
     }
 
-    /// Whether the last accepted position is younger than the state timeout (and its
-    /// origin known): what the swarm may fly on.
+    /// Whether the last accepted position is younger than the state timeout (its origin
+    /// known, and its estimator not saying it is lost): what the swarm may fly on.
     pub fn state_fresh(&self, now: SimTime) -> bool {
         self.state.origin.is_some()
+            && self.state.estimate_lost.is_none()
             && self
                 .state
                 .last_position
@@ -420,7 +421,10 @@ impl VehicleLink {
                         if let Some(origin) = self.next_origin.take() {
                             self.state.origin = Some(origin);
                         }
-                        if self.held == Some(true) && self.phase == Phase::VehicleHold {
+                        if self.held == Some(true)
+                            && self.phase == Phase::VehicleHold
+                            && self.state_fresh(now)
+                        {
                             self.start_streaming(now);
                         }
                     }
@@ -440,6 +444,28 @@ impl VehicleLink {
             Inbound::Landed(landed) => {
                 self.state.landed = landed;
                 self.advance_on_state(now);
+            }
+            Inbound::Estimator { usable, flags } => {
+                let was = self.state.estimate_lost;
+                self.state.estimate_lost = (!usable).then_some(flags);
+                if was.is_none() && !usable {
+                    self.events.push_back(LinkEvent::EstimateLost { flags });
+                    if self.phase == Phase::Flying {
+                        self.hand_to_hold(
+                            now,
+                            format!("its estimator lost its position (flags 0x{flags:03x})"),
+                            true,
+                        );
+                    }
+                } else if was.is_some() && usable {
+                    self.events.push_back(LinkEvent::EstimateGood { flags });
+                    if self.held == Some(true)
+                        && self.phase == Phase::VehicleHold
+                        && self.state_fresh(now)
+                    {
+                        self.start_streaming(now);
+                    }
+                }
             }
             Inbound::Ack { command, result } => self.on_ack(now, command, result),
         }

@@ -278,6 +278,17 @@ pub enum LinkEvent {
         /// The jump (m).
         jump_m: f64,
     },
+    /// Its estimator says the position and velocity it reports are not good (ESTIMATOR_STATUS
+    /// flags as sent): they are not flown on.
+    EstimateLost {
+        /// The flags.
+        flags: u16,
+    },
+    /// Its estimator says they are good again.
+    EstimateGood {
+        /// The flags.
+        flags: u16,
+    },
     /// Handed to its own Hold mode, and why.
     HandedToHold(String),
     /// A frame from the vehicle failed the signing rules (reported once per link; the
@@ -295,6 +306,7 @@ impl LinkEvent {
                 | Self::Armed
                 | Self::Flying
                 | Self::Recovered
+                | Self::EstimateGood { .. }
                 | Self::Landing
                 | Self::Landed
                 | Self::Disarmed
@@ -344,6 +356,14 @@ impl fmt::Display for LinkEvent {
             Self::PositionReset { jump_m } => write!(
                 f,
                 "position jump of {jump_m:.2} m taken after it was followed consistently"
+            ),
+            Self::EstimateLost { flags } => write!(
+                f,
+                "estimator reports no good position and velocity (ESTIMATOR_STATUS flags 0x{flags:03x}): not flown on"
+            ),
+            Self::EstimateGood { flags } => write!(
+                f,
+                "estimator reports a good position and velocity again (flags 0x{flags:03x})"
             ),
             Self::HandedToHold(why) => write!(f, "handed to its own Hold: {why}"),
             Self::SigningRefused(why) => write!(
@@ -412,6 +432,9 @@ pub struct VehicleState {
     /// When the last accepted local position arrived (cleared when the origin moves, so
     /// no position is read against the wrong origin).
     pub last_position: Option<SimTime>,
+    /// The vehicle's estimator flags, when its last ESTIMATOR_STATUS said the position
+    /// and velocity it reports are not good (`None`: good, or never said).
+    pub estimate_lost: Option<u16>,
 }
 
 impl VehicleState {

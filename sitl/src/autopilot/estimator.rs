@@ -60,7 +60,25 @@ pub enum FaultKind {
         /// Whether LOCAL_POSITION_NED moves with the origin.
         positions_follow: bool,
     },
+    /// The estimator loses its horizontal position and velocity, as PX4's EKF2 does when
+    /// its GNSS and sensors stop fitting: ESTIMATOR_STATUS says the attitude alone is good
+    /// ([`SOLUTION_ATTITUDE_ONLY`]) while LOCAL_POSITION_NED goes on, dead-reckoned: its
+    /// velocity off the truth by [`DEAD_RECKONING_ERROR_MPS`] north and its position
+    /// drifting with it. The vehicle's own controllers still fly on the truth.
+    PositionLost,
 }
+
+/// ESTIMATOR_STATUS flags of a healthy estimate in the air (what PX4 SIH reports:
+/// attitude, horizontal and vertical velocity, relative and absolute horizontal position,
+/// absolute and above-ground vertical position, and both predicted positions).
+pub const SOLUTION_HEALTHY: u16 = 0x37f;
+/// Added on the ground: PX4's constant position mode while the vehicle is at rest.
+pub const SOLUTION_AT_REST: u16 = 0x80;
+/// ESTIMATOR_STATUS flags of an estimate that kept only its attitude.
+pub const SOLUTION_ATTITUDE_ONLY: u16 = 0x1;
+/// How far off the truth a dead-reckoned velocity is during [`FaultKind::PositionLost`]
+/// (m/s, north).
+pub const DEAD_RECKONING_ERROR_MPS: f64 = 1.0;
 
 impl EstimatorConfig {
     /// Checks every number.
@@ -169,11 +187,24 @@ impl Estimator {
     }
 
     fn fault(&self, now: SimTime) -> Option<FaultKind> {
+        self.active(now).map(|f| f.kind)
+    }
+
+    fn active(&self, now: SimTime) -> Option<&TelemetryFault> {
         self.cfg
             .faults
             .iter()
             .find(|f| now >= f.from && now < f.until)
-            .map(|f| f.kind)
+    }
+
+    /// ESTIMATOR_STATUS's flags now ([`SOLUTION_HEALTHY`], with [`SOLUTION_AT_REST`] on
+    /// the ground; [`SOLUTION_ATTITUDE_ONLY`] while the position is lost).
+    pub(super) fn solution_flags(&self, now: SimTime, landed: bool) -> u16 {
+        match self.fault(now) {
+            Some(FaultKind::PositionLost) => SOLUTION_ATTITUDE_ONLY,
+            _ if landed => SOLUTION_HEALTHY | SOLUTION_AT_REST,
+            _ => SOLUTION_HEALTHY,
+        }
     }
 
     /// Where the reported origin is, from the true one (m, NED).
@@ -206,6 +237,13 @@ impl Estimator {
                 shift_ned_m,
                 positions_follow: true,
             }) => Some((p - shift_ned_m, v)),
+            Some(FaultKind::PositionLost) => {
+                let since_s = self
+                    .active(now)
+                    .map_or(0.0, |f| (now - f.from).as_secs_f64());
+                let error = Vector3::new(DEAD_RECKONING_ERROR_MPS, 0.0, 0.0);
+                Some((p + error * since_s, v + error))
+            }
             _ => Some((p, v)),
         }
     }
@@ -286,6 +324,33 @@ mod tests {
         // Slow: it moves by far less than its spread in 0.1 s.
         let step = (bias[1100] - bias[1000]).abs();
         assert!(step < 0.3, "{step}");
+    }
+
+    #[test]
+    fn a_lost_position_is_flagged_and_dead_reckoned() {
+        let e = Estimator::new(
+            EstimatorConfig {
+                faults: vec![TelemetryFault {
+                    from: SimTime::from_millis(1000),
+                    until: SimTime::from_millis(3000),
+                    kind: FaultKind::PositionLost,
+                }],
+                ..EstimatorConfig::default()
+            },
+            1,
+        );
+        let (p, v) = (Vector3::new(1.0, 2.0, -3.0), Vector3::new(0.5, 0.0, 0.0));
+        let before = SimTime::from_millis(999);
+        assert_eq!(e.solution_flags(before, false), 0x37f);
+        assert_eq!(e.solution_flags(before, true), 0x3ff);
+        assert_eq!(e.report(before, p, v), Some((p, v)));
+        // 1.5 s into the fault: attitude only; 1 m/s north off, 1.5 m drifted.
+        let during = SimTime::from_millis(2500);
+        assert_eq!(e.solution_flags(during, false), 0x001);
+        let (rp, rv) = e.report(during, p, v).unwrap();
+        assert!((rp - Vector3::new(2.5, 2.0, -3.0)).norm() < 1e-12, "{rp}");
+        assert!((rv - Vector3::new(1.5, 0.0, 0.0)).norm() < 1e-12, "{rv}");
+        assert_eq!(e.solution_flags(SimTime::from_millis(3000), false), 0x37f);
     }
 
     #[test]

@@ -5,12 +5,13 @@ use std::time::Duration;
 
 use mavlink::dialects::common::{
     ATTITUDE_DATA, ATTITUDE_QUATERNION_DATA, AUTOPILOT_VERSION_DATA, BATTERY_STATUS_DATA,
-    EXTENDED_SYS_STATE_DATA, GLOBAL_POSITION_INT_DATA, GPS_GLOBAL_ORIGIN_DATA, GPS_RAW_INT_DATA,
-    GpsFixType, HEARTBEAT_DATA, HOME_POSITION_DATA, LOCAL_POSITION_NED_DATA, MavAutopilot,
-    MavBatteryChargeState, MavBatteryFault, MavBatteryFunction, MavBatteryMode, MavBatteryType,
-    MavLandedState, MavMessage, MavModeFlag, MavParamType, MavProtocolCapability, MavSeverity,
-    MavState, MavSysStatusSensor, MavSysStatusSensorExtended, MavType, MavVtolState,
-    PARAM_VALUE_DATA, STATUSTEXT_DATA, SYS_STATUS_DATA,
+    ESTIMATOR_STATUS_DATA, EXTENDED_SYS_STATE_DATA, EstimatorStatusFlags, GLOBAL_POSITION_INT_DATA,
+    GPS_GLOBAL_ORIGIN_DATA, GPS_RAW_INT_DATA, GpsFixType, HEARTBEAT_DATA, HOME_POSITION_DATA,
+    LOCAL_POSITION_NED_DATA, MavAutopilot, MavBatteryChargeState, MavBatteryFault,
+    MavBatteryFunction, MavBatteryMode, MavBatteryType, MavLandedState, MavMessage, MavModeFlag,
+    MavParamType, MavProtocolCapability, MavSeverity, MavState, MavSysStatusSensor,
+    MavSysStatusSensorExtended, MavType, MavVtolState, PARAM_VALUE_DATA, STATUSTEXT_DATA,
+    SYS_STATUS_DATA,
 };
 use nalgebra::Vector3;
 
@@ -31,6 +32,7 @@ const BATTERY_STATUS: u32 = 147;
 const AUTOPILOT_VERSION: u32 = 148;
 const EXTENDED_SYS_STATE: u32 = 245;
 const HOME_POSITION: u32 = 242;
+const ESTIMATOR_STATUS: u32 = 230;
 
 /// The streams every link starts with: `(message id, rate in Hz)`.
 pub(super) fn default_streams(fast_rate_hz: f64) -> Vec<Stream> {
@@ -42,6 +44,8 @@ pub(super) fn default_streams(fast_rate_hz: f64) -> Vec<Stream> {
         (GPS_RAW_INT, 5.0),
         (HOME_POSITION, 0.5),
         (GPS_GLOBAL_ORIGIN, 0.2),
+        // PX4's onboard and normal modes stream it at 1 and 0.5 Hz (mavlink_main.cpp).
+        (ESTIMATOR_STATUS, 1.0),
         (ATTITUDE, fast_rate_hz),
         (ATTITUDE_QUATERNION, fast_rate_hz),
         (LOCAL_POSITION_NED, fast_rate_hz),
@@ -76,6 +80,7 @@ fn is_known(msg_id: u32) -> bool {
             | AUTOPILOT_VERSION
             | EXTENDED_SYS_STATE
             | HOME_POSITION
+            | ESTIMATOR_STATUS
     )
 }
 
@@ -222,6 +227,21 @@ impl Vehicle {
                 landed_state: self.landed_state(),
             }),
             BATTERY_STATUS => self.battery_status(),
+            ESTIMATOR_STATUS => MavMessage::ESTIMATOR_STATUS(ESTIMATOR_STATUS_DATA {
+                time_usec: now.as_micros(),
+                vel_ratio: 0.0,
+                pos_horiz_ratio: 0.0,
+                pos_vert_ratio: 0.0,
+                mag_ratio: 0.0,
+                hagl_ratio: 0.0,
+                tas_ratio: 0.0,
+                pos_horiz_accuracy: 0.0,
+                pos_vert_accuracy: 0.0,
+                flags: EstimatorStatusFlags::from_bits_truncate(self.estimator.solution_flags(
+                    now,
+                    self.landed_state() == MavLandedState::MAV_LANDED_STATE_ON_GROUND,
+                )),
+            }),
             GPS_RAW_INT => self.gps_raw_int(now),
             HOME_POSITION => self.home_position(now),
             GPS_GLOBAL_ORIGIN => {
