@@ -24,7 +24,8 @@ pub enum Command {
     /// Stability of a ring (bound on k, eigenvalues of L, Yu's bound, closed loop) and,
     /// without --alpha/--beta, recommended gains. Exit code 0 stable, 1 unstable.
     Analyze(AnalyzeArgs),
-    /// Plan the gain k (and, if needed, one agent's new initial velocity) that makes the
+    /// Plan the gain k (and, if needed, one agent's new initial velocity, or every agent's
+    /// when one cannot do it within the speed limit) that makes the
     /// swarm reach a target velocity. Exit code 0 feasible, 1 infeasible.
     Plan(PlanArgs),
     /// Run N emulated PX4-like quadrotors on PX4's SITL ports until Ctrl-C.
@@ -280,6 +281,11 @@ pub struct PlanArgs {
     /// Refuse plans whose re-targeted agent would fly faster than this (m/s).
     #[arg(long)]
     pub max_speed: Option<f64>,
+    /// When one agent cannot reach the target within the limits, every agent is
+    /// re-targeted by the least change of their velocities with this k (default 1: weights
+    /// 1 and 2 per macro-vertex; kept within [k_min + margin, k_max]).
+    #[arg(long)]
+    pub k: Option<f64>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,

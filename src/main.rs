@@ -16,7 +16,7 @@ use clap::Parser;
 use ringswarm::cli::{AnalyzeArgs, Cli, Command, PlanArgs};
 use ringswarm::consensus::PlanRequest;
 use ringswarm::error::{GaveUp, GuardStopped};
-use ringswarm::report::{AnalyzeRequest, emit, run_analyze, run_plan};
+use ringswarm::report::{AnalyzeRequest, emit, run_analyze, run_plan_everyone};
 use tracing_subscriber::EnvFilter;
 use tracing_subscriber::filter::LevelFilter;
 
@@ -90,13 +90,16 @@ fn analyze(args: &AnalyzeArgs) -> anyhow::Result<bool> {
 
 /// Prints the plan; `Ok(feasible)`.
 fn plan(args: &PlanArgs) -> anyhow::Result<bool> {
-    let output = run_plan(&PlanRequest {
-        velocities_mps: args.initial_velocities.0.clone(),
-        target_mps: args.target,
-        k_margin: args.margin,
-        k_max: args.k_max,
-        max_speed_mps: args.max_speed,
-    })?;
+    let output = run_plan_everyone(
+        &PlanRequest {
+            velocities_mps: args.initial_velocities.0.clone(),
+            target_mps: args.target,
+            k_margin: args.margin,
+            k_max: args.k_max,
+            max_speed_mps: args.max_speed,
+        },
+        args.k,
+    )?;
     if args.json {
         emit(&serde_json::to_string_pretty(&output)?)?;
     } else {

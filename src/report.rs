@@ -8,8 +8,9 @@ use nalgebra::Vector2;
 use serde::Serialize;
 
 use crate::consensus::{
-    BandwidthCheck, CouplingGains, PlanOutcome, PlanRequest, RingDigraph, StabilityReport, analyze,
-    check_bandwidth, fastest_mode_per_s, numeric_k_lower_bound, plan, recommend_gains,
+    BandwidthCheck, CouplingGains, LeastChange, PlanOutcome, PlanRequest, RingDigraph,
+    StabilityReport, analyze, check_bandwidth, fastest_mode_per_s, least_change_velocities,
+    numeric_k_lower_bound, plan, recommend_gains,
 };
 use crate::error::InputError;
 
@@ -371,8 +372,116 @@ pub struct PlanOutput {
     pub k: Option<f64>,
     /// The final velocity predicted from the (modified) velocities and `k` (m/s).
     pub predicted_final_velocity: Option<[f64; 2]>,
-    /// Why the target is not reachable.
+    /// Why the target is not reachable (or, when every agent is re-targeted, why one agent
+    /// could not do it).
     pub reason: Option<String>,
+    /// Which plan: `one agent` (the paper's) or `every agent` (the least change of every
+    /// velocity, when one agent cannot reach the target within the limits).
+    pub method: Option<String>,
+    /// With `every agent`: each agent that changes (1-based), old and new velocity (m/s).
+    pub retargeted: Vec<Retarget>,
+    /// With an unreachable target: the nearest final velocity the speed limit allows
+    /// with every agent re-targeted (m/s).
+    pub best_reachable_velocity: Option<[f64; 2]>,
+}
+
+/// The `k` of `plan`'s every-agent plan unless `--k` says otherwise.
+pub const EVERY_AGENT_K: f64 = 1.0;
+
+/// One agent of an every-agent plan.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Retarget {
+    /// The agent (1-based).
+    pub agent: usize,
+    /// Its initial velocity before (m/s).
+    pub old_velocity: [f64; 2],
+    /// Its new initial velocity (m/s).
+    pub new_velocity: [f64; 2],
+    /// `|new − old|` (m/s).
+    pub change: f64,
+}
+
+/// Runs `plan`: the paper's plan (one agent re-targeted); when it is infeasible, every
+/// agent re-targeted by the least change of their velocities at `every_k` (default 1:
+/// weights 1 and 2 per macro-vertex, all positive, so that the weighted mean of speeds
+/// within the limit stays within it; kept within `[k_min + margin, k_max]`), each within
+/// `max_speed_mps`.
+///
+/// # Errors
+/// [`InputError`] for an odd agent count, non-finite numbers or a negative margin.
+pub fn run_plan_everyone(
+    request: &PlanRequest,
+    every_k: Option<f64>,
+) -> Result<PlanOutput, InputError> {
+    let mut out = run_plan(request)?;
+    if out.feasible {
+        out.method = Some("one agent".to_owned());
+        return Ok(out);
+    }
+    let k_lo = out.k_min + request.k_margin;
+    if k_lo > request.k_max {
+        return Ok(out);
+    }
+    if let Some(k) = every_k
+        && !(k.is_finite() && k > 0.0)
+    {
+        return Err(InputError::OutOfRange {
+            name: "--k",
+            range: "(0, ∞)",
+            value: k,
+        });
+    }
+    let k = every_k.unwrap_or(EVERY_AGENT_K).clamp(k_lo, request.k_max);
+    let n = request.velocities_mps.len();
+    let ring = RingDigraph::for_agents(n, k)?;
+    let w: Vec<f64> = (0..n).map(|i| ring.w(i)).collect();
+    let limit = request
+        .max_speed_mps
+        .unwrap_or(crate::config::MAX_SPEED_MPS);
+    let answer = least_change_velocities(
+        &request.velocities_mps,
+        &w,
+        request.target_mps,
+        &vec![limit; n],
+    )?;
+    let pair = |v: Vector2<f64>| [v.x, v.y];
+    let one_agent = out.reason.take().unwrap_or_default();
+    match answer {
+        LeastChange::Reached { velocities_mps, .. } => {
+            out.feasible = true;
+            out.method = Some("every agent".to_owned());
+            out.k = Some(k);
+            out.delta = Some(1.0 + k);
+            out.reason = Some(one_agent);
+            let total: f64 = w.iter().sum();
+            let mean = velocities_mps
+                .iter()
+                .zip(&w)
+                .map(|(v, wi)| v * *wi)
+                .sum::<Vector2<f64>>()
+                / total;
+            out.predicted_final_velocity = Some(pair(mean));
+            out.retargeted = velocities_mps
+                .iter()
+                .zip(&request.velocities_mps)
+                .enumerate()
+                .filter(|(_, (new, old))| (*new - *old).norm() > 1e-9)
+                .map(|(i, (new, old))| Retarget {
+                    agent: i + 1,
+                    old_velocity: pair(*old),
+                    new_velocity: pair(*new),
+                    change: (new - old).norm(),
+                })
+                .collect();
+        }
+        LeastChange::Unreachable { best_mps, reason } => {
+            out.reason = Some(format!(
+                "{one_agent}; re-targeting every agent with k = {k:.6}: {reason}"
+            ));
+            out.best_reachable_velocity = Some(pair(best_mps));
+        }
+    }
+    Ok(out)
 }
 
 /// Runs `plan`.
@@ -399,6 +508,9 @@ pub fn run_plan(request: &PlanRequest) -> Result<PlanOutput, InputError> {
         k: None,
         predicted_final_velocity: None,
         reason: None,
+        method: None,
+        retargeted: Vec::new(),
+        best_reachable_velocity: None,
     };
     match answer.outcome {
         PlanOutcome::Feasible {
@@ -444,12 +556,55 @@ impl fmt::Display for PlanOutput {
             self.k_min, self.margin
         )?;
         if !self.feasible {
-            return write!(
+            write!(
                 f,
                 "INFEASIBLE: {}",
                 self.reason.as_deref().unwrap_or("no admissible gain")
-            );
+            )?;
+            if let Some(best) = self.best_reachable_velocity {
+                write!(f, "\nnearest reachable final velocity: {} m/s", v(best))?;
+            }
+            return Ok(());
         }
+        if self.method.as_deref() == Some("every agent") {
+            writeln!(
+                f,
+                "one agent cannot do it ({}): every agent re-targeted by the least change",
+                self.reason.as_deref().unwrap_or("")
+            )?;
+            for r in &self.retargeted {
+                writeln!(
+                    f,
+                    "re-target agent {}: initial velocity {} -> {} m/s (change {:.4} m/s)",
+                    r.agent,
+                    v(r.old_velocity),
+                    v(r.new_velocity),
+                    r.change
+                )?;
+            }
+        } else {
+            self.one_agent_line(f, &v)?;
+        }
+        writeln!(
+            f,
+            "delta = {:.6}, k = {:.6}",
+            self.delta.unwrap_or(f64::NAN),
+            self.k.unwrap_or(f64::NAN)
+        )?;
+        let predicted = self.predicted_final_velocity.map(v).unwrap_or_default();
+        write!(
+            f,
+            "predicted final velocity with these velocities and k: {predicted} m/s\nverdict: FEASIBLE"
+        )
+    }
+}
+
+impl PlanOutput {
+    fn one_agent_line(
+        &self,
+        f: &mut fmt::Formatter<'_>,
+        v: &dyn Fn([f64; 2]) -> String,
+    ) -> fmt::Result {
         match (self.agent, self.old_velocity, self.new_velocity) {
             (Some(agent), Some(old), Some(new)) => writeln!(
                 f,
@@ -464,16 +619,6 @@ impl fmt::Display for PlanOutput {
                 "no agent needs a new velocity: g and h are collinear with an admissible delta"
             )?,
         }
-        writeln!(
-            f,
-            "delta = {:.6}, k = {:.6}",
-            self.delta.unwrap_or(f64::NAN),
-            self.k.unwrap_or(f64::NAN)
-        )?;
-        let predicted = self.predicted_final_velocity.map(v).unwrap_or_default();
-        write!(
-            f,
-            "predicted final velocity with these velocities and k: {predicted} m/s\nverdict: FEASIBLE"
-        )
+        Ok(())
     }
 }

@@ -170,6 +170,7 @@ fn plan_reports_agent_velocity_gain_and_prediction() {
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     let v = json(&out);
     assert_eq!(v["feasible"], serde_json::json!(true));
+    assert_eq!(v["method"], serde_json::json!("one agent"));
     assert_eq!(v["agent"], serde_json::json!(4));
     assert!((v["k"].as_f64().unwrap() - 10.0).abs() < 1e-12);
     let vf = v["predicted_final_velocity"].as_array().unwrap();
@@ -180,21 +181,96 @@ fn plan_reports_agent_velocity_gain_and_prediction() {
 }
 
 #[test]
-fn plan_with_a_speed_limit_can_be_infeasible() {
+fn plan_with_a_speed_limit_re_targets_every_agent_or_names_the_nearest_reachable() {
+    let velocities = "9,4;15,8;18,-2;13,1;-8,-7;14,18";
+    // At 50 m/s agent 4 alone cannot do it (it would need 72.6 m/s at k = 10); every
+    // agent can, within 50 m/s.
     let out = ringswarm(&[
         "plan",
         "--initial-velocities",
-        "9,4;15,8;18,-2;13,1;-8,-7;14,18",
+        velocities,
         "--target",
         "20,30",
         "--max-speed",
         "50",
         "--json",
     ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let v = json(&out);
+    assert_eq!(v["method"], serde_json::json!("every agent"));
+    assert!(v["reason"].as_str().unwrap().contains("50 m/s"), "{v}");
+    for r in v["retargeted"].as_array().unwrap() {
+        let n = r["new_velocity"].as_array().unwrap();
+        let speed = n[0].as_f64().unwrap().hypot(n[1].as_f64().unwrap());
+        assert!(speed <= 50.0 + 1e-9, "{r}");
+    }
+    // A target faster than the limit is out of reach for every plan: refused, with the
+    // nearest reachable final velocity, (20, 30) scaled to 30 m/s at most.
+    let out = ringswarm(&[
+        "plan",
+        "--initial-velocities",
+        velocities,
+        "--target",
+        "20,30",
+        "--max-speed",
+        "30",
+        "--json",
+    ]);
     assert_eq!(out.status.code(), Some(1));
     let v = json(&out);
     assert_eq!(v["feasible"], serde_json::json!(false));
-    assert!(v["reason"].as_str().unwrap().contains("50 m/s"));
+    assert!(v["reason"].as_str().unwrap().contains("30 m/s"), "{v}");
+    let best = v["best_reachable_velocity"].as_array().unwrap();
+    let (bx, by) = (best[0].as_f64().unwrap(), best[1].as_f64().unwrap());
+    assert!(bx.hypot(by) <= 30.0 + 1e-6, "{best:?}");
+    assert!((by / bx - 1.5).abs() < 1e-3, "along the target: {best:?}");
+}
+
+#[test]
+fn plan_re_targets_every_agent_by_the_weighted_least_norm_change() {
+    // From (nearly) rest one agent would need W·|v_t|/w ≥ 16 m/s against a 5.49 m/s limit.
+    // With k = 1 the left null vector of L is w = (1, 2) per macro-vertex (W = 9,
+    // Σw² = 15), and min Σ|Δvᵢ|² subject to Σwᵢ(vᵢ + Δvᵢ) = W·v_t gives Δvᵢ = wᵢ·λ,
+    // λ = (W·v_t − Σwᵢvᵢ)/Σwᵢ² = ((27, 18) − (0.2, 0.1))/15 = (1.786667, 1.193333), no
+    // limit binding (the fastest new velocity is 4.59 m/s).
+    let out = ringswarm(&[
+        "plan",
+        "--initial-velocities",
+        "0.5,0;0,0.5;-0.5,0;0,-0.5;0.2,0.1;0,0",
+        "--target",
+        "3,2",
+        "--max-speed",
+        "5.49",
+        "--k",
+        "1",
+        "--json",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let v = json(&out);
+    assert_eq!(v["method"], serde_json::json!("every agent"));
+    assert!((v["k"].as_f64().unwrap() - 1.0).abs() < 1e-12);
+    let old = [
+        (0.5, 0.0),
+        (0.0, 0.5),
+        (-0.5, 0.0),
+        (0.0, -0.5),
+        (0.2, 0.1),
+        (0.0, 0.0),
+    ];
+    let lambda = (26.8 / 15.0, 17.9 / 15.0);
+    let retargeted = v["retargeted"].as_array().unwrap();
+    assert_eq!(retargeted.len(), 6);
+    for (i, r) in retargeted.iter().enumerate() {
+        assert_eq!(r["agent"], serde_json::json!(i + 1));
+        let w = if i % 2 == 0 { 1.0 } else { 2.0 };
+        let n = r["new_velocity"].as_array().unwrap();
+        let expected = (old[i].0 + w * lambda.0, old[i].1 + w * lambda.1);
+        assert!((n[0].as_f64().unwrap() - expected.0).abs() < 1e-6, "{r}");
+        assert!((n[1].as_f64().unwrap() - expected.1).abs() < 1e-6, "{r}");
+    }
+    let vf = v["predicted_final_velocity"].as_array().unwrap();
+    assert!((vf[0].as_f64().unwrap() - 3.0).abs() < 1e-9);
+    assert!((vf[1].as_f64().unwrap() - 2.0).abs() < 1e-9);
 }
 
 #[test]
