@@ -101,7 +101,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         handshake_timeout: Duration::from_secs(30),
         estimate_hover: true,
         estimate_drag: true,
-        disturbance_time_constant_s: 1.0,
+        disturbance_time_constant_s: 0.5,
         mean_velocity_gain: 0.2,
         setpoint: ringswarm::swarm::SetpointKind::Attitude,
         bandwidth: None,

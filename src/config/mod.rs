@@ -206,7 +206,7 @@ pub struct SwarmSection {
     /// is then never more than the estimate's lower confidence bound, and the estimate is
     /// flown once it is settled and differs from `drag_per_s`.
     pub estimate_drag: bool,
-    /// Time constant (s) of each vehicle's disturbance observer (default 1; 0 turns it
+    /// Time constant (s) of each vehicle's disturbance observer (default 0.5; 0 turns it
     /// off): the horizontal acceleration the commands do not explain (a vehicle's own
     /// attitude estimate off the truth, a drag mistaken), low-pass filtered and taken off
     /// the next commands.
@@ -232,7 +232,7 @@ impl Default for SwarmSection {
             retake_offboard: false,
             estimate_hover: true,
             estimate_drag: true,
-            disturbance_time_constant_s: 1.0,
+            disturbance_time_constant_s: 0.5,
             setpoint: SetpointKind::Attitude,
         }
     }

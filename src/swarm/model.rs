@@ -147,7 +147,7 @@ impl FlownModel {
     /// (m/s², ENU; zero while the observer is off).
     pub(super) fn disturbance_mps2(&self) -> Vector2<f64> {
         self.disturbance
-            .map_or(Vector2::zeros(), |o| o.estimate_mps2())
+            .map_or(Vector2::zeros(), |o| o.significant_mps2())
     }
 
     /// The observer's latest estimate while the vehicle flew on our commands in the air
@@ -242,7 +242,7 @@ impl FlownModel {
                     let fed_forward = self.drag_fed_forward_per_s() * mean_v.xy();
                     if let Some(o) = &mut self.disturbance {
                         o.update(dt, made - (asked - fed_forward));
-                        self.disturbance_seen = o.estimate_mps2();
+                        self.disturbance_seen = o.significant_mps2();
                     }
                     if self.estimate_drag {
                         self.fuse_drag(dt, asked - made, mean_v.xy());
