@@ -10,7 +10,7 @@ use serde::Serialize;
 use crate::consensus::{
     BandwidthCheck, CouplingGains, LeastChange, PlanOutcome, PlanRequest, RingDigraph,
     StabilityReport, analyze, check_bandwidth, fastest_mode_per_s, least_change_velocities,
-    numeric_k_lower_bound, plan, recommend_gains,
+    numeric_k_lower_bound, plan, predicted_final_velocity, recommend_gains,
 };
 use crate::error::InputError;
 
@@ -453,14 +453,8 @@ pub fn run_plan_everyone(
             out.k = Some(k);
             out.delta = Some(1.0 + k);
             out.reason = Some(one_agent);
-            let total: f64 = w.iter().sum();
-            let mean = velocities_mps
-                .iter()
-                .zip(&w)
-                .map(|(v, wi)| v * *wi)
-                .sum::<Vector2<f64>>()
-                / total;
-            out.predicted_final_velocity = Some(pair(mean));
+            out.predicted_final_velocity =
+                Some(pair(predicted_final_velocity(&ring, &velocities_mps)?));
             out.retargeted = velocities_mps
                 .iter()
                 .zip(&request.velocities_mps)

@@ -23,6 +23,23 @@ pub struct HorizontalState {
     pub offset_m: Vector2<f64>,
 }
 
+/// Largest horizontal distance of any `pᵢ − dᵢ` from their mean (m), given the
+/// `pᵢ − dᵢ`: zero when the vehicles are exactly in formation (the formation may sit
+/// anywhere).
+pub fn formation_error_m<I>(relative_m: I) -> f64
+where
+    I: Iterator<Item = Vector2<f64>> + Clone,
+{
+    let (sum, n) = relative_m
+        .clone()
+        .fold((Vector2::zeros(), 0usize), |(s, n), r| (s + r, n + 1));
+    if n == 0 {
+        return 0.0;
+    }
+    let centre = sum / n as f64;
+    relative_m.map(|r| (r - centre).norm()).fold(0.0, f64::max)
+}
+
 /// The consensus acceleration of one agent from its own state and its weighted
 /// neighbours `(aᵢⱼ, state of j)`.
 pub fn consensus_acceleration<'a>(

@@ -18,7 +18,7 @@ pub use bandwidth::{
 };
 pub use design::{GainDesign, recommend_gains};
 pub use graph::{Edge, Neighbours, RingDigraph};
-pub use law::{HorizontalState, consensus_acceleration, ring_accelerations};
+pub use law::{HorizontalState, consensus_acceleration, formation_error_m, ring_accelerations};
 pub use least_change::{LeastChange, REACH_MARGIN, least_change_velocities};
 pub use planner::{
     AgentClass, Plan, PlanOutcome, PlanRequest, Retarget, g_and_h, plan, retarget_velocity,

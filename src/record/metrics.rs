@@ -11,21 +11,7 @@ use crate::swarm::{Swarm, SwarmPhase};
 /// Largest horizontal distance of any `pᵢ − dᵢ` from their mean (m): zero when the
 /// vehicles are exactly in formation (the formation may sit anywhere).
 pub fn formation_error_m(pos_m: &[Vector2<f64>], offsets_m: &[Vector2<f64>]) -> f64 {
-    let n = pos_m.len().min(offsets_m.len());
-    if n == 0 {
-        return 0.0;
-    }
-    let centre = pos_m
-        .iter()
-        .zip(offsets_m)
-        .map(|(p, d)| p - d)
-        .sum::<Vector2<f64>>()
-        / n as f64;
-    pos_m
-        .iter()
-        .zip(offsets_m)
-        .map(|(p, d)| (p - d - centre).norm())
-        .fold(0.0, f64::max)
+    crate::consensus::formation_error_m(pos_m.iter().zip(offsets_m).map(|(p, d)| p - d))
 }
 
 /// Largest `|zᵢ − altitude|` (m).

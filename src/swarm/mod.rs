@@ -225,12 +225,6 @@ pub struct Swarm {
     boxes: Vec<Vector2<f64>>,
     /// The divergence guard, if on.
     guard: Option<DivergenceGuard>,
-    /// Each vehicle's attitude response as measured so far, and its latest attitude
-    /// report (to tell a new one from the same).
-    responses: Vec<(
-        crate::control::ResponseFit,
-        Option<nalgebra::UnitQuaternion<f64>>,
-    )>,
     /// Why the flight stopped (or is stopping), once it does.
     stop: Option<StopReason>,
 }
@@ -284,6 +278,7 @@ impl Swarm {
                         setup.disturbance_time_constant_s,
                     ),
                     (lo, hi),
+                    setup.control_interval.as_secs_f64(),
                 )
             })
             .collect();
@@ -327,13 +322,6 @@ impl Swarm {
             timing: timing::TickTiming::new(setup_interval),
             boxes: Vec::with_capacity(n),
             guard: setup_guard.map(DivergenceGuard::new),
-            responses: vec![
-                (
-                    crate::control::ResponseFit::new(setup_interval.as_secs_f64()),
-                    None
-                );
-                n
-            ],
             stop: None,
         }
     }
@@ -430,7 +418,7 @@ impl Swarm {
     /// Vehicle `i`'s attitude response as measured so far (`None` before enough
     /// commanded motion has been seen, or with acceleration setpoints).
     pub fn attitude_response(&self, i: usize) -> Option<crate::control::AttitudeResponse> {
-        self.responses.get(i).and_then(|(fit, _)| fit.fit())
+        self.flown.get(i).and_then(FlownModel::attitude_response)
     }
 
     /// Whether the divergence guard ended the consensus (`fly` and `demo` exit non-zero).

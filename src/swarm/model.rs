@@ -15,11 +15,12 @@
 //! is flown. A vehicle whose model is right is never flown on an estimate's transient
 //! error; one whose model is 10 % off is corrected within seconds.
 
-use nalgebra::{Vector2, Vector3};
+use nalgebra::{UnitQuaternion, Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 
 use crate::control::{
-    DISTURBANCE_LIMIT_MPS2, DisturbanceObserver, DragKf, GRAVITY_MPS2, HoverThrustEkf, VehicleModel,
+    AttitudeResponse, DISTURBANCE_LIMIT_MPS2, DisturbanceObserver, DragKf, GRAVITY_MPS2,
+    HoverThrustEkf, ResponseFit, VehicleModel, euler_ned_frd,
 };
 
 /// What drives a vehicle horizontally on one tick, as far as the coordinator can tell.
@@ -59,6 +60,10 @@ pub(super) struct FlownModel {
     disturbance: Option<DisturbanceObserver>,
     /// The observer's latest estimate while the vehicle flew on our commands (m/s², ENU).
     disturbance_seen: Vector2<f64>,
+    /// The attitude response fitted so far, and the latest attitude report (a new one is
+    /// told from the same by its value).
+    response: ResponseFit,
+    last_attitude: Option<UnitQuaternion<f64>>,
     /// How much more drag than the estimate's lower bound may be fed forward (1/s).
     drag_allowance_per_s: f64,
     estimate: bool,
@@ -81,12 +86,13 @@ impl FlownModel {
     /// `estimate_drag` the drag estimator, a positive `disturbance_time_constant_s` the
     /// disturbance observer. The drag fed forward may exceed the estimate's lower
     /// confidence bound by `drag_allowance_per_s` (half the mean-velocity gain:
-    /// docs/math.md).
+    /// docs/math.md). Commands are sent every `control_period_s`.
     pub(super) fn new(
         configured: VehicleModel,
         (drag_per_s, drag_allowance_per_s): (f64, f64),
         (estimate, estimate_drag, disturbance_time_constant_s): (bool, bool, f64),
         (min, max): (f64, f64),
+        control_period_s: f64,
     ) -> Self {
         Self {
             configured,
@@ -97,6 +103,8 @@ impl FlownModel {
                 DisturbanceObserver::new(disturbance_time_constant_s, DISTURBANCE_LIMIT_MPS2)
             }),
             disturbance_seen: Vector2::zeros(),
+            response: ResponseFit::new(control_period_s),
+            last_attitude: None,
             drag_allowance_per_s,
             estimate,
             estimate_drag,
@@ -161,6 +169,36 @@ impl FlownModel {
         if let Some(o) = &mut self.disturbance {
             o.reset();
         }
+    }
+
+    /// One control tick of the attitude response fit: the attitude commanded on it, the
+    /// latest attitude report (taken as new when it differs from the last one), and
+    /// whether the vehicle flies our attitude commands in the air.
+    pub(super) fn attitude_tick(
+        &mut self,
+        now_s: f64,
+        commanded: &UnitQuaternion<f64>,
+        reported: Option<UnitQuaternion<f64>>,
+        usable: bool,
+    ) {
+        let new = reported.filter(|q| Some(*q) != self.last_attitude);
+        if new.is_some() {
+            self.last_attitude = new;
+        }
+        let (sp_roll, sp_pitch, _) = euler_ned_frd(commanded);
+        self.response.tick(
+            new.map(|q| {
+                let (roll, pitch, _) = euler_ned_frd(&q);
+                ([roll, pitch], now_s)
+            }),
+            [sp_roll, sp_pitch],
+            usable,
+        );
+    }
+
+    /// The attitude response fitted so far (`None` before enough commanded motion).
+    pub(super) fn attitude_response(&self) -> Option<AttitudeResponse> {
+        self.response.fit()
     }
 
     /// Whether the estimate is flown (it disagreed significantly with the configuration).

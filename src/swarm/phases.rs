@@ -7,7 +7,7 @@ use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
 use super::{EndAction, LossPolicy, PlanDecision, StopReason, Swarm, SwarmFailure, SwarmPhase};
-use crate::consensus::{HorizontalState, predicted_final_velocity};
+use crate::consensus::{formation_error_m, predicted_final_velocity};
 use crate::vehicle::Phase;
 
 /// How close to the commanded altitude (m) and how slow vertically (m/s) every vehicle must
@@ -253,7 +253,7 @@ impl Swarm {
         let Some(guard) = self.guard.as_mut() else {
             return;
         };
-        let formation = formation_error_m(&self.horizontal);
+        let formation = formation_error_m(self.horizontal.iter().map(|h| h.pos_m - h.offset_m));
         let spread = self
             .horizontal
             .iter()
@@ -289,21 +289,4 @@ impl Swarm {
             }
         }
     }
-}
-
-/// The formation error of the states flown on: the largest distance of `pᵢ − dᵢ` from
-/// their mean (m).
-fn formation_error_m(states: &[HorizontalState]) -> f64 {
-    if states.is_empty() {
-        return 0.0;
-    }
-    let centre = states
-        .iter()
-        .map(|h| h.pos_m - h.offset_m)
-        .sum::<Vector2<f64>>()
-        / states.len() as f64;
-    states
-        .iter()
-        .map(|h| (h.pos_m - h.offset_m - centre).norm())
-        .fold(0.0, f64::max)
 }

@@ -9,8 +9,7 @@ use super::model::HorizontalDrive;
 use super::{Swarm, SwarmPhase};
 use crate::consensus::HorizontalState;
 use crate::control::{
-    attitude_thrust_from_acceleration, enu_to_ned, euler_ned_frd, saturate_with,
-    thrust_direction_enu, tilt_cos,
+    attitude_thrust_from_acceleration, enu_to_ned, saturate_with, thrust_direction_enu, tilt_cos,
 };
 use crate::swarm::SetpointKind;
 use crate::vehicle::{Phase, Setpoint};
@@ -94,18 +93,10 @@ impl Swarm {
                 && !link.state().landed
                 && !self.isolated[i]
                 && self.states[i].is_some();
-            let (fit, last) = &mut self.responses[i];
-            let reported = link.state().attitude.filter(|q| Some(*q) != *last);
-            if reported.is_some() {
-                *last = reported;
-            }
-            let (sp_roll, sp_pitch, _) = euler_ned_frd(&sp.attitude_ned_frd);
-            fit.tick(
-                reported.map(|q| {
-                    let (roll, pitch, _) = euler_ned_frd(&q);
-                    ([roll, pitch], now.as_secs_f64())
-                }),
-                [sp_roll, sp_pitch],
+            self.flown[i].attitude_tick(
+                now.as_secs_f64(),
+                &sp.attitude_ned_frd,
+                link.state().attitude,
                 usable,
             );
             if self.states[i].is_some() || link.phase() == Phase::Flying {

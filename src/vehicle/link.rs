@@ -421,12 +421,7 @@ impl VehicleLink {
                         if let Some(origin) = self.next_origin.take() {
                             self.state.origin = Some(origin);
                         }
-                        if self.held == Some(true)
-                            && self.phase == Phase::VehicleHold
-                            && self.state_fresh(now)
-                        {
-                            self.start_streaming(now);
-                        }
+                        self.take_back_if_usable(now);
                     }
                 }
             }
@@ -459,15 +454,18 @@ impl VehicleLink {
                     }
                 } else if was.is_some() && usable {
                     self.events.push_back(LinkEvent::EstimateGood { flags });
-                    if self.held == Some(true)
-                        && self.phase == Phase::VehicleHold
-                        && self.state_fresh(now)
-                    {
-                        self.start_streaming(now);
-                    }
+                    self.take_back_if_usable(now);
                 }
             }
             Inbound::Ack { command, result } => self.on_ack(now, command, result),
+        }
+    }
+
+    /// A vehicle in the Hold we handed it to (to be taken back when fresh) is streamed to
+    /// again once its state is usable.
+    fn take_back_if_usable(&mut self, now: SimTime) {
+        if self.held == Some(true) && self.phase == Phase::VehicleHold && self.state_fresh(now) {
+            self.start_streaming(now);
         }
     }
 
@@ -546,9 +544,7 @@ impl VehicleLink {
             );
             self.hand_to_hold(now, reason, true);
         }
-        if self.held == Some(true) && self.phase == Phase::VehicleHold && self.state_fresh(now) {
-            self.start_streaming(now);
-        }
+        self.take_back_if_usable(now);
         // Arm and take OFFBOARD only once the origin is known: without it the swarm
         // cannot place the vehicle, and would hand it to its Hold on the first tick.
         if let Phase::Streaming(since) = self.phase
