@@ -215,3 +215,44 @@ fn the_planner_keeps_k_where_the_airframes_can_fly_the_law() {
     let fastest = ringswarm::consensus::fastest_mode_per_s(&mu, gains);
     assert!(fastest <= 9.75 + 1e-6, "{fastest}");
 }
+
+#[test]
+fn a_vehicle_lost_in_the_re_target_stage_holds_the_swarm_until_the_duration_is_over() {
+    // Vehicle 3 stops sending positions at 3 s, in stage 1 (which runs from 1.3 s for
+    // more than 7.6 s): the others hold. Consensus never started, so the duration (10 s)
+    // counts from the start of stage 1, and the swarm lands then instead of holding
+    // until it is killed.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim2.toml");
+    let text = std::fs::read_to_string(path).unwrap();
+    let text = text.replace("duration_s = 60.0", "duration_s = 10.0");
+    let fault = "[[emulator.fault]]\nvehicle = 3\nfrom_s = 3.0\nuntil_s = 1000.0\nkind = \"no_position\"\n";
+    let text = text.replacen("[[vehicle]]", &format!("{fault}\n[[vehicle]]"), 1);
+    let mut run = Lockstep::from_config(&Config::from_toml(&text).unwrap()).unwrap();
+    let (mut retarget, mut held, mut landing, mut consensus) = (None, None, None, None);
+    run.run_until(SimTime::from_millis(14_000), |r| match r.swarm().phase() {
+        SwarmPhase::Retargeting(t) => {
+            retarget.get_or_insert(t);
+        }
+        SwarmPhase::Holding(t) => {
+            held.get_or_insert(t);
+        }
+        SwarmPhase::Landing(t) => {
+            landing.get_or_insert(t);
+        }
+        SwarmPhase::Consensus(t) => {
+            consensus.get_or_insert(t);
+        }
+        _ => {}
+    });
+    assert_eq!(consensus, None, "consensus never starts");
+    let retarget = retarget.expect("no stage 1").as_secs_f64();
+    let held = held.expect("never held").as_secs_f64();
+    let landing = landing.expect("held past the duration").as_secs_f64();
+    // The state timeout (300 ms) after the last position at 3 s.
+    assert!((3.28..3.34).contains(&held), "held at {held} s");
+    // The first control tick (250 Hz) at or after stage 1's start + 10 s.
+    assert!(
+        landing >= retarget + 10.0 && landing < retarget + 10.0 + 0.0041,
+        "landing at {landing} s, stage 1 at {retarget} s"
+    );
+}

@@ -217,6 +217,10 @@ pub struct Swarm {
     mean_velocity_integral: Vector2<f64>,
     all_flying_since: Option<SimTime>,
     first_consensus: Option<SimTime>,
+    /// When the swarm first flew on a law of the flight (the re-target stage or
+    /// consensus): a swarm that holds before consensus ever started (a vehicle lost in
+    /// the re-target stage) ends its flight the duration after this.
+    first_law: Option<SimTime>,
     hold_points: Vec<Option<Vector2<f64>>>,
     control_ticks: u64,
     plan: Option<PlanDecision>,
@@ -316,6 +320,7 @@ impl Swarm {
             mean_velocity_integral: Vector2::zeros(),
             all_flying_since: None,
             first_consensus: None,
+            first_law: None,
             hold_points: vec![None; n],
             control_ticks: 0,
             plan: None,

@@ -142,7 +142,7 @@ impl Swarm {
                 }
             }
             SwarmPhase::Handshake | SwarmPhase::Holding(_) if all_flying => {
-                if over(self.first_consensus) {
+                if over(self.first_consensus.or(self.first_law)) {
                     self.end(now);
                     return;
                 }
@@ -169,8 +169,9 @@ impl Swarm {
                     }
                 }
             }
-            SwarmPhase::Consensus(_) | SwarmPhase::Holding(_) | SwarmPhase::Stopped(_)
-                if over(self.first_consensus) =>
+            SwarmPhase::Consensus(_) if over(self.first_consensus) => self.end(now),
+            SwarmPhase::Holding(_) | SwarmPhase::Stopped(_)
+                if over(self.first_consensus.or(self.first_law)) =>
             {
                 self.end(now)
             }
@@ -218,6 +219,7 @@ impl Swarm {
             guard.reset();
         }
         self.first_consensus.get_or_insert(now);
+        self.first_law.get_or_insert(now);
         let v0: Vec<Vector2<f64>> = self
             .states
             .iter()

@@ -70,6 +70,7 @@ impl Swarm {
         self.plan = Some(decision);
         if retargeting {
             self.phase = SwarmPhase::Retargeting(now);
+            self.first_law.get_or_insert(now);
         } else {
             self.start_consensus(now);
         }
