@@ -152,9 +152,10 @@ fn noise_drift_latency_and_battery_sag_still_fly_the_prediction() {
     let matched = matched();
     let noisy = fly(&load("hexagon-x500-noisy"));
     eprintln!("noisy {noisy:?}");
-    // Measured: velocity 1.2 %, formation 2.82 m, altitude 0.20 m.
-    assert!(noisy.velocity_error < 0.02, "{noisy:?}");
-    assert!(noisy.altitude_m < 0.3, "{noisy:?}");
+    // Measured: velocity 0.56 %, formation 2.72 m, altitude 0.18 m (a deterministic run:
+    // the emulator's noise is seeded).
+    assert!(noisy.velocity_error < 0.007, "{noisy:?}");
+    assert!(noisy.altitude_m < 0.2, "{noisy:?}");
     assert!(
         (noisy.formation_m - matched.formation_m).abs() < 0.5,
         "{noisy:?} vs {matched:?}"

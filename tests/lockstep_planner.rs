@@ -225,7 +225,8 @@ fn a_vehicle_lost_in_the_re_target_stage_holds_the_swarm_until_the_duration_is_o
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim2.toml");
     let text = std::fs::read_to_string(path).unwrap();
     let text = text.replace("duration_s = 60.0", "duration_s = 10.0");
-    let fault = "[[emulator.fault]]\nvehicle = 3\nfrom_s = 3.0\nuntil_s = 1000.0\nkind = \"no_position\"\n";
+    let fault =
+        "[[emulator.fault]]\nvehicle = 3\nfrom_s = 3.0\nuntil_s = 1000.0\nkind = \"no_position\"\n";
     let text = text.replacen("[[vehicle]]", &format!("{fault}\n[[vehicle]]"), 1);
     let mut run = Lockstep::from_config(&Config::from_toml(&text).unwrap()).unwrap();
     let (mut retarget, mut held, mut landing, mut consensus) = (None, None, None, None);
