@@ -49,6 +49,7 @@ pub mod link;
 pub mod plot;
 pub mod record;
 pub mod report;
+pub mod safety;
 pub mod security;
 pub mod sign_setup_cmd;
 #[cfg(feature = "emulator")]

@@ -1,0 +1,448 @@
+//! Keeping vehicles apart: a control-barrier-function safety filter between the law and
+//! the saturation (docs/math.md, "Keeping vehicles apart").
+//!
+//! Each tick, the pairs close enough to matter (a sweep, [`neighbours`]) each give one
+//! barrier row ([`barrier`]) on the two vehicles' horizontal commands. When the law's
+//! commands break none of them they pass untouched; otherwise the filter solves
+//!
+//! ```text
+//! minimise Σ wᵢ|uᵢ − ûᵢ|²  subject to  every barrier row,
+//!                                      each |uᵢ| inside an octagon inscribed in its disc,
+//!                                      Σ wᵢuᵢ = Σ wᵢûᵢ (in consensus)
+//! ```
+//!
+//! with clarabel. A pairwise row is `+a` on one vehicle and `−a` on the other, so without
+//! the octagons the optimum keeps `Σ wᵢuᵢ` by itself; the octagons (one vehicle's limit)
+//! can break that, and the explicit equality restores it while it is feasible. When it is
+//! not, the filter solves again without it (`sum_kept = false`); when that fails too, or
+//! the solver does not converge in time, every vehicle of the problem brakes at its share
+//! of the authority the barrier assumed (the fallback, counted and logged). The commands
+//! it writes are finite and inside the envelope: the saturation after it changes nothing.
+//!
+//! Pure and synchronous.
+
+pub mod barrier;
+pub mod neighbours;
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
+};
+use nalgebra::{Vector2, Vector3};
+
+pub use barrier::{PairRow, Separation, Side, pair_row};
+pub use neighbours::Sweep;
+
+/// How far ahead a pair is looked at (s): pairs that cannot meet within this time at
+/// the swarm's top speed are not considered.
+pub const LOOKAHEAD_S: f64 = 3.0;
+
+/// A barrier row counts as active when the command leaves less slack than this (m/s²).
+pub const ACTIVE_SLACK_MPS2: f64 = 1e-6;
+
+/// One vehicle as the filter sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Agent {
+    /// What is known of it (`None`: nothing usable; it takes no part).
+    pub side: Option<Side>,
+    /// Whether its horizontal command is the filter's to change (ours, in the air).
+    pub controlled: bool,
+    /// Its weight in the objective (the consensus weight `wᵢ`, or 1).
+    pub weight: f64,
+    /// The part of its command that does not accelerate it (m/s²): the drag fed forward
+    /// less the disturbance taken off. Net acceleration = command − drift.
+    pub drift_mps2: Vector2<f64>,
+    /// The radius of its envelope for the horizontal command (m/s²).
+    pub limit_mps2: f64,
+    /// Its share of a pair's braking authority (m/s²).
+    pub braking_mps2: f64,
+}
+
+/// What the filter did on one tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Outcome {
+    /// No barrier row was broken by the law's commands: nothing changed.
+    Untouched,
+    /// The commands were changed; `sum_kept` when `Σ wᵢuᵢ` was held as an equality.
+    Filtered {
+        /// Whether the weighted sum was kept.
+        sum_kept: bool,
+    },
+    /// No solution in time: the vehicles of the problem brake.
+    Fallback {
+        /// Why (`infeasible`, `not converged`, `solver setup`).
+        reason: &'static str,
+    },
+}
+
+/// One tick's report.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Report {
+    /// What was done.
+    pub outcome: Outcome,
+    /// Pairs with a barrier row.
+    pub rows: usize,
+    /// Rows the final commands meet with (almost) no slack.
+    pub active: usize,
+    /// The closest pair seen (indices and scaled distance, m).
+    pub closest: Option<(usize, usize, f64)>,
+}
+
+/// The filter's settings for one tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settings {
+    /// The separation enforced.
+    pub separation: Separation,
+    /// How old what is known of the vehicles may be when the command acts (s).
+    pub age_s: f64,
+    /// Hold `Σ wᵢuᵢ` as an equality (consensus).
+    pub keep_weighted_sum: bool,
+    /// The solver's time limit (s).
+    pub time_limit_s: f64,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Row {
+    i: usize,
+    j: usize,
+    row: PairRow,
+}
+
+/// The filter, with its buffers.
+#[derive(Debug, Clone, Default)]
+pub struct SafetyFilter {
+    sweep: Sweep,
+    positions: Vec<Option<Vector3<f64>>>,
+    rows: Vec<Row>,
+    var_of: Vec<Option<usize>>,
+    vars: Vec<usize>,
+}
+
+/// The eight unit directions of the octagon inscribed in each vehicle's disc.
+fn octagon() -> [Vector2<f64>; 8] {
+    std::array::from_fn(|m| {
+        let angle = std::f64::consts::FRAC_PI_4 * m as f64;
+        Vector2::new(angle.cos(), angle.sin())
+    })
+}
+
+/// `cos(π/8)`: the octagon's inner radius per unit of the disc's.
+const OCTAGON_INNER: f64 = 0.923_879_532_511_286_7;
+
+impl SafetyFilter {
+    /// Filters the horizontal commands `commands` (m/s², ENU; one per agent) in place.
+    /// Agents and commands have the same length (a shorter slice is filtered as far as
+    /// both go).
+    pub fn filter(
+        &mut self,
+        settings: &Settings,
+        agents: &[Agent],
+        commands: &mut [Vector2<f64>],
+    ) -> Report {
+        let n = agents.len().min(commands.len());
+        let sep = settings.separation;
+        self.positions.clear();
+        self.positions
+            .extend(agents[..n].iter().map(|a| a.side.map(|s| s.pos_m)));
+        let top_speed = agents[..n]
+            .iter()
+            .filter_map(|a| a.side.map(|s| sep.scaled(s.vel_mps).norm()))
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max);
+        let radius = sep.horizontal_m + 2.0 * top_speed * LOOKAHEAD_S + 1.0;
+        let pairs = self
+            .sweep
+            .pairs_within(&self.positions, sep.vertical_scale(), radius);
+        self.rows.clear();
+        let mut closest: Option<(usize, usize, f64)> = None;
+        let mut broken = false;
+        for &(i, j) in pairs {
+            let (a, b) = (&agents[i], &agents[j]);
+            let (Some(si), Some(sj)) = (a.side, b.side) else {
+                continue;
+            };
+            let d = sep.distance_m(si.pos_m, sj.pos_m);
+            if closest.is_none_or(|c| d < c.2) {
+                closest = Some((i, j, d));
+            }
+            if !(a.controlled || b.controlled) {
+                continue;
+            }
+            let authority = braking(a) + braking(b);
+            let Some(row) = pair_row(&sep, &si, &sj, authority, settings.age_s) else {
+                continue;
+            };
+            // A row no command inside the envelopes can reach never binds.
+            let reach = limit(a) + limit(b);
+            if !row.b.is_finite() || row.b <= -reach - 1.0 {
+                continue;
+            }
+            let net = |k: usize| {
+                if agents[k].controlled {
+                    commands[k] - agents[k].drift_mps2
+                } else {
+                    Vector2::zeros()
+                }
+            };
+            if row.a.dot(&(net(i) - net(j))) < row.b {
+                broken = true;
+            }
+            self.rows.push(Row { i, j, row });
+        }
+        if !broken {
+            return Report {
+                outcome: Outcome::Untouched,
+                rows: self.rows.len(),
+                active: 0,
+                closest,
+            };
+        }
+        self.index_variables(agents, n);
+        let outcome = match self.solve(settings, agents, commands, true) {
+            Ok(()) => Outcome::Filtered {
+                sum_kept: settings.keep_weighted_sum,
+            },
+            Err(_) if settings.keep_weighted_sum => {
+                match self.solve(settings, agents, commands, false) {
+                    Ok(()) => Outcome::Filtered { sum_kept: false },
+                    Err(reason) => {
+                        self.brake(agents, commands);
+                        Outcome::Fallback { reason }
+                    }
+                }
+            }
+            Err(reason) => {
+                self.brake(agents, commands);
+                Outcome::Fallback { reason }
+            }
+        };
+        let active = self
+            .rows
+            .iter()
+            .filter(|r| {
+                let net = |k: usize| {
+                    if agents[k].controlled {
+                        commands[k] - agents[k].drift_mps2
+                    } else {
+                        Vector2::zeros()
+                    }
+                };
+                r.row.a.dot(&(net(r.i) - net(r.j))) - r.row.b < ACTIVE_SLACK_MPS2
+            })
+            .count();
+        Report {
+            outcome,
+            rows: self.rows.len(),
+            active,
+            closest,
+        }
+    }
+
+    /// The controlled agents of the rows, each given a variable index.
+    fn index_variables(&mut self, agents: &[Agent], n: usize) {
+        self.var_of.clear();
+        self.var_of.resize(n, None);
+        self.vars.clear();
+        for r in &self.rows {
+            for k in [r.i, r.j] {
+                if agents[k].controlled && self.var_of[k].is_none() {
+                    self.var_of[k] = Some(self.vars.len());
+                    self.vars.push(k);
+                }
+            }
+        }
+    }
+
+    /// One QP over the variables; writes the commands when solved.
+    fn solve(
+        &self,
+        settings: &Settings,
+        agents: &[Agent],
+        commands: &mut [Vector2<f64>],
+        with_sum: bool,
+    ) -> Result<(), &'static str> {
+        let nv = 2 * self.vars.len();
+        let weight = |k: usize| agents[k].weight.max(1e-9);
+        // Objective ½xᵀPx + qᵀx with P = 2W, q = −2Wû.
+        let mut p_diag = Vec::with_capacity(nv);
+        let mut q = Vec::with_capacity(nv);
+        for &k in &self.vars {
+            for component in commands[k].iter() {
+                p_diag.push(2.0 * weight(k));
+                q.push(-2.0 * weight(k) * component);
+            }
+        }
+        // Constraint rows as (row, column, value) and b, zero cone first.
+        let mut entries: Vec<(usize, usize, f64)> = Vec::new();
+        let mut b = Vec::new();
+        let mut zero_rows = 0;
+        if with_sum && settings.keep_weighted_sum {
+            for axis in [0, 1] {
+                let mut total = 0.0;
+                for (v, &k) in self.vars.iter().enumerate() {
+                    entries.push((b.len(), 2 * v + axis, weight(k)));
+                    total += weight(k) * commands[k][axis];
+                }
+                b.push(total);
+                zero_rows += 1;
+            }
+        }
+        for r in &self.rows {
+            // a·(netᵢ − netⱼ) ≥ b  ⇔  −a·xᵢ + a·xⱼ + s = −b − a·cᵢ + a·cⱼ, s ≥ 0.
+            let mut rhs = -r.row.b;
+            for (k, sign) in [(r.i, -1.0), (r.j, 1.0)] {
+                if let Some(v) = self.var_of[k] {
+                    for axis in 0..2 {
+                        entries.push((b.len(), 2 * v + axis, sign * r.row.a[axis]));
+                    }
+                    rhs += sign * r.row.a.dot(&agents[k].drift_mps2);
+                }
+            }
+            b.push(rhs);
+        }
+        for (v, &k) in self.vars.iter().enumerate() {
+            let inner = limit(&agents[k]) * OCTAGON_INNER;
+            for d in octagon() {
+                entries.push((b.len(), 2 * v, d.x));
+                entries.push((b.len(), 2 * v + 1, d.y));
+                b.push(inner);
+            }
+        }
+        let m = b.len();
+        let a = csc(m, nv, &mut entries);
+        let p = csc(
+            nv,
+            nv,
+            &mut p_diag
+                .iter()
+                .enumerate()
+                .map(|(c, &x)| (c, c, x))
+                .collect::<Vec<_>>(),
+        );
+        let mut cones = Vec::with_capacity(2);
+        if zero_rows > 0 {
+            cones.push(SupportedConeT::ZeroConeT(zero_rows));
+        }
+        cones.push(SupportedConeT::NonnegativeConeT(m - zero_rows));
+        let time_limit = if settings.time_limit_s.is_finite() && settings.time_limit_s > 0.0 {
+            settings.time_limit_s
+        } else {
+            f64::INFINITY
+        };
+        let solver_settings = DefaultSettingsBuilder::default()
+            .verbose(false)
+            .max_iter(100)
+            .time_limit(time_limit)
+            .build()
+            .map_err(|_| "solver setup")?;
+        let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, solver_settings)
+            .map_err(|_| "solver setup")?;
+        solver.solve();
+        match solver.solution.status {
+            SolverStatus::Solved | SolverStatus::AlmostSolved => {}
+            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
+                return Err("infeasible");
+            }
+            _ => return Err("not converged"),
+        }
+        let x = &solver.solution.x;
+        if x.len() != nv || x.iter().any(|v| !v.is_finite()) {
+            return Err("not converged");
+        }
+        // The rows must hold as the solver claims (its tolerance, scaled).
+        let tolerance = 1e-6 * (1.0 + b.iter().fold(0.0f64, |acc, v| acc.max(v.abs())));
+        let value = |k: usize| match self.var_of[k] {
+            Some(v) => Vector2::new(x[2 * v], x[2 * v + 1]) - agents[k].drift_mps2,
+            None => Vector2::zeros(),
+        };
+        if self
+            .rows
+            .iter()
+            .any(|r| r.row.a.dot(&(value(r.i) - value(r.j))) < r.row.b - tolerance)
+        {
+            return Err("infeasible");
+        }
+        for (v, &k) in self.vars.iter().enumerate() {
+            commands[k] = Vector2::new(x[2 * v], x[2 * v + 1]);
+        }
+        if with_sum && settings.keep_weighted_sum {
+            // The solver meets the equality to its tolerance (1e-8); the least weighted
+            // change that meets it exactly is uₖ −= δ/Σw (δ the sum's error per axis).
+            let total_w: f64 = self.vars.iter().map(|&k| weight(k)).sum();
+            for axis in 0..2 {
+                let got: f64 = self
+                    .vars
+                    .iter()
+                    .map(|&k| weight(k) * commands[k][axis])
+                    .sum();
+                let delta = (got - b[axis]) / total_w;
+                for &k in &self.vars {
+                    commands[k][axis] -= delta;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The fallback: every vehicle of the problem brakes at its share of the authority
+    /// (along its velocity; one at rest holds still), inside its octagon.
+    fn brake(&self, agents: &[Agent], commands: &mut [Vector2<f64>]) {
+        for &k in &self.vars {
+            let a = &agents[k];
+            let v = a.side.map_or(Vector2::zeros(), |s| s.vel_mps.xy());
+            let speed = v.norm();
+            let net = if speed > 1e-6 {
+                // Stop in no less than 0.5 s: no overshoot of zero speed in one tick.
+                -v / speed * braking(a).min(speed / 0.5)
+            } else {
+                Vector2::zeros()
+            };
+            let mut command = net + a.drift_mps2;
+            let cap = limit(a) * OCTAGON_INNER;
+            if command.norm() > cap {
+                command *= cap / command.norm();
+            }
+            commands[k] = if command.iter().all(|x| x.is_finite()) {
+                command
+            } else {
+                Vector2::zeros()
+            };
+        }
+    }
+}
+
+fn braking(a: &Agent) -> f64 {
+    if a.controlled && a.braking_mps2.is_finite() {
+        a.braking_mps2.max(0.0)
+    } else {
+        0.0
+    }
+}
+
+fn limit(a: &Agent) -> f64 {
+    if a.controlled && a.limit_mps2.is_finite() {
+        a.limit_mps2.max(0.0)
+    } else {
+        0.0
+    }
+}
+
+/// A compressed-column matrix from (row, column, value) entries (sorted here).
+fn csc(m: usize, n: usize, entries: &mut [(usize, usize, f64)]) -> CscMatrix<f64> {
+    entries.sort_by_key(|e| (e.1, e.0));
+    let mut colptr = vec![0usize; n + 1];
+    let mut rowval = Vec::with_capacity(entries.len());
+    let mut nzval = Vec::with_capacity(entries.len());
+    for &(r, c, v) in entries.iter() {
+        colptr[c + 1] += 1;
+        rowval.push(r);
+        nzval.push(v);
+    }
+    for c in 0..n {
+        colptr[c + 1] += colptr[c];
+    }
+    CscMatrix::new(m, n, colptr, rowval, nzval)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,197 @@
+use super::*;
+
+fn sep() -> Separation {
+    Separation {
+        horizontal_m: 3.0,
+        vertical_m: 9.0,
+        gamma: 1.0,
+    }
+}
+
+fn settings(keep: bool) -> Settings {
+    Settings {
+        separation: sep(),
+        age_s: 0.04,
+        keep_weighted_sum: keep,
+        time_limit_s: f64::INFINITY,
+    }
+}
+
+fn agent(p: [f64; 3], v: [f64; 3], weight: f64) -> Agent {
+    Agent {
+        side: Some(Side {
+            pos_m: Vector3::from(p),
+            vel_mps: Vector3::from(v),
+            accel_z_mps2: 0.0,
+        }),
+        controlled: true,
+        weight,
+        drift_mps2: Vector2::zeros(),
+        limit_mps2: 6.0,
+        braking_mps2: 2.0,
+    }
+}
+
+/// Every barrier row of the agents, recomputed from scratch, and whether the commands
+/// meet it.
+fn rows_hold(s: &Settings, agents: &[Agent], commands: &[Vector2<f64>], tolerance: f64) -> bool {
+    let net = |k: usize| {
+        if agents[k].controlled {
+            commands[k] - agents[k].drift_mps2
+        } else {
+            Vector2::zeros()
+        }
+    };
+    for i in 0..agents.len() {
+        for j in i + 1..agents.len() {
+            let (a, b) = (&agents[i], &agents[j]);
+            if !(a.controlled || b.controlled) {
+                continue;
+            }
+            let authority = braking(a) + braking(b);
+            let (Some(si), Some(sj)) = (a.side, b.side) else {
+                continue;
+            };
+            let Some(row) = pair_row(&s.separation, &si, &sj, authority, s.age_s) else {
+                continue;
+            };
+            if row.b <= -(limit(a) + limit(b)) - 1.0 {
+                continue;
+            }
+            if row.a.dot(&(net(i) - net(j))) < row.b - tolerance {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+#[test]
+fn two_vehicles_head_on_are_slowed_and_the_weighted_sum_is_kept() {
+    // 6 m apart, closing at 4 m/s, each commanded on towards the other.
+    let agents = [
+        agent([0.0, 0.0, 10.0], [2.0, 0.0, 0.0], 1.0),
+        agent([6.0, 0.2, 10.0], [-2.0, 0.0, 0.0], 3.0),
+    ];
+    let before = [Vector2::new(1.0, 0.0), Vector2::new(-1.0, 0.0)];
+    let mut commands = before;
+    let mut filter = SafetyFilter::default();
+    let report = filter.filter(&settings(true), &agents, &mut commands);
+    assert_eq!(report.outcome, Outcome::Filtered { sum_kept: true });
+    assert_eq!(report.rows, 1);
+    assert_eq!(report.active, 1);
+    assert!(rows_hold(&settings(true), &agents, &commands, 1e-9));
+    // Optimality with one row: wᵢΔuᵢ = −wⱼΔuⱼ, both along the row's a.
+    let (d0, d1) = (commands[0] - before[0], commands[1] - before[1]);
+    assert!((d0 * 1.0 + d1 * 3.0).norm() < 1e-9, "{d0} {d1}");
+    assert!(d0.x < 0.0 && d1.x > 0.0, "pushed apart: {d0} {d1}");
+    let closest = report.closest.expect("a pair");
+    assert_eq!((closest.0, closest.1), (0, 1));
+    assert!((closest.2 - (36.0f64 + 0.04).sqrt()).abs() < 1e-12);
+}
+
+#[test]
+fn vehicles_far_apart_are_untouched() {
+    let agents = [
+        agent([0.0, 0.0, 10.0], [1.0, 0.0, 0.0], 1.0),
+        agent([100.0, 0.0, 10.0], [1.0, 0.0, 0.0], 1.0),
+    ];
+    let mut commands = [Vector2::new(1.0, 2.0), Vector2::new(-3.0, 0.5)];
+    let before = commands;
+    let report = SafetyFilter::default().filter(&settings(true), &agents, &mut commands);
+    assert_eq!(report.outcome, Outcome::Untouched);
+    assert_eq!(commands, before);
+}
+
+#[test]
+fn a_pair_too_fast_to_stop_falls_back_to_braking_with_finite_commands() {
+    // 10 m apart, closing at 20 m/s, with 0.5 m/s² of authority: h ≈ −17.5 m/s asks for
+    // thousands of m/s², which no command within the envelopes gives.
+    let mut agents = [
+        agent([0.0, 0.0, 10.0], [10.0, 0.0, 0.0], 1.0),
+        agent([10.0, 0.0, 10.0], [-10.0, 0.0, 0.0], 1.0),
+    ];
+    for a in &mut agents {
+        a.limit_mps2 = 0.5;
+        a.braking_mps2 = 0.25;
+    }
+    let mut commands = [Vector2::new(0.3, 0.0), Vector2::new(-0.3, 0.0)];
+    let report = SafetyFilter::default().filter(&settings(true), &agents, &mut commands);
+    assert!(
+        matches!(report.outcome, Outcome::Fallback { .. }),
+        "{report:?}"
+    );
+    // Each brakes against its own velocity at its share, inside its envelope.
+    assert!(
+        (commands[0] - Vector2::new(-0.25, 0.0)).norm() < 1e-12,
+        "{commands:?}"
+    );
+    assert!(
+        (commands[1] - Vector2::new(0.25, 0.0)).norm() < 1e-12,
+        "{commands:?}"
+    );
+}
+
+#[test]
+fn random_swarms_meet_every_row_keep_the_sum_and_stay_finite() {
+    let mut x: u64 = 2024;
+    let mut next = || {
+        x = x
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (x >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut filtered, mut kept, mut fallbacks) = (0, 0, 0);
+    let mut filter = SafetyFilter::default();
+    for case in 0..300 {
+        let n = 2 + case % 11;
+        let mut agents: Vec<Agent> = (0..n)
+            .map(|_| {
+                let mut a = agent(
+                    [25.0 * next(), 25.0 * next(), 10.0 + 4.0 * next()],
+                    [8.0 * next() - 4.0, 8.0 * next() - 4.0, 0.0],
+                    1.0 + 3.0 * next(),
+                );
+                a.drift_mps2 = Vector2::new(next() - 0.5, next() - 0.5);
+                a.limit_mps2 = 4.0 + 4.0 * next();
+                a.braking_mps2 = 0.25 * a.limit_mps2;
+                a
+            })
+            .collect();
+        if case % 7 == 0 {
+            agents[0].controlled = false;
+        }
+        let before: Vec<Vector2<f64>> = (0..n)
+            .map(|_| Vector2::new(6.0 * next() - 3.0, 6.0 * next() - 3.0))
+            .collect();
+        let mut commands = before.clone();
+        let keep = case % 3 != 0;
+        let s = settings(keep);
+        let report = filter.filter(&s, &agents, &mut commands);
+        assert!(commands.iter().all(|c| c.iter().all(|v| v.is_finite())));
+        match report.outcome {
+            Outcome::Untouched => assert_eq!(commands, before),
+            Outcome::Filtered { sum_kept } => {
+                filtered += 1;
+                assert!(rows_hold(&s, &agents, &commands, 1e-5), "case {case}");
+                for (k, c) in commands.iter().enumerate() {
+                    if agents[k].controlled {
+                        assert!(c.norm() <= agents[k].limit_mps2 + 1e-9, "case {case}");
+                    } else {
+                        assert_eq!(*c, before[k]);
+                    }
+                }
+                if sum_kept {
+                    kept += 1;
+                    let delta: Vector2<f64> = (0..n)
+                        .map(|k| agents[k].weight * (commands[k] - before[k]))
+                        .sum();
+                    assert!(delta.norm() < 1e-9, "case {case}: {delta}");
+                }
+            }
+            Outcome::Fallback { .. } => fallbacks += 1,
+        }
+    }
+    eprintln!("filtered {filtered}, sum kept {kept}, fallbacks {fallbacks}");
+    assert!(filtered > 100 && kept > 50, "{filtered} {kept}");
+}
