@@ -59,6 +59,39 @@ pub struct Config {
     /// The divergence guard.
     #[serde(default)]
     pub guard: GuardSection,
+    /// The separation the safety filter enforces.
+    #[serde(default)]
+    pub safety: SafetySection,
+}
+
+/// `[safety]`: no command brings two vehicles closer than a downwash ellipsoid of
+/// `horizontal_m` by `vertical_m` (centre to centre), by a control-barrier-function
+/// filter between the law and the saturation (docs/math.md, "Keeping vehicles apart").
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SafetySection {
+    /// Whether the filter acts (default true).
+    pub enabled: bool,
+    /// Horizontal separation, centre to centre (m, default 3: Skybrush's outdoor
+    /// proximity limit; at least 2 m for the x500 class).
+    pub horizontal_m: f64,
+    /// Vertical separation (m, default 9: three times the horizontal, the ratio of the
+    /// Crazyflie's downwash ellipsoid).
+    pub vertical_m: f64,
+    /// The share of each vehicle's horizontal envelope the barrier counts on for braking
+    /// (default 0.5: the rest stays for the law and the disturbances).
+    pub braking_share: f64,
+}
+
+impl Default for SafetySection {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            horizontal_m: 3.0,
+            vertical_m: 9.0,
+            braking_share: 0.5,
+        }
+    }
 }
 
 /// `[guard]`: the divergence guard ends the consensus (the swarm applies

@@ -188,6 +188,7 @@ impl Config {
         let target = self.target(&mut p);
         let models = self.models(envelope.as_ref(), &mut p);
         let guard = self.guard(&mut p);
+        let safety = self.safety(offsets.as_deref(), &mut p);
         self.transport(&mut p);
         if !p.0.is_empty() {
             return Err(p.0.join("\n"));
@@ -247,6 +248,50 @@ impl Config {
             loss_policy: s.on_link_loss,
             target,
             guard,
+            safety,
+        })
+    }
+
+    /// `[safety]`: every key checked by name, and no two formation places closer than the
+    /// horizontal separation; `None` when the filter is off.
+    fn safety(
+        &self,
+        offsets: Option<&[nalgebra::Vector2<f64>]>,
+        p: &mut Problems,
+    ) -> Option<crate::swarm::SafetySetup> {
+        let s = &self.safety;
+        let mut ok = p.within("safety.horizontal_m", s.horizontal_m, 0.5, 100.0, " m");
+        ok &= p.within(
+            "safety.vertical_m",
+            s.vertical_m,
+            s.horizontal_m.max(0.5),
+            300.0,
+            " m (at least safety.horizontal_m)",
+        );
+        ok &= p.positive("safety.braking_share", s.braking_share, 1.0, "");
+        if !(ok && s.enabled) {
+            return None;
+        }
+        if let Some(offsets) = offsets {
+            for i in 0..offsets.len() {
+                for j in i + 1..offsets.len() {
+                    let d = (offsets[i] - offsets[j]).norm();
+                    if d < s.horizontal_m {
+                        p.push(format!(
+                            "formation.offsets_m[{i}] and formation.offsets_m[{j}] are {d:.3} m apart, closer than safety.horizontal_m = {} m: no formation can hold them",
+                            s.horizontal_m
+                        ));
+                    }
+                }
+            }
+        }
+        Some(crate::swarm::SafetySetup {
+            separation: crate::safety::Separation {
+                horizontal_m: s.horizontal_m,
+                vertical_m: s.vertical_m,
+                gamma: crate::swarm::SAFETY_GAMMA,
+            },
+            braking_share: s.braking_share,
         })
     }
 

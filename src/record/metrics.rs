@@ -207,6 +207,8 @@ pub struct Summary {
     pub warnings: usize,
     /// The control loop's punctuality (in lockstep every tick is on time).
     pub timing: TimingReport,
+    /// What the safety filter enforced and did (`null` when `[safety]` is off).
+    pub safety: Option<SafetyReport>,
     /// What each traffic mirror (`--mirror`) carried; absent without one.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub mirrors: Vec<MirrorReport>,
@@ -243,8 +245,50 @@ impl Summary {
             models: ModelReport::of(swarm),
             warnings: swarm.events().iter().filter(|e| e.warning).count(),
             timing: swarm.timing(),
+            safety: SafetyReport::of(swarm),
             mirrors: Vec::new(),
         }
+    }
+}
+
+/// What the safety filter enforced and did (`summary.json`'s `safety`).
+#[derive(Debug, Clone, Serialize)]
+pub struct SafetyReport {
+    /// The horizontal separation enforced, centre to centre (m).
+    pub min_separation_m: f64,
+    /// The vertical separation enforced (m).
+    pub vertical_separation_m: f64,
+    /// The smallest ellipsoidal distance between two vehicles seen on a control tick
+    /// (m, horizontal metres; `null` while never two had a usable state).
+    pub min_separation_seen_m: Option<f64>,
+    /// The fraction of control ticks with at least one active barrier constraint.
+    pub active_fraction: f64,
+    /// Control ticks on which the filter changed a command.
+    pub filtered_ticks: u64,
+    /// Consensus ticks on which `Σ wᵢuᵢ` could not be kept with the envelopes.
+    pub sum_released_ticks: u64,
+    /// Control ticks on which the filter fell back to braking.
+    pub fallbacks: u64,
+}
+
+impl SafetyReport {
+    /// The report of a swarm whose filter is on.
+    pub fn of(swarm: &Swarm) -> Option<Self> {
+        let sep = swarm.safety_enforced()?;
+        let s = swarm.safety_stats();
+        Some(Self {
+            min_separation_m: sep.horizontal_m,
+            vertical_separation_m: sep.vertical_m,
+            min_separation_seen_m: Some(s.min_seen_m).filter(|m| m.is_finite()),
+            active_fraction: if s.ticks > 0 {
+                s.active_ticks as f64 / s.ticks as f64
+            } else {
+                0.0
+            },
+            filtered_ticks: s.filtered_ticks,
+            sum_released_ticks: s.sum_released_ticks,
+            fallbacks: s.fallbacks,
+        })
     }
 }
 

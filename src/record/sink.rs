@@ -199,14 +199,17 @@ mod tests {
     fn a_write_error_is_reported_by_a_later_hand_over() {
         // /dev/full takes every open and fails every write with "no space".
         let mut sinks = Sinks::create(vec![("/dev/full".into(), 4, None)]).unwrap();
+        // The writer thread fails on its own time: wait for it generously (10 s), not
+        // for a number of yields a loaded machine may use up first.
         let mut failed = None;
-        for _ in 0..10_000 {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while std::time::Instant::now() < deadline {
             sinks.buffer(0).extend_from_slice(b"12345678");
             if let Err(err) = sinks.appended(0) {
                 failed = Some(err);
                 break;
             }
-            std::thread::yield_now();
+            std::thread::sleep(std::time::Duration::from_millis(1));
         }
         let err = failed.expect("the writer's error came back");
         assert_eq!(err.kind(), io::ErrorKind::StorageFull, "{err}");

@@ -7,13 +7,14 @@
 //!
 //! ```text
 //! minimise Σ wᵢ|uᵢ − ûᵢ|²  subject to  every barrier row,
-//!                                      each |uᵢ| inside an octagon inscribed in its disc,
+//!                                      each |uᵢ| within its envelope's disc,
 //!                                      Σ wᵢuᵢ = Σ wᵢûᵢ (in consensus)
 //! ```
 //!
-//! with clarabel. A pairwise row is `+a` on one vehicle and `−a` on the other, so without
-//! the octagons the optimum keeps `Σ wᵢuᵢ` by itself; the octagons (one vehicle's limit)
-//! can break that, and the explicit equality restores it while it is feasible. When it is
+//! with clarabel (the discs as second-order cones). It runs on the saturated commands, so
+//! `û` is inside the discs. A pairwise row is `+a` on one vehicle and `−a` on the other,
+//! so without the discs the optimum keeps `Σ wᵢuᵢ` by itself; the discs (one vehicle's
+//! limit) can break that, and the explicit equality restores it while it is feasible. When it is
 //! not, the filter solves again without it (`sum_kept = false`); when that fails too, or
 //! the solver does not converge in time, every vehicle of the problem brakes at its share
 //! of the authority the barrier assumed (the fallback, counted and logged). The commands
@@ -117,17 +118,6 @@ pub struct SafetyFilter {
     var_of: Vec<Option<usize>>,
     vars: Vec<usize>,
 }
-
-/// The eight unit directions of the octagon inscribed in each vehicle's disc.
-fn octagon() -> [Vector2<f64>; 8] {
-    std::array::from_fn(|m| {
-        let angle = std::f64::consts::FRAC_PI_4 * m as f64;
-        Vector2::new(angle.cos(), angle.sin())
-    })
-}
-
-/// `cos(π/8)`: the octagon's inner radius per unit of the disc's.
-const OCTAGON_INNER: f64 = 0.923_879_532_511_286_7;
 
 impl SafetyFilter {
     /// Filters the horizontal commands `commands` (m/s², ENU; one per agent) in place.
@@ -238,6 +228,15 @@ impl SafetyFilter {
         }
     }
 
+    /// The pairs of the last call closer than `distance_m` (scaled), with their distance:
+    /// every pair with a vehicle the filter commands that was near enough for a row.
+    pub fn close_pairs(&self, distance_m: f64) -> impl Iterator<Item = (usize, usize, f64)> + '_ {
+        self.rows
+            .iter()
+            .filter(move |r| r.row.distance_m < distance_m)
+            .map(|r| (r.i, r.j, r.row.distance_m))
+    }
+
     /// The controlled agents of the rows, each given a variable index.
     fn index_variables(&mut self, agents: &[Agent], n: usize) {
         self.var_of.clear();
@@ -300,13 +299,14 @@ impl SafetyFilter {
             }
             b.push(rhs);
         }
+        let nonnegative = b.len() - zero_rows;
+        // Each command inside its disc: s = (L, x, y) in the second-order cone.
         for (v, &k) in self.vars.iter().enumerate() {
-            let inner = limit(&agents[k]) * OCTAGON_INNER;
-            for d in octagon() {
-                entries.push((b.len(), 2 * v, d.x));
-                entries.push((b.len(), 2 * v + 1, d.y));
-                b.push(inner);
-            }
+            b.push(limit(&agents[k]));
+            entries.push((b.len(), 2 * v, -1.0));
+            b.push(0.0);
+            entries.push((b.len(), 2 * v + 1, -1.0));
+            b.push(0.0);
         }
         let m = b.len();
         let a = csc(m, nv, &mut entries);
@@ -319,11 +319,18 @@ impl SafetyFilter {
                 .map(|(c, &x)| (c, c, x))
                 .collect::<Vec<_>>(),
         );
-        let mut cones = Vec::with_capacity(2);
+        let mut cones = Vec::with_capacity(2 + self.vars.len());
         if zero_rows > 0 {
             cones.push(SupportedConeT::ZeroConeT(zero_rows));
         }
-        cones.push(SupportedConeT::NonnegativeConeT(m - zero_rows));
+        if nonnegative > 0 {
+            cones.push(SupportedConeT::NonnegativeConeT(nonnegative));
+        }
+        cones.extend(
+            self.vars
+                .iter()
+                .map(|_| SupportedConeT::SecondOrderConeT(3)),
+        );
         let time_limit = if settings.time_limit_s.is_finite() && settings.time_limit_s > 0.0 {
             settings.time_limit_s
         } else {
@@ -384,21 +391,38 @@ impl SafetyFilter {
         Ok(())
     }
 
-    /// The fallback: every vehicle of the problem brakes at its share of the authority
-    /// (along its velocity; one at rest holds still), inside its octagon.
+    /// The fallback, the manoeuvre the barrier counts on: every vehicle of the problem
+    /// accelerates at its share of the authority away from the vehicles of its rows (the
+    /// sum of their directions), or, where those cancel, brakes along its velocity; inside
+    /// its disc.
     fn brake(&self, agents: &[Agent], commands: &mut [Vector2<f64>]) {
         for &k in &self.vars {
             let a = &agents[k];
+            let away: Vector2<f64> = self
+                .rows
+                .iter()
+                .map(|r| {
+                    if r.i == k {
+                        r.row.a
+                    } else if r.j == k {
+                        -r.row.a
+                    } else {
+                        Vector2::zeros()
+                    }
+                })
+                .sum();
             let v = a.side.map_or(Vector2::zeros(), |s| s.vel_mps.xy());
             let speed = v.norm();
-            let net = if speed > 1e-6 {
+            let net = if away.norm() > 1e-6 {
+                away / away.norm() * braking(a)
+            } else if speed > 1e-6 {
                 // Stop in no less than 0.5 s: no overshoot of zero speed in one tick.
                 -v / speed * braking(a).min(speed / 0.5)
             } else {
                 Vector2::zeros()
             };
             let mut command = net + a.drift_mps2;
-            let cap = limit(a) * OCTAGON_INNER;
+            let cap = limit(a);
             if command.norm() > cap {
                 command *= cap / command.norm();
             }

@@ -121,7 +121,7 @@ fn a_pair_too_fast_to_stop_falls_back_to_braking_with_finite_commands() {
         matches!(report.outcome, Outcome::Fallback { .. }),
         "{report:?}"
     );
-    // Each brakes against its own velocity at its share, inside its envelope.
+    // Each accelerates away from the other at its share, inside its envelope.
     assert!(
         (commands[0] - Vector2::new(-0.25, 0.0)).norm() < 1e-12,
         "{commands:?}"

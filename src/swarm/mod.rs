@@ -41,6 +41,7 @@ mod laws;
 mod model;
 mod phases;
 mod plan;
+mod safety;
 mod setup;
 mod tick;
 pub mod timing;
@@ -61,8 +62,10 @@ use events::EventLog;
 pub use events::{MAX_KEPT_EVENTS, SwarmEvent};
 pub use guard::{DivergenceGuard, GuardLimits, GuardTrip};
 use model::FlownModel;
+pub use safety::SafetyStats;
 pub use setup::{
-    EndAction, LossPolicy, PlanDecision, Retargeted, SetpointKind, SwarmSetup, TargetVelocity,
+    EndAction, LossPolicy, PlanDecision, Retargeted, SAFETY_GAMMA, SafetySetup, SetpointKind,
+    SwarmSetup, TargetVelocity,
 };
 
 /// Where the swarm is.
@@ -188,6 +191,12 @@ pub struct Swarm {
     law_commands: Vec<Vector3<f64>>,
     setpoints: Vec<AttitudeThrust>,
     states: Vec<Option<CommonState>>,
+    /// The safety filter, its inputs' buffers, what it did, and the closest pair.
+    safety_filter: crate::safety::SafetyFilter,
+    safety_agents: Vec<crate::safety::Agent>,
+    safety_xy: Vec<Vector2<f64>>,
+    safety_stats: SafetyStats,
+    closest_pair: Option<(usize, usize, f64)>,
     /// Each link's origin with its NED offset (m) from the common reference, projected
     /// once when the origin is learnt (not at every use: the projection costs trigonometry).
     origin_offsets: Vec<Option<(Geodetic, Vector3<f64>)>>,
@@ -302,6 +311,11 @@ impl Swarm {
             law_commands: vec![Vector3::zeros(); n],
             setpoints,
             states: vec![None; n],
+            safety_filter: crate::safety::SafetyFilter::default(),
+            safety_agents: Vec::with_capacity(n),
+            safety_xy: Vec::with_capacity(n),
+            safety_stats: SafetyStats::new(),
+            closest_pair: None,
             origin_offsets: vec![None; n],
             saturated_ticks: 0,
             consensus_ticks: 0,

@@ -64,7 +64,22 @@ pub struct SwarmSetup {
     pub target: Option<TargetVelocity>,
     /// The divergence guard's bounds (`None`: off).
     pub guard: Option<super::GuardLimits>,
+    /// The safety filter's separation (`None`: off).
+    pub safety: Option<SafetySetup>,
 }
+
+/// What the safety filter enforces.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SafetySetup {
+    /// The downwash ellipsoid and the barrier's gain.
+    pub separation: crate::safety::Separation,
+    /// The share of each vehicle's horizontal envelope counted on for braking.
+    pub braking_share: f64,
+}
+
+/// The barrier's class-K gain `γ` in `ḣ ≥ −γh³` (s/m²): a pair 1 m/s from its braking
+/// curve may close on it at 1 m/s².
+pub const SAFETY_GAMMA: f64 = 1.0;
 
 /// The planner's job: reach `velocity_mps` by choosing `k` and, if needed, re-targeting
 /// one agent (the paper's plan) or several (the least change of every velocity) before

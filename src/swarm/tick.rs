@@ -77,6 +77,9 @@ impl Swarm {
             self.saturated_ticks +=
                 u64::from(summary.horizontal_limited + summary.vertical_limited > 0);
         }
+        // On the saturated commands, inside the same envelope: the saturation after it
+        // would change nothing.
+        self.filter_for_safety(now);
         self.isolate_non_finite(now, "the saturated command");
         self.integrate_altitude();
         for (i, link) in self.links.iter_mut().enumerate() {

@@ -1,0 +1,167 @@
+//! The safety filter in the control tick: each vehicle's state and envelope handed to
+//! [`crate::safety::SafetyFilter`] between the law and the saturation, and what it did
+//! counted for `summary.json` and logged.
+
+use ringswarm_wire::time::SimTime;
+
+use super::{Swarm, SwarmPhase};
+use crate::safety::{Agent, Outcome, Settings, Side};
+
+/// What the filter did over a flight.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SafetyStats {
+    /// Ticks the filter ran on.
+    pub ticks: u64,
+    /// Ticks with at least one active barrier row.
+    pub active_ticks: u64,
+    /// Ticks it changed a command.
+    pub filtered_ticks: u64,
+    /// Ticks on which the weighted sum could not be kept (the filter solved without it).
+    pub sum_released_ticks: u64,
+    /// Ticks on which it fell back to braking.
+    pub fallbacks: u64,
+    /// The smallest ellipsoidal distance between two vehicles with a usable state, seen
+    /// on a control tick (m; infinite while never two).
+    pub min_seen_m: f64,
+    /// Pairs within the separation now (to log each entry once).
+    inside: Vec<(usize, usize)>,
+}
+
+impl SafetyStats {
+    /// Empty statistics.
+    pub fn new() -> Self {
+        Self {
+            min_seen_m: f64::INFINITY,
+            ..Self::default()
+        }
+    }
+}
+
+impl Swarm {
+    /// Filters the horizontal commands of the vehicles flown on our commands, in place,
+    /// when `[safety]` is on.
+    pub(super) fn filter_for_safety(&mut self, now: SimTime) {
+        let Some(setup) = self.setup.safety else {
+            return;
+        };
+        let consensus = matches!(self.phase, SwarmPhase::Consensus(_));
+        let period_s = self.setup.control_interval.as_secs_f64();
+        let mut age_s: f64 = 0.0;
+        self.safety_agents.clear();
+        self.safety_xy.clear();
+        for i in 0..self.links.len() {
+            let controlled = self.states[i].is_some() && self.ours_in_air(i);
+            let model = &self.flown_models[i];
+            let envelope = &self.setup.envelope;
+            let u_z = envelope.limit_vertical(self.commands[i].z, model);
+            let limit = envelope.horizontal_limit_mps2(u_z, model);
+            if controlled && let Some(at) = self.links[i].state().last_position {
+                age_s = age_s.max((now - at).as_secs_f64());
+            }
+            self.safety_agents.push(Agent {
+                side: self.states[i].map(|s| Side {
+                    pos_m: s.pos_enu_m,
+                    vel_mps: s.vel_enu_mps,
+                    accel_z_mps2: if controlled { self.u_z[i] } else { 0.0 },
+                }),
+                controlled,
+                weight: if consensus { self.w[i] } else { 1.0 },
+                // What the command holds besides the law's acceleration (the drag fed
+                // forward less the disturbance taken off), from before the saturation.
+                drift_mps2: self.law_commands[i].xy() - self.accel[i],
+                limit_mps2: limit,
+                braking_mps2: setup.braking_share * limit,
+            });
+            self.safety_xy.push(self.commands[i].xy());
+        }
+        let settings = Settings {
+            separation: setup.separation,
+            // What is known is this old, and the command acts for a period.
+            age_s: age_s + period_s,
+            keep_weighted_sum: consensus,
+            time_limit_s: 0.5 * period_s,
+        };
+        let report = self
+            .safety_filter
+            .filter(&settings, &self.safety_agents, &mut self.safety_xy);
+        let stats = &mut self.safety_stats;
+        stats.ticks += 1;
+        stats.active_ticks += u64::from(report.active > 0);
+        if let Some((_, _, d)) = report.closest {
+            stats.min_seen_m = stats.min_seen_m.min(d);
+        }
+        self.closest_pair = report.closest;
+        match report.outcome {
+            Outcome::Untouched => {}
+            Outcome::Filtered { sum_kept } => {
+                stats.filtered_ticks += 1;
+                if consensus && !sum_kept {
+                    stats.sum_released_ticks += 1;
+                }
+            }
+            Outcome::Fallback { reason } => {
+                stats.fallbacks += 1;
+                // The first, then one in a hundred: a long fallback must not flood the log.
+                if stats.fallbacks % 100 == 1 {
+                    self.log.push(
+                        now,
+                        true,
+                        format!(
+                            "safety filter: no command keeps every pair apart ({reason}): the vehicles of the conflict brake (fallback {})",
+                            stats.fallbacks
+                        ),
+                    );
+                }
+            }
+        }
+        for (i, xy) in self.safety_xy.iter().enumerate() {
+            if self.safety_agents[i].controlled {
+                self.commands[i].x = xy.x;
+                self.commands[i].y = xy.y;
+            }
+        }
+        self.log_pairs_inside(now, setup.separation);
+    }
+
+    /// Logs every pair that came within the separation (once per entry).
+    fn log_pairs_inside(&mut self, now: SimTime, sep: crate::safety::Separation) {
+        let mut inside = std::mem::take(&mut self.safety_stats.inside);
+        let mut entered: Vec<(usize, usize, f64)> = Vec::new();
+        let mut still = Vec::with_capacity(inside.len());
+        for (i, j, d) in self.safety_filter.close_pairs(sep.horizontal_m) {
+            if !inside.contains(&(i, j)) {
+                entered.push((i, j, d));
+            }
+            still.push((i, j));
+        }
+        inside.clear();
+        inside.extend(still);
+        self.safety_stats.inside = inside;
+        for (i, j, d) in entered {
+            let (a, b) = (self.setup.links[i].system_id, self.setup.links[j].system_id);
+            self.log.push(
+                now,
+                true,
+                format!(
+                    "vehicles {a} and {b} came within the separation: {d:.2} m (ellipsoid {} m by {} m)",
+                    sep.horizontal_m, sep.vertical_m
+                ),
+            );
+        }
+    }
+
+    /// What the safety filter did so far.
+    pub fn safety_stats(&self) -> &SafetyStats {
+        &self.safety_stats
+    }
+
+    /// The closest pair on the last control tick (indices and ellipsoidal distance, m).
+    pub fn closest_pair(&self) -> Option<(usize, usize, f64)> {
+        self.closest_pair
+    }
+
+    /// The separation the filter enforces (`None`: off).
+    pub fn safety_enforced(&self) -> Option<crate::safety::Separation> {
+        self.setup.safety.map(|s| s.separation)
+    }
+}
