@@ -526,3 +526,52 @@ fn the_attitude_rate_defaults_to_the_control_rate_and_may_be_lower_only() {
         );
     }
 }
+
+#[test]
+fn the_safety_keys_are_checked_by_name_and_close_places_are_refused() {
+    let text = with(
+        "[formation]",
+        "[safety]\nhorizontal_m = 0.1\nvertical_m = 400.0\nbraking_share = 0.0\n\n[formation]",
+    );
+    let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
+    for needle in [
+        "safety.horizontal_m must be a finite number in [0.5, 100] m, got 0.1",
+        "safety.vertical_m must be a finite number in [0.5, 300] m (at least safety.horizontal_m), got 400",
+        "safety.braking_share must be a finite number in (0, 1], got 0",
+    ] {
+        assert!(err.lines().any(|l| l == needle), "{needle}\nnot in:\n{err}");
+    }
+    // The paper's hexagon has 20 m sides: a separation of 25 m cannot hold it.
+    let text = with(
+        "[formation]",
+        "[safety]\nhorizontal_m = 25.0\nvertical_m = 30.0\n\n[formation]",
+    );
+    let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
+    assert!(
+        err.lines().any(|l| l.starts_with(
+            "formation.offsets_m[0] and formation.offsets_m[1] are 20.000 m apart, closer than safety.horizontal_m = 25 m"
+        )),
+        "{err}"
+    );
+    // Off, nothing is checked against it and the setup carries no filter.
+    let text = with(
+        "[formation]",
+        "[safety]\nenabled = false\nhorizontal_m = 25.0\nvertical_m = 30.0\n\n[formation]",
+    );
+    let setup = Config::from_toml(&text).unwrap().validate().unwrap();
+    assert!(setup.safety.is_none());
+    // The defaults: 3 m by 9 m, half the envelope for braking.
+    let setup = Config::from_toml(&with("k = 5.0", "k = 5.0"))
+        .unwrap()
+        .validate()
+        .unwrap();
+    let s = setup.safety.expect("on by default");
+    assert_eq!(
+        (
+            s.separation.horizontal_m,
+            s.separation.vertical_m,
+            s.braking_share
+        ),
+        (3.0, 9.0, 0.5)
+    );
+}

@@ -7,6 +7,10 @@ use ringswarm_wire::time::SimTime;
 use super::{Swarm, SwarmPhase};
 use crate::safety::{Agent, Outcome, Settings, Side};
 
+/// The attitude response counted for a vehicle not measured yet (s): the emulated
+/// x500's measured `L + T` is 0.18–0.20 s, PX4 SIH's 0.28–0.36 s (docs/math.md).
+pub const UNMEASURED_RESPONSE_S: f64 = 0.3;
+
 /// What the filter did over a flight.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SafetyStats {
@@ -56,7 +60,12 @@ impl Swarm {
             let u_z = envelope.limit_vertical(self.commands[i].z, model);
             let limit = envelope.horizontal_limit_mps2(u_z, model);
             if controlled && let Some(at) = self.links[i].state().last_position {
-                age_s = age_s.max((now - at).as_secs_f64());
+                // A command acts after the vehicle's attitude response: what is known is
+                // that much older by the time the vehicle answers it.
+                let response = self.flown[i]
+                    .attitude_response()
+                    .map_or(UNMEASURED_RESPONSE_S, |r| r.response_s);
+                age_s = age_s.max((now - at).as_secs_f64() + response);
             }
             self.safety_agents.push(Agent {
                 side: self.states[i].map(|s| Side {
