@@ -91,6 +91,7 @@ fn crossing_paths_keep_the_separation_and_the_prediction() {
     // The filter keeps 3 m to 5 %, and works for it.
     assert!(safe.min_separation_m >= 0.95 * 3.0, "{safe:?}");
     assert!(safe.filtered_ticks > 100, "{safe:?}");
+    assert_eq!(safe.fallbacks, 0, "{safe:?}");
     // The prediction holds to 0.1 % as without it.
     let speed = safe.predicted_mps.norm();
     assert!((safe.predicted_mps - alone.predicted_mps).norm() < 1e-12);
@@ -103,16 +104,21 @@ fn the_shipped_scenarios_keep_the_separation_with_takeoff_and_landing() {
     // (scenario, how long, the velocity error allowed as a fraction of the prediction:
     // what each scenario's own test holds without the filter).
     for (name, until_s, fraction) in [
+        ("paper-sim1", 62.0, 1e-5),
+        ("paper-sim2", 62.0, 2e-4),
         ("lossy", 65.0, 1e-3),
         ("link-loss", 65.0, 2e-3),
         ("ground-start", 80.0, 1e-3),
     ] {
-        let f = fly(&load(name), until_s);
-        eprintln!("{name}: {f:?}");
+        let config = load(name);
+        let mut off = config.clone();
+        off.safety.enabled = false;
+        let alone = fly(&off, until_s);
+        let f = fly(&config, until_s);
+        eprintln!("{name}: alone {alone:?}\n  filtered {f:?}");
         assert!(f.min_separation_m >= 0.95 * 3.0, "{name}: {f:?}");
-        // Nothing here is too fast to stop: the filter never falls back to braking but
-        // in ground-start, whose six vehicles climb 5 m apart (2 ticks).
-        assert!(f.fallbacks <= 2, "{name}: {f:?}");
+        // The solver never fails (the rows' slacks keep every problem feasible).
+        assert_eq!(f.fallbacks, 0, "{name}: {f:?}");
         assert!(
             f.velocity_off_mps <= fraction * f.predicted_mps.norm().max(1.0),
             "{name}: {f:?}"

@@ -267,7 +267,10 @@ pub struct SafetyReport {
     pub filtered_ticks: u64,
     /// Consensus ticks on which `Σ wᵢuᵢ` could not be kept with the envelopes.
     pub sum_released_ticks: u64,
-    /// Control ticks on which the filter fell back to braking.
+    /// Control ticks on which a pair closed faster than the envelopes could stop it
+    /// inside the separation (the filter braked as hard as they allow).
+    pub relaxed_ticks: u64,
+    /// Control ticks on which the solver failed and the filter fell back to braking.
     pub fallbacks: u64,
 }
 
@@ -287,6 +290,7 @@ impl SafetyReport {
             },
             filtered_ticks: s.filtered_ticks,
             sum_released_ticks: s.sum_released_ticks,
+            relaxed_ticks: s.relaxed_ticks,
             fallbacks: s.fallbacks,
         })
     }

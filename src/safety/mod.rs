@@ -14,10 +14,14 @@
 //! with clarabel (the discs as second-order cones). It runs on the saturated commands, so
 //! `û` is inside the discs. A pairwise row is `+a` on one vehicle and `−a` on the other,
 //! so without the discs the optimum keeps `Σ wᵢuᵢ` by itself; the discs (one vehicle's
-//! limit) can break that, and the explicit equality restores it while it is feasible. When it is
-//! not, the filter solves again without it (`sum_kept = false`); when that fails too, or
-//! the solver does not converge in time, every vehicle of the problem brakes at its share
-//! of the authority the barrier assumed (the fallback, counted and logged). The commands
+//! limit) can break that, and the explicit equality restores it. Each row has a slack
+//! `σ ≥ 0` costing [`SLACK_COST`] times the largest weight: a pair that closes faster than
+//! the envelopes can stop is braked as hard as they allow (`relaxed`), and the problem is
+//! always feasible (`û` with large slacks meets every row), so the equality always
+//! holds. When the solver fails anyway, it solves again without the equality
+//! (`sum_kept = false`); when that fails too, or it does not converge in time, every
+//! vehicle of the problem accelerates away from its neighbours at its share of the
+//! authority the barrier assumed (the fallback, counted and logged). The commands
 //! it writes are finite and inside the envelope: the saturation after it changes nothing.
 //!
 //! Pure and synchronous.
@@ -37,6 +41,10 @@ pub use neighbours::Sweep;
 /// How far ahead a pair is looked at (s): pairs that cannot meet within this time at
 /// the swarm's top speed are not considered.
 pub const LOOKAHEAD_S: f64 = 3.0;
+
+/// The cost of a row's slack (per m/s² and unit of weight, linear: an exact penalty): a
+/// row that cannot be met inside the envelopes is met as nearly as they allow.
+pub const SLACK_COST: f64 = 1e4;
 
 /// A barrier row counts as active when the command leaves less slack than this (m/s²).
 pub const ACTIVE_SLACK_MPS2: f64 = 1e-6;
@@ -68,6 +76,9 @@ pub enum Outcome {
     Filtered {
         /// Whether the weighted sum was kept.
         sum_kept: bool,
+        /// Whether a row could not be met inside the envelopes and was relaxed: the
+        /// commands then come as close to it as the envelopes allow (most braking).
+        relaxed: bool,
     },
     /// No solution in time: the vehicles of the problem brake.
     Fallback {
@@ -189,12 +200,16 @@ impl SafetyFilter {
         }
         self.index_variables(agents, n);
         let outcome = match self.solve(settings, agents, commands, true) {
-            Ok(()) => Outcome::Filtered {
+            Ok(relaxed) => Outcome::Filtered {
                 sum_kept: settings.keep_weighted_sum,
+                relaxed,
             },
             Err(_) if settings.keep_weighted_sum => {
                 match self.solve(settings, agents, commands, false) {
-                    Ok(()) => Outcome::Filtered { sum_kept: false },
+                    Ok(relaxed) => Outcome::Filtered {
+                        sum_kept: false,
+                        relaxed,
+                    },
                     Err(reason) => {
                         self.brake(agents, commands);
                         Outcome::Fallback { reason }
@@ -252,17 +267,23 @@ impl SafetyFilter {
         }
     }
 
-    /// One QP over the variables; writes the commands when solved.
+    /// One QP over the variables; writes the commands when solved and says whether a
+    /// row had to be relaxed (its slack used).
     fn solve(
         &self,
         settings: &Settings,
         agents: &[Agent],
         commands: &mut [Vector2<f64>],
         with_sum: bool,
-    ) -> Result<(), &'static str> {
-        let nv = 2 * self.vars.len();
+    ) -> Result<bool, &'static str> {
+        let n_u = 2 * self.vars.len();
+        let n_rows = self.rows.len();
+        let nv = n_u + n_rows;
         let weight = |k: usize| agents[k].weight.max(1e-9);
-        // Objective ½xᵀPx + qᵀx with P = 2W, q = −2Wû.
+        let max_weight = self.vars.iter().map(|&k| weight(k)).fold(1.0, f64::max);
+        // Objective ½xᵀPx + qᵀx: P = 2W and q = −2Wû on the commands, and ρσ on each row's
+        // slack, linear: an exact penalty, so a row that can be met is met exactly
+        // (ρ = 10⁴·max w is far above any multiplier a row of these sizes needs).
         let mut p_diag = Vec::with_capacity(nv);
         let mut q = Vec::with_capacity(nv);
         for &k in &self.vars {
@@ -270,6 +291,10 @@ impl SafetyFilter {
                 p_diag.push(2.0 * weight(k));
                 q.push(-2.0 * weight(k) * component);
             }
+        }
+        for _ in 0..n_rows {
+            p_diag.push(0.0);
+            q.push(SLACK_COST * max_weight);
         }
         // Constraint rows as (row, column, value) and b, zero cone first.
         let mut entries: Vec<(usize, usize, f64)> = Vec::new();
@@ -286,9 +311,12 @@ impl SafetyFilter {
                 zero_rows += 1;
             }
         }
-        for r in &self.rows {
-            // a·(netᵢ − netⱼ) ≥ b  ⇔  −a·xᵢ + a·xⱼ + s = −b − a·cᵢ + a·cⱼ, s ≥ 0.
-            let mut rhs = -r.row.b;
+        for (r_index, r) in self.rows.iter().enumerate() {
+            // a·(netᵢ − netⱼ) + σ ≥ b  ⇔  −a·xᵢ + a·xⱼ − σ + s = −b − a·cᵢ + a·cⱼ, s ≥ 0.
+            // A bound beyond what the two envelopes can give asks for the same thing as
+            // one just beyond it (all of both discs): clipped, the problem stays scaled.
+            let reach = limit(&agents[r.i]) + limit(&agents[r.j]);
+            let mut rhs = -r.row.b.min(reach + 1.0);
             for (k, sign) in [(r.i, -1.0), (r.j, 1.0)] {
                 if let Some(v) = self.var_of[k] {
                     for axis in 0..2 {
@@ -297,7 +325,13 @@ impl SafetyFilter {
                     rhs += sign * r.row.a.dot(&agents[k].drift_mps2);
                 }
             }
+            entries.push((b.len(), n_u + r_index, -1.0));
             b.push(rhs);
+        }
+        for r_index in 0..n_rows {
+            // σ ≥ 0.
+            entries.push((b.len(), n_u + r_index, -1.0));
+            b.push(0.0);
         }
         let nonnegative = b.len() - zero_rows;
         // Each command inside its disc: s = (L, x, y) in the second-order cone.
@@ -326,11 +360,7 @@ impl SafetyFilter {
         if nonnegative > 0 {
             cones.push(SupportedConeT::NonnegativeConeT(nonnegative));
         }
-        cones.extend(
-            self.vars
-                .iter()
-                .map(|_| SupportedConeT::SecondOrderConeT(3)),
-        );
+        cones.extend(self.vars.iter().map(|_| SupportedConeT::SecondOrderConeT(3)));
         let time_limit = if settings.time_limit_s.is_finite() && settings.time_limit_s > 0.0 {
             settings.time_limit_s
         } else {
@@ -356,19 +386,6 @@ impl SafetyFilter {
         if x.len() != nv || x.iter().any(|v| !v.is_finite()) {
             return Err("not converged");
         }
-        // The rows must hold as the solver claims (its tolerance, scaled).
-        let tolerance = 1e-6 * (1.0 + b.iter().fold(0.0f64, |acc, v| acc.max(v.abs())));
-        let value = |k: usize| match self.var_of[k] {
-            Some(v) => Vector2::new(x[2 * v], x[2 * v + 1]) - agents[k].drift_mps2,
-            None => Vector2::zeros(),
-        };
-        if self
-            .rows
-            .iter()
-            .any(|r| r.row.a.dot(&(value(r.i) - value(r.j))) < r.row.b - tolerance)
-        {
-            return Err("infeasible");
-        }
         for (v, &k) in self.vars.iter().enumerate() {
             commands[k] = Vector2::new(x[2 * v], x[2 * v + 1]);
         }
@@ -377,18 +394,24 @@ impl SafetyFilter {
             // change that meets it exactly is uₖ −= δ/Σw (δ the sum's error per axis).
             let total_w: f64 = self.vars.iter().map(|&k| weight(k)).sum();
             for axis in 0..2 {
-                let got: f64 = self
-                    .vars
-                    .iter()
-                    .map(|&k| weight(k) * commands[k][axis])
-                    .sum();
+                let got: f64 = self.vars.iter().map(|&k| weight(k) * commands[k][axis]).sum();
                 let delta = (got - b[axis]) / total_w;
                 for &k in &self.vars {
                     commands[k][axis] -= delta;
                 }
             }
         }
-        Ok(())
+        // A row is relaxed when the commands miss it by more than the solver's tolerance.
+        let tolerance = 1e-6 * (1.0 + b.iter().fold(0.0f64, |acc, v| acc.max(v.abs())));
+        let net = |k: usize| match self.var_of[k] {
+            Some(_) => commands[k] - agents[k].drift_mps2,
+            None => Vector2::zeros(),
+        };
+        let relaxed = self
+            .rows
+            .iter()
+            .any(|r| r.row.a.dot(&(net(r.i) - net(r.j))) < r.row.b - tolerance);
+        Ok(relaxed)
     }
 
     /// The fallback, the manoeuvre the barrier counts on: every vehicle of the problem

@@ -77,7 +77,13 @@ fn two_vehicles_head_on_are_slowed_and_the_weighted_sum_is_kept() {
     let mut commands = before;
     let mut filter = SafetyFilter::default();
     let report = filter.filter(&settings(true), &agents, &mut commands);
-    assert_eq!(report.outcome, Outcome::Filtered { sum_kept: true });
+    assert_eq!(
+        report.outcome,
+        Outcome::Filtered {
+            sum_kept: true,
+            relaxed: false
+        }
+    );
     assert_eq!(report.rows, 1);
     assert_eq!(report.active, 1);
     assert!(rows_hold(&settings(true), &agents, &commands, 1e-9));
@@ -104,9 +110,10 @@ fn vehicles_far_apart_are_untouched() {
 }
 
 #[test]
-fn a_pair_too_fast_to_stop_falls_back_to_braking_with_finite_commands() {
+fn a_pair_too_fast_to_stop_brakes_as_hard_as_the_envelopes_allow() {
     // 10 m apart, closing at 20 m/s, with 0.5 m/s² of authority: h ≈ −17.5 m/s asks for
-    // thousands of m/s², which no command within the envelopes gives.
+    // thousands of m/s², which no command within the envelopes gives. The row is relaxed:
+    // each vehicle pushes away from the other with all of its disc (0.5 m/s²).
     let mut agents = [
         agent([0.0, 0.0, 10.0], [10.0, 0.0, 0.0], 1.0),
         agent([10.0, 0.0, 10.0], [-10.0, 0.0, 0.0], 1.0),
@@ -116,20 +123,23 @@ fn a_pair_too_fast_to_stop_falls_back_to_braking_with_finite_commands() {
         a.braking_mps2 = 0.25;
     }
     let mut commands = [Vector2::new(0.3, 0.0), Vector2::new(-0.3, 0.0)];
-    let report = SafetyFilter::default().filter(&settings(true), &agents, &mut commands);
-    assert!(
-        matches!(report.outcome, Outcome::Fallback { .. }),
+    let mut filter = SafetyFilter::default();
+    let report = filter.filter(&settings(true), &agents, &mut commands);
+    assert_eq!(
+        report.outcome,
+        Outcome::Filtered {
+            sum_kept: true,
+            relaxed: true
+        },
         "{report:?}"
     );
-    // Each accelerates away from the other at its share, inside its envelope.
-    assert!(
-        (commands[0] - Vector2::new(-0.25, 0.0)).norm() < 1e-12,
-        "{commands:?}"
-    );
-    assert!(
-        (commands[1] - Vector2::new(0.25, 0.0)).norm() < 1e-12,
-        "{commands:?}"
-    );
+    assert!((commands[0] - Vector2::new(-0.5, 0.0)).norm() < 1e-6, "{commands:?}");
+    assert!((commands[1] - Vector2::new(0.5, 0.0)).norm() < 1e-6, "{commands:?}");
+    // The fallback (for a solver that fails): each accelerates away from the other at its
+    // share, inside its envelope.
+    filter.brake(&agents, &mut commands);
+    assert!((commands[0] - Vector2::new(-0.25, 0.0)).norm() < 1e-12, "{commands:?}");
+    assert!((commands[1] - Vector2::new(0.25, 0.0)).norm() < 1e-12, "{commands:?}");
 }
 
 #[test]
@@ -141,7 +151,7 @@ fn random_swarms_meet_every_row_keep_the_sum_and_stay_finite() {
             .wrapping_add(1442695040888963407);
         (x >> 11) as f64 / (1u64 << 53) as f64
     };
-    let (mut filtered, mut kept, mut fallbacks) = (0, 0, 0);
+    let (mut filtered, mut kept, mut fallbacks, mut relaxed_cases) = (0, 0, 0, 0);
     let mut filter = SafetyFilter::default();
     for case in 0..300 {
         let n = 2 + case % 11;
@@ -171,9 +181,14 @@ fn random_swarms_meet_every_row_keep_the_sum_and_stay_finite() {
         assert!(commands.iter().all(|c| c.iter().all(|v| v.is_finite())));
         match report.outcome {
             Outcome::Untouched => assert_eq!(commands, before),
-            Outcome::Filtered { sum_kept } => {
+            Outcome::Filtered { sum_kept, relaxed } => {
                 filtered += 1;
-                assert!(rows_hold(&s, &agents, &commands, 1e-5), "case {case}");
+                assert_eq!(
+                    !relaxed,
+                    rows_hold(&s, &agents, &commands, 1e-5),
+                    "case {case}"
+                );
+                relaxed_cases += usize::from(relaxed);
                 for (k, c) in commands.iter().enumerate() {
                     if agents[k].controlled {
                         assert!(c.norm() <= agents[k].limit_mps2 + 1e-9, "case {case}");
@@ -192,6 +207,8 @@ fn random_swarms_meet_every_row_keep_the_sum_and_stay_finite() {
             Outcome::Fallback { .. } => fallbacks += 1,
         }
     }
-    eprintln!("filtered {filtered}, sum kept {kept}, fallbacks {fallbacks}");
+    eprintln!("filtered {filtered} (relaxed {relaxed_cases}), sum kept {kept}, fallbacks {fallbacks}");
     assert!(filtered > 100 && kept > 50, "{filtered} {kept}");
+    // Slack makes every problem feasible: the solver never fails.
+    assert_eq!(fallbacks, 0);
 }
