@@ -360,7 +360,11 @@ impl SafetyFilter {
         if nonnegative > 0 {
             cones.push(SupportedConeT::NonnegativeConeT(nonnegative));
         }
-        cones.extend(self.vars.iter().map(|_| SupportedConeT::SecondOrderConeT(3)));
+        cones.extend(
+            self.vars
+                .iter()
+                .map(|_| SupportedConeT::SecondOrderConeT(3)),
+        );
         let time_limit = if settings.time_limit_s.is_finite() && settings.time_limit_s > 0.0 {
             settings.time_limit_s
         } else {
@@ -394,7 +398,11 @@ impl SafetyFilter {
             // change that meets it exactly is uₖ −= δ/Σw (δ the sum's error per axis).
             let total_w: f64 = self.vars.iter().map(|&k| weight(k)).sum();
             for axis in 0..2 {
-                let got: f64 = self.vars.iter().map(|&k| weight(k) * commands[k][axis]).sum();
+                let got: f64 = self
+                    .vars
+                    .iter()
+                    .map(|&k| weight(k) * commands[k][axis])
+                    .sum();
                 let delta = (got - b[axis]) / total_w;
                 for &k in &self.vars {
                     commands[k][axis] -= delta;

@@ -133,13 +133,25 @@ fn a_pair_too_fast_to_stop_brakes_as_hard_as_the_envelopes_allow() {
         },
         "{report:?}"
     );
-    assert!((commands[0] - Vector2::new(-0.5, 0.0)).norm() < 1e-6, "{commands:?}");
-    assert!((commands[1] - Vector2::new(0.5, 0.0)).norm() < 1e-6, "{commands:?}");
+    assert!(
+        (commands[0] - Vector2::new(-0.5, 0.0)).norm() < 1e-6,
+        "{commands:?}"
+    );
+    assert!(
+        (commands[1] - Vector2::new(0.5, 0.0)).norm() < 1e-6,
+        "{commands:?}"
+    );
     // The fallback (for a solver that fails): each accelerates away from the other at its
     // share, inside its envelope.
     filter.brake(&agents, &mut commands);
-    assert!((commands[0] - Vector2::new(-0.25, 0.0)).norm() < 1e-12, "{commands:?}");
-    assert!((commands[1] - Vector2::new(0.25, 0.0)).norm() < 1e-12, "{commands:?}");
+    assert!(
+        (commands[0] - Vector2::new(-0.25, 0.0)).norm() < 1e-12,
+        "{commands:?}"
+    );
+    assert!(
+        (commands[1] - Vector2::new(0.25, 0.0)).norm() < 1e-12,
+        "{commands:?}"
+    );
 }
 
 #[test]
@@ -207,7 +219,9 @@ fn random_swarms_meet_every_row_keep_the_sum_and_stay_finite() {
             Outcome::Fallback { .. } => fallbacks += 1,
         }
     }
-    eprintln!("filtered {filtered} (relaxed {relaxed_cases}), sum kept {kept}, fallbacks {fallbacks}");
+    eprintln!(
+        "filtered {filtered} (relaxed {relaxed_cases}), sum kept {kept}, fallbacks {fallbacks}"
+    );
     assert!(filtered > 100 && kept > 50, "{filtered} {kept}");
     // Slack makes every problem feasible: the solver never fails.
     assert_eq!(fallbacks, 0);
