@@ -163,6 +163,18 @@ impl GuardStopped {
     pub const EXIT_CODE: u8 = 4;
 }
 
+/// The fence ended the consensus (a vehicle could no longer stop inside its margin); the
+/// vehicles were held or landed by `fence.action`. `fly` and `demo` exit with
+/// [`FenceStopped::EXIT_CODE`].
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("{0}")]
+pub struct FenceStopped(pub String);
+
+impl FenceStopped {
+    /// The process exit code for it.
+    pub const EXIT_CODE: u8 = 5;
+}
+
 /// A finished flight's outcome as the process sees it: [`GaveUp`] when the swarm gave up
 /// before its flight, [`GuardStopped`] when the divergence guard ended the consensus.
 ///
@@ -174,6 +186,12 @@ pub fn flight_result(summary: &crate::record::metrics::Summary) -> anyhow::Resul
     }
     if let Some(guard) = &summary.guard {
         return Err(GuardStopped(guard.clone()).into());
+    }
+    if summary.stop_reason.as_deref() == Some("fence") {
+        return Err(FenceStopped(
+            "the fence ended the consensus (events.csv names the vehicle)".to_owned(),
+        )
+        .into());
     }
     Ok(())
 }

@@ -15,7 +15,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use ringswarm::cli::{AnalyzeArgs, Cli, Command, PlanArgs};
 use ringswarm::consensus::PlanRequest;
-use ringswarm::error::{GaveUp, GuardStopped};
+use ringswarm::error::{FenceStopped, GaveUp, GuardStopped};
 use ringswarm::report::{AnalyzeRequest, emit, run_analyze, run_plan_everyone};
 use tracing_subscriber::EnvFilter;
 use tracing_subscriber::filter::LevelFilter;
@@ -51,6 +51,8 @@ fn main() -> ExitCode {
                 ExitCode::from(GaveUp::EXIT_CODE)
             } else if err.downcast_ref::<GuardStopped>().is_some() {
                 ExitCode::from(GuardStopped::EXIT_CODE)
+            } else if err.downcast_ref::<FenceStopped>().is_some() {
+                ExitCode::from(FenceStopped::EXIT_CODE)
             } else {
                 ExitCode::from(2)
             }

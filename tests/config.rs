@@ -575,3 +575,71 @@ fn the_safety_keys_are_checked_by_name_and_close_places_are_refused() {
         (3.0, 9.0, 0.5)
     );
 }
+
+#[test]
+fn a_fence_is_checked_by_name() {
+    let fence = |body: &str| with("[formation]", &format!("[fence]\n{body}\n\n[formation]"));
+    let err = |body: &str| {
+        Config::from_toml(&fence(body))
+            .unwrap()
+            .validate()
+            .unwrap_err()
+    };
+    // A bow tie is no fence.
+    let e = err(
+        "kind = \"polygon\"\nvertices_enu_m = [[-500.0, -500.0], [500.0, 500.0], [500.0, -500.0], [-500.0, 500.0]]\nmin_altitude_m = 0.0\nmax_altitude_m = 100.0",
+    );
+    assert!(
+        e.lines().any(|l| l == "fence.vertices_enu_m: the polygon's edges cross each other (a fence must be a simple polygon)"),
+        "{e}"
+    );
+    // Two vertices, a circle without its radius, a band upside down.
+    let e = err(
+        "kind = \"polygon\"\nvertices_enu_m = [[0.0, 0.0], [1.0, 1.0]]\nmin_altitude_m = 0.0\nmax_altitude_m = 100.0",
+    );
+    assert!(
+        e.lines()
+            .any(|l| l == "fence.vertices_enu_m needs at least 3 vertices, got 2"),
+        "{e}"
+    );
+    let e = err(
+        "kind = \"circle\"\ncentre_enu_m = [0.0, 0.0]\nmin_altitude_m = 0.0\nmax_altitude_m = 100.0",
+    );
+    assert!(
+        e.lines().any(
+            |l| l == "fence.centre_enu_m and fence.radius_m are required for kind = \"circle\""
+        ),
+        "{e}"
+    );
+    let e = err(
+        "kind = \"circle\"\ncentre_enu_m = [0.0, 0.0]\nradius_m = 1000.0\nmin_altitude_m = 100.0\nmax_altitude_m = 10.0",
+    );
+    assert!(
+        e.lines()
+            .any(|l| l.starts_with("fence.max_altitude_m must be a finite number in [100, ")),
+        "{e}"
+    );
+    // The paper's formation flies at 50 m; its vehicle 2 starts at (50, -20) m.
+    let e = err(
+        "kind = \"circle\"\ncentre_enu_m = [0.0, 0.0]\nradius_m = 40.0\nmin_altitude_m = 48.0\nmax_altitude_m = 100.0",
+    );
+    assert!(
+        e.lines().any(|l| l == "formation.altitude_m = 50 m is not inside the fence's altitudes [48, 100] m by its margin of 5 m"),
+        "{e}"
+    );
+    assert!(
+        e.lines()
+            .any(|l| l == "vehicle[1] (system id 2) starts at (50, -20) m, outside the fence"),
+        "{e}"
+    );
+    // A good one.
+    let setup = Config::from_toml(&fence(
+        "kind = \"circle\"\ncentre_enu_m = [0.0, 0.0]\nradius_m = 400.0\nmin_altitude_m = 20.0\nmax_altitude_m = 80.0\naction = \"land\"",
+    ))
+    .unwrap()
+    .validate()
+    .unwrap();
+    let f = setup.fence.expect("a fence");
+    assert_eq!(f.margin_m, 5.0);
+    assert_eq!(f.action, ringswarm::swarm::LossPolicy::Land);
+}

@@ -110,6 +110,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         target: None,
         guard: None,
         safety: None,
+        fence: None,
     };
     let mut all_flying_at = None;
     let (command_tx, command_rx) = watch::channel(DriverCommand::Fly);

@@ -62,6 +62,48 @@ pub struct Config {
     /// The separation the safety filter enforces.
     #[serde(default)]
     pub safety: SafetySection,
+    /// Where the swarm may fly (optional).
+    pub fence: Option<FenceSection>,
+}
+
+/// The fence's horizontal shape.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FenceKind {
+    /// `centre_enu_m` and `radius_m`.
+    Circle,
+    /// `vertices_enu_m`, at least three, a simple polygon.
+    Polygon,
+}
+
+/// `[fence]`: an inclusion circle or polygon in the common frame with an altitude band.
+/// The swarm applies `action` as soon as one vehicle's stopping point comes within
+/// `margin_m` of it (docs/math.md, "The fence").
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FenceSection {
+    /// `circle` or `polygon`.
+    pub kind: FenceKind,
+    /// The circle's centre (m, ENU).
+    pub centre_enu_m: Option<[f64; 2]>,
+    /// The circle's radius (m).
+    pub radius_m: Option<f64>,
+    /// The polygon's vertices (m, ENU).
+    pub vertices_enu_m: Option<Vec<[f64; 2]>>,
+    /// Lowest altitude in flight (m, up, common frame).
+    pub min_altitude_m: f64,
+    /// Highest altitude (m, up, common frame).
+    pub max_altitude_m: f64,
+    /// How close to the fence a stopping point may come (m, default 5).
+    #[serde(default = "default_fence_margin_m")]
+    pub margin_m: f64,
+    /// What the swarm does: `hold` (brake and hover; default) or `land`.
+    #[serde(default)]
+    pub action: crate::swarm::LossPolicy,
+}
+
+fn default_fence_margin_m() -> f64 {
+    5.0
 }
 
 /// `[safety]`: no command brings two vehicles closer than a downwash ellipsoid of

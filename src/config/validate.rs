@@ -189,6 +189,7 @@ impl Config {
         let models = self.models(envelope.as_ref(), &mut p);
         let guard = self.guard(&mut p);
         let safety = self.safety(offsets.as_deref(), &mut p);
+        let fence = self.fence(&mut p);
         self.transport(&mut p);
         if !p.0.is_empty() {
             return Err(p.0.join("\n"));
@@ -249,6 +250,7 @@ impl Config {
             target,
             guard,
             safety,
+            fence,
         })
     }
 
@@ -292,6 +294,104 @@ impl Config {
                 gamma: crate::swarm::SAFETY_GAMMA,
             },
             braking_share: s.braking_share,
+        })
+    }
+
+    /// `[fence]`: the shape, the band and the margin checked by name; the formation's
+    /// altitude inside the band and every vehicle's start inside the shape.
+    fn fence(&self, p: &mut Problems) -> Option<crate::swarm::FenceSetup> {
+        use crate::config::FenceKind;
+        use crate::safety::{Fence, FenceShape, fence::polygon_self_intersects};
+        use nalgebra::{Vector2, Vector3};
+        let f = self.fence.as_ref()?;
+        let mut ok = p.within(
+            "fence.min_altitude_m",
+            f.min_altitude_m,
+            -MAX_DISTANCE_M,
+            MAX_DISTANCE_M,
+            " m",
+        );
+        ok &= p.within(
+            "fence.max_altitude_m",
+            f.max_altitude_m,
+            f.min_altitude_m.max(-MAX_DISTANCE_M),
+            MAX_DISTANCE_M,
+            " m (above fence.min_altitude_m)",
+        );
+        ok &= p.within("fence.margin_m", f.margin_m, 0.0, 1000.0, " m");
+        let shape = match f.kind {
+            FenceKind::Circle => {
+                let (Some(c), Some(r)) = (f.centre_enu_m, f.radius_m) else {
+                    p.push(
+                        "fence.centre_enu_m and fence.radius_m are required for kind = \"circle\""
+                            .to_owned(),
+                    );
+                    return None;
+                };
+                ok &= p.vector("fence.centre_enu_m", &c, MAX_DISTANCE_M, " m");
+                ok &= p.positive("fence.radius_m", r, MAX_DISTANCE_M, " m");
+                FenceShape::Circle {
+                    centre_m: Vector2::from(c),
+                    radius_m: r,
+                }
+            }
+            FenceKind::Polygon => {
+                let Some(list) = f.vertices_enu_m.as_ref() else {
+                    p.push("fence.vertices_enu_m is required for kind = \"polygon\"".to_owned());
+                    return None;
+                };
+                if list.len() < 3 {
+                    p.push(format!(
+                        "fence.vertices_enu_m needs at least 3 vertices, got {}",
+                        list.len()
+                    ));
+                    return None;
+                }
+                for (k, v) in list.iter().enumerate() {
+                    ok &= p.vector(
+                        &format!("fence.vertices_enu_m[{k}]"),
+                        v,
+                        MAX_DISTANCE_M,
+                        " m",
+                    );
+                }
+                let vertices_m: Vec<Vector2<f64>> =
+                    list.iter().map(|v| Vector2::from(*v)).collect();
+                if ok && polygon_self_intersects(&vertices_m) {
+                    p.push("fence.vertices_enu_m: the polygon's edges cross each other (a fence must be a simple polygon)".to_owned());
+                    ok = false;
+                }
+                FenceShape::Polygon { vertices_m }
+            }
+        };
+        if !ok {
+            return None;
+        }
+        let fence = Fence {
+            shape,
+            min_altitude_m: f.min_altitude_m,
+            max_altitude_m: f.max_altitude_m,
+        };
+        let altitude = self.formation.altitude_m;
+        if fence.vertical_margin_m(altitude) < f.margin_m {
+            p.push(format!(
+                "formation.altitude_m = {altitude} m is not inside the fence's altitudes [{}, {}] m by its margin of {} m",
+                f.min_altitude_m, f.max_altitude_m, f.margin_m
+            ));
+        }
+        for (k, v) in self.vehicle.iter().enumerate() {
+            let start = Vector3::from(v.start_enu_m);
+            if fence.horizontal_margin_m(start.xy()) < 0.0 {
+                p.push(format!(
+                    "vehicle[{k}] (system id {}) starts at ({}, {}) m, outside the fence",
+                    v.system_id, start.x, start.y
+                ));
+            }
+        }
+        Some(crate::swarm::FenceSetup {
+            fence,
+            margin_m: f.margin_m,
+            action: f.action,
         })
     }
 

@@ -272,6 +272,8 @@ pub struct SafetyReport {
     pub relaxed_ticks: u64,
     /// Control ticks on which the solver failed and the filter fell back to braking.
     pub fallbacks: u64,
+    /// Times the fence made the swarm hold or land.
+    pub fence_actions: u64,
 }
 
 impl SafetyReport {
@@ -292,6 +294,7 @@ impl SafetyReport {
             sum_released_ticks: s.sum_released_ticks,
             relaxed_ticks: s.relaxed_ticks,
             fallbacks: s.fallbacks,
+            fence_actions: s.fence_actions,
         })
     }
 }

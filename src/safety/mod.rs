@@ -27,6 +27,7 @@
 //! Pure and synchronous.
 
 pub mod barrier;
+pub mod fence;
 pub mod neighbours;
 
 use clarabel::algebra::CscMatrix;
@@ -36,6 +37,7 @@ use clarabel::solver::{
 use nalgebra::{Vector2, Vector3};
 
 pub use barrier::{PairRow, Separation, Side, pair_row};
+pub use fence::{Fence, FenceShape, stop_point_m};
 pub use neighbours::Sweep;
 
 /// How far ahead a pair is looked at (s): pairs that cannot meet within this time at

@@ -36,6 +36,7 @@
 //! (`events.rs`).
 
 mod events;
+mod fence;
 mod guard;
 mod laws;
 mod model;
@@ -64,8 +65,8 @@ pub use guard::{DivergenceGuard, GuardLimits, GuardTrip};
 use model::FlownModel;
 pub use safety::SafetyStats;
 pub use setup::{
-    EndAction, LossPolicy, PlanDecision, Retargeted, SAFETY_GAMMA, SafetySetup, SetpointKind,
-    SwarmSetup, TargetVelocity,
+    EndAction, FenceSetup, LossPolicy, PlanDecision, Retargeted, SAFETY_GAMMA, SafetySetup,
+    SetpointKind, SwarmSetup, TargetVelocity,
 };
 
 /// Where the swarm is.
@@ -152,10 +153,12 @@ pub enum StopReason {
     LinkLoss,
     /// Landing was asked for from outside (Ctrl-C, a signal, the live view).
     Requested,
+    /// A vehicle could no longer stop inside the fence's margin.
+    Fence,
 }
 
 impl StopReason {
-    /// A short name: `duration`, `guard`, `handshake`, `link_loss`, `requested`.
+    /// A short name: `duration`, `guard`, `handshake`, `link_loss`, `requested`, `fence`.
     pub fn name(&self) -> &'static str {
         match self {
             Self::DurationOver => "duration",
@@ -163,6 +166,7 @@ impl StopReason {
             Self::Handshake => "handshake",
             Self::LinkLoss => "link_loss",
             Self::Requested => "requested",
+            Self::Fence => "fence",
         }
     }
 }

@@ -30,6 +30,8 @@ pub struct SafetyStats {
     pub relaxed_ticks: u64,
     /// Ticks on which it fell back to braking.
     pub fallbacks: u64,
+    /// Times the fence made the swarm hold or land.
+    pub fence_actions: u64,
     /// The smallest ellipsoidal distance between two vehicles with a usable state, seen
     /// on a control tick (m; infinite while never two).
     pub min_seen_m: f64,
@@ -57,6 +59,11 @@ impl Swarm {
         let consensus = matches!(self.phase, SwarmPhase::Consensus(_));
         let period_s = self.setup.control_interval.as_secs_f64();
         let mut age_s: f64 = 0.0;
+        for i in 0..self.links.len() {
+            if self.states[i].is_some() && self.ours_in_air(i) {
+                age_s = age_s.max(self.command_age_s(i, now) - period_s);
+            }
+        }
         self.safety_agents.clear();
         self.safety_xy.clear();
         for i in 0..self.links.len() {
@@ -65,18 +72,6 @@ impl Swarm {
             let envelope = &self.setup.envelope;
             let u_z = envelope.limit_vertical(self.commands[i].z, model);
             let limit = envelope.horizontal_limit_mps2(u_z, model);
-            if controlled && let Some(at) = self.links[i].state().last_position {
-                // A command acts after the vehicle's attitude response: what is known is
-                // that much older by the time the vehicle answers it.
-                // A fit beyond a second is no attitude loop a swarm flies with (the
-                // emulator's ideal vehicles, which have none, fit 4.5 s): not counted.
-                let response = self.flown[i]
-                    .attitude_response()
-                    .map(|r| r.response_s)
-                    .filter(|r| (0.0..=MAX_RESPONSE_S).contains(r))
-                    .unwrap_or(UNMEASURED_RESPONSE_S);
-                age_s = age_s.max((now - at).as_secs_f64() + response);
-            }
             self.safety_agents.push(Agent {
                 side: self.states[i].map(|s| Side {
                     pos_m: s.pos_enu_m,
@@ -95,7 +90,6 @@ impl Swarm {
         }
         let settings = Settings {
             separation: setup.separation,
-            // What is known is this old, and the command acts for a period.
             age_s: age_s + period_s,
             keep_weighted_sum: consensus,
             time_limit_s: 0.5 * period_s,
@@ -153,6 +147,24 @@ impl Swarm {
             }
         }
         self.log_pairs_inside(now, setup.separation);
+    }
+
+    /// How old what is known of vehicle `i` is by the time a command sent now acts (s):
+    /// its state's age, a control period, and its attitude response (measured; a fit
+    /// beyond [`MAX_RESPONSE_S`] is not trusted and [`UNMEASURED_RESPONSE_S`] is used).
+    pub(super) fn command_age_s(&self, i: usize, now: SimTime) -> f64 {
+        let state = self.links[i]
+            .state()
+            .last_position
+            .map_or(0.0, |at| (now - at).as_secs_f64());
+        // A fit beyond a second is no attitude loop a swarm flies with (the emulator's
+        // ideal vehicles, which have none, fit 4.5 s): not counted.
+        let response = self.flown[i]
+            .attitude_response()
+            .map(|r| r.response_s)
+            .filter(|r| (0.0..=MAX_RESPONSE_S).contains(r))
+            .unwrap_or(UNMEASURED_RESPONSE_S);
+        state + self.setup.control_interval.as_secs_f64() + response
     }
 
     /// Logs every pair that came within the separation (once per entry).

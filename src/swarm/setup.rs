@@ -66,6 +66,19 @@ pub struct SwarmSetup {
     pub guard: Option<super::GuardLimits>,
     /// The safety filter's separation (`None`: off).
     pub safety: Option<SafetySetup>,
+    /// The fence (`None`: none).
+    pub fence: Option<FenceSetup>,
+}
+
+/// The fence and what the swarm does at it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FenceSetup {
+    /// Where the swarm may fly.
+    pub fence: crate::safety::Fence,
+    /// How close to it a stopping point may come (m).
+    pub margin_m: f64,
+    /// `Hold` (brake and hover) or `Land`.
+    pub action: LossPolicy,
 }
 
 /// What the safety filter enforces.

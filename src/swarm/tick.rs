@@ -47,6 +47,7 @@ impl Swarm {
             };
         }
         self.watch_divergence(now);
+        self.watch_fence(now);
         let saturation = self.horizontal_law();
         for (i, state) in self.states.iter().enumerate() {
             let s = state.unwrap_or_default();
