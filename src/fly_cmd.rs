@@ -22,7 +22,7 @@ use crate::link::router::{Router, TransportPlan};
 use crate::record::metrics::Summary;
 use crate::record::{Recorder, RowText, RunSetup};
 use crate::security::FlightSigning;
-use crate::swarm::{Swarm, SwarmPhase};
+use crate::swarm::{StopReason, Swarm, SwarmPhase};
 use crate::vehicle::Phase;
 use crate::view::{Content, LiveFeed, ViewState, WebServer};
 
@@ -306,7 +306,10 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
     let phase = match swarm.phase() {
         SwarmPhase::Holding(_) => "HOLDING (a vehicle is lost)",
         SwarmPhase::Ended(_) => "ended (hovering)",
-        SwarmPhase::Stopped(_) => "STOPPED by the divergence guard (hovering)",
+        SwarmPhase::Stopped(_) => match swarm.stop_reason() {
+            Some(StopReason::Fence) => "STOPPED at the fence (hovering)",
+            _ => "STOPPED by the divergence guard (hovering)",
+        },
         other => other.name(),
     };
     let links: String = swarm
@@ -336,6 +339,10 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
     }
     if let Some(p) = swarm.predicted_final_velocity() {
         line += &format!(" | predicted ({:.2}, {:.2})", p.x, p.y);
+    }
+    if let Some((i, j, d)) = swarm.closest_pair() {
+        let id = |k: usize| swarm.setup().links[k].system_id;
+        line += &format!(" | closest {}-{} {d:.1} m", id(i), id(j));
     }
     line
 }

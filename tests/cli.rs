@@ -641,3 +641,40 @@ fn web_and_mirror_without_realtime_and_a_view_of_no_run_directory_are_refused_by
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn demo_exits_5_when_the_fence_ends_the_consensus() {
+    // paper-sim1 in a circle of radius 400 m: it flies out at 14.9 m/s and is held.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml");
+    let text = std::fs::read_to_string(path).unwrap().replacen(
+        "[[vehicle]]",
+        "[fence]\nkind = \"circle\"\ncentre_enu_m = [0.0, 0.0]\nradius_m = 400.0\n\
+         min_altitude_m = -50.0\nmax_altitude_m = 100.0\n\n[[vehicle]]",
+        1,
+    );
+    let dir = std::env::temp_dir().join(format!("ringswarm-cli-fence-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let config = dir.join("fenced.toml");
+    std::fs::write(&config, text).unwrap();
+    let run = dir.join("run");
+    let out = ringswarm(&[
+        "demo",
+        "--scenario",
+        config.to_str().unwrap(),
+        "--no-plots",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(5), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("the fence ended the consensus"),
+        "{}",
+        stderr(&out)
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["stop_reason"], "fence");
+    assert_eq!(summary["safety"]["fence_actions"], 1);
+    let _ = std::fs::remove_dir_all(&dir);
+}
