@@ -300,6 +300,13 @@ fn main() {
     .filter(|c| words.is_empty() || words.iter().any(|w| c.name.contains(w.as_str())))
     .collect();
 
+    if words.is_empty() || words.iter().any(|w| "safety".contains(w.as_str())) {
+        safety_table();
+        if !words.is_empty() && cases.is_empty() {
+            return;
+        }
+        println!();
+    }
     println!(
         "| case | vehicles | control | simulated s | wall s | x real time | µs per vehicle per simulated ms |"
     );
@@ -346,6 +353,88 @@ fn main() {
             per(phases.delivery),
             total / floor,
             per(recorded.wall.saturating_sub(plain.wall)),
+        );
+    }
+}
+
+/// The safety filter's cost per control tick next to the law's floor (one tick of ring
+/// coupling, altitude loop, saturation, attitude and thrust for the whole swarm): a
+/// formation 10 m apart (every pair checked, none broken) and the same with every other
+/// pair 4 m apart closing at 2 m/s on commands that push them together (a QP over every
+/// vehicle).
+fn safety_table() {
+    use ringswarm::safety::{Agent, SafetyFilter, Separation, Settings, Side};
+    println!(
+        "| vehicles | law floor µs/tick | filter, formation µs/tick | ratio | filter, every pair in conflict µs/tick | ratio |"
+    );
+    println!("|---|---|---|---|---|---|");
+    let settings = Settings {
+        separation: Separation {
+            horizontal_m: 3.0,
+            vertical_m: 9.0,
+            gamma: 1.0,
+        },
+        age_s: 0.34,
+        keep_weighted_sum: true,
+        time_limit_s: f64::INFINITY,
+    };
+    for n in [6usize, 64, 1000] {
+        let setup = Config::from_toml(&ring(n, 50.0))
+            .and_then(|cfg| cfg.validate())
+            .expect("ring");
+        let law = law_ns_per_tick(&setup) / 1e3;
+        let agent = |pos: Vector3<f64>, vel: Vector3<f64>, k: usize| Agent {
+            side: Some(Side {
+                pos_m: pos,
+                vel_mps: vel,
+                accel_z_mps2: 0.0,
+            }),
+            controlled: true,
+            weight: setup.ring.w(k),
+            drift_mps2: Vector2::zeros(),
+            limit_mps2: 7.0,
+            braking_mps2: 3.5,
+        };
+        // A row of vehicles 10 m apart along east, flying north in formation.
+        let formation: Vec<Agent> = (0..n)
+            .map(|k| {
+                agent(
+                    Vector3::new(10.0 * k as f64, 0.0, 50.0),
+                    Vector3::new(0.0, 2.0, 0.0),
+                    k,
+                )
+            })
+            .collect();
+        // Every other pair 4 m apart, closing at 2 m/s.
+        let conflict: Vec<Agent> = (0..n)
+            .map(|k| {
+                let (x, v) = if k % 2 == 0 {
+                    (10.0 * k as f64, 1.0)
+                } else {
+                    (10.0 * (k - 1) as f64 + 4.0, -1.0)
+                };
+                agent(Vector3::new(x, 0.0, 50.0), Vector3::new(v, 0.0, 0.0), k)
+            })
+            .collect();
+        let time = |agents: &[Agent], push: f64| {
+            let mut filter = SafetyFilter::default();
+            let ticks = (20_000 / n).max(10);
+            let mut commands = vec![Vector2::zeros(); n];
+            let start = Instant::now();
+            for _ in 0..ticks {
+                for (k, c) in commands.iter_mut().enumerate() {
+                    *c = Vector2::new(if k % 2 == 0 { push } else { -push }, 0.0);
+                }
+                black_box(filter.filter(&settings, agents, &mut commands));
+            }
+            start.elapsed().as_secs_f64() * 1e6 / ticks as f64
+        };
+        let calm = time(&formation, 0.0);
+        let busy = time(&conflict, 1.0);
+        println!(
+            "| {n} | {law:.1} | {calm:.1} | {:.2} | {busy:.1} | {:.1} |",
+            calm / law,
+            busy / law
         );
     }
 }
