@@ -425,7 +425,7 @@ fn safety_table() {
                 for (k, c) in commands.iter_mut().enumerate() {
                     *c = Vector2::new(if k % 2 == 0 { push } else { -push }, 0.0);
                 }
-                black_box(filter.filter(&settings, agents, &mut commands));
+                black_box(filter.filter(&settings, agents, &mut commands, None));
             }
             start.elapsed().as_secs_f64() * 1e6 / ticks as f64
         };

@@ -9,6 +9,8 @@
 
 use nalgebra::{Vector2, Vector3};
 
+use super::barrier::{INSIDE_M, PairRow, Side};
+
 /// The horizontal shape of the fence.
 #[derive(Debug, Clone, PartialEq)]
 pub enum FenceShape {
@@ -62,6 +64,41 @@ impl Fence {
         }
     }
 
+    /// The nearest point of the horizontal boundary seen from `p`: the signed margin (m,
+    /// positive inside), the unit normal pointing inward there, and, for a circle, the
+    /// distance from its centre (the radius of the margin's level curve through `p`).
+    /// `None` at the circle's centre, or on the boundary itself (no direction).
+    pub fn nearest(&self, p: Vector2<f64>) -> Option<(f64, Vector2<f64>, Option<f64>)> {
+        match &self.shape {
+            FenceShape::Circle { centre_m, radius_m } => {
+                let r = (p - centre_m).norm();
+                (r > 1e-9).then(|| (radius_m - r, (centre_m - p) / r, Some(r)))
+            }
+            FenceShape::Polygon { vertices_m } => {
+                let n = vertices_m.len();
+                let mut best: Option<(f64, Vector2<f64>)> = None;
+                for k in 0..n {
+                    let q = segment_nearest(p, vertices_m[k], vertices_m[(k + 1) % n]);
+                    let d = (p - q).norm();
+                    if best.is_none_or(|b| d < b.0) {
+                        best = Some((d, q));
+                    }
+                }
+                let (d, q) = best?;
+                if d < 1e-12 {
+                    return None;
+                }
+                let margin = self.horizontal_margin_m(p);
+                let inward = if margin > 0.0 {
+                    (p - q) / d
+                } else {
+                    (q - p) / d
+                };
+                Some((margin, inward, None))
+            }
+        }
+    }
+
     /// How far inside the altitude band `z_m` is (m).
     pub fn vertical_margin_m(&self, z_m: f64) -> f64 {
         (z_m - self.min_altitude_m).min(self.max_altitude_m - z_m)
@@ -92,6 +129,11 @@ pub fn stop_point_m(
 
 /// The distance from `p` to the segment `ab` (m).
 fn segment_distance_m(p: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>) -> f64 {
+    (p - segment_nearest(p, a, b)).norm()
+}
+
+/// The point of the segment `ab` nearest to `p`.
+fn segment_nearest(p: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>) -> Vector2<f64> {
     let ab = b - a;
     let len2 = ab.norm_squared();
     let t = if len2 > 0.0 {
@@ -99,7 +141,49 @@ fn segment_distance_m(p: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>) -> f64 
     } else {
         0.0
     };
-    (p - (a + ab * t)).norm()
+    a + ab * t
+}
+
+/// The barrier row of one vehicle against the fence's horizontal boundary, `aᵀuᵢ ≥ b`:
+/// the pair barrier with the margin `m − margin_m` in place of `D − d`, `s = nᵀv` the
+/// rate at which the margin grows (`n` the inward normal) and the vehicle's own braking
+/// `A`. For a circle the margin's second derivative loses `(|v|² − s²)/r` to tangential
+/// motion (`r` the distance from the centre), which the bound adds. Inside the age-grown
+/// margin a vehicle moving outward must turn in at `A`.
+pub fn fence_row(
+    fence: &Fence,
+    margin_m: f64,
+    side: &Side,
+    braking_mps2: f64,
+    age_s: f64,
+    gamma: f64,
+) -> Option<PairRow> {
+    let p = side.pos_m.xy();
+    let v = side.vel_mps.xy();
+    let (m, inward, radius) = fence.nearest(p)?;
+    let s = inward.dot(&v);
+    let d = margin_m + v.norm() * age_s + 0.5 * braking_mps2 * age_s * age_s;
+    let room = m - d;
+    let curvature = radius.map_or(0.0, |r| (v.norm_squared() - s * s).max(0.0) / r);
+    if room < INSIDE_M {
+        let push = if s < 0.0 { braking_mps2 } else { 0.0 };
+        return Some(PairRow {
+            a: inward,
+            b: push + curvature,
+            h_mps: s,
+            distance_m: m,
+            room_m: room,
+        });
+    }
+    let root = (2.0 * braking_mps2 * room).sqrt();
+    let h = s + root;
+    Some(PairRow {
+        a: inward,
+        b: -gamma * h * h * h + curvature - braking_mps2 * s / root,
+        h_mps: h,
+        distance_m: m,
+        room_m: room,
+    })
 }
 
 /// Whether the polygon's edges cross each other anywhere but at shared vertices of
@@ -176,6 +260,52 @@ mod tests {
             4.0,
         );
         assert!((p - Vector3::new(14.0, 2.0, 21.1)).norm() < 1e-12, "{p}");
+    }
+
+    #[test]
+    fn the_fence_rows_derivative_is_the_barriers_along_a_trajectory() {
+        // A vehicle inside a circle of radius 100 m moving out and sideways with a given
+        // acceleration: ḣ by central differences equals aᵀu − b − γh³.
+        let fence = Fence {
+            shape: FenceShape::Circle {
+                centre_m: Vector2::new(0.0, 0.0),
+                radius_m: 100.0,
+            },
+            min_altitude_m: 0.0,
+            max_altitude_m: 100.0,
+        };
+        let (margin, a_brake, gamma) = (5.0, 3.0, 1.0);
+        let u = Vector2::new(0.4, -0.7);
+        let at = |t: f64| Side {
+            pos_m: Vector3::new(
+                60.0 + 4.0 * t + 0.2 * t * t,
+                20.0 + 3.0 * t - 0.35 * t * t,
+                50.0,
+            ),
+            vel_mps: Vector3::new(4.0 + 0.4 * t, 3.0 - 0.7 * t, 0.0),
+            accel_z_mps2: 0.0,
+        };
+        let h = |side: &Side| {
+            let p = side.pos_m.xy();
+            let r = p.norm();
+            let s = -(p / r).dot(&side.vel_mps.xy());
+            s + (2.0 * a_brake * (100.0 - r - margin)).sqrt()
+        };
+        let dt = 1e-5;
+        let hdot = (h(&at(dt)) - h(&at(-dt))) / (2.0 * dt);
+        let row = fence_row(&fence, margin, &at(0.0), a_brake, 0.0, gamma).expect("a row");
+        assert!((row.h_mps - h(&at(0.0))).abs() < 1e-12);
+        let from_row = row.a.dot(&u) - row.b - gamma * row.h_mps.powi(3);
+        assert!((hdot - from_row).abs() < 1e-6, "{hdot} vs {from_row}");
+    }
+
+    #[test]
+    fn the_nearest_boundary_point_of_a_polygon_gives_the_inward_normal() {
+        let f = square();
+        let (m, n, r) = f.nearest(Vector2::new(30.0, 20.0)).expect("inside");
+        assert_eq!((m, n, r), (20.0, Vector2::new(0.0, 1.0), None));
+        let (m, n, _) = f.nearest(Vector2::new(-3.0, 50.0)).expect("outside");
+        assert_eq!((m, n), (-3.0, Vector2::new(1.0, 0.0)));
     }
 
     #[test]

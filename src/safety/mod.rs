@@ -37,7 +37,7 @@ use clarabel::solver::{
 use nalgebra::{Vector2, Vector3};
 
 pub use barrier::{PairRow, Separation, Side, pair_row};
-pub use fence::{Fence, FenceShape, stop_point_m};
+pub use fence::{Fence, FenceShape, fence_row, stop_point_m};
 pub use neighbours::Sweep;
 
 /// How far ahead a pair is looked at (s): pairs that cannot meet within this time at
@@ -118,8 +118,15 @@ pub struct Settings {
 #[derive(Debug, Clone, Copy)]
 struct Row {
     i: usize,
+    /// The other vehicle; `i` itself for a fence row (one vehicle only).
     j: usize,
     row: PairRow,
+}
+
+impl Row {
+    fn single(&self) -> bool {
+        self.i == self.j
+    }
 }
 
 /// The filter, with its buffers.
@@ -136,11 +143,15 @@ impl SafetyFilter {
     /// Filters the horizontal commands `commands` (m/s², ENU; one per agent) in place.
     /// Agents and commands have the same length (a shorter slice is filtered as far as
     /// both go).
+    ///
+    /// With a fence (and its margin, m), every vehicle the filter commands whose margin
+    /// is within the look-ahead also gets a row against the fence's horizontal boundary.
     pub fn filter(
         &mut self,
         settings: &Settings,
         agents: &[Agent],
         commands: &mut [Vector2<f64>],
+        fence: Option<(&Fence, f64)>,
     ) -> Report {
         let n = agents.len().min(commands.len());
         let sep = settings.separation;
@@ -192,6 +203,33 @@ impl SafetyFilter {
             }
             self.rows.push(Row { i, j, row });
         }
+        if let Some((fence, margin_m)) = fence {
+            for (i, a) in agents[..n].iter().enumerate() {
+                let Some(side) = a.side.filter(|_| a.controlled) else {
+                    continue;
+                };
+                if fence.horizontal_margin_m(side.pos_m.xy()) > radius + margin_m {
+                    continue;
+                }
+                let Some(row) = fence::fence_row(
+                    fence,
+                    margin_m,
+                    &side,
+                    braking(a),
+                    settings.age_s,
+                    sep.gamma,
+                ) else {
+                    continue;
+                };
+                if !row.b.is_finite() || row.b <= -limit(a) - 1.0 {
+                    continue;
+                }
+                if row.a.dot(&(commands[i] - a.drift_mps2)) < row.b {
+                    broken = true;
+                }
+                self.rows.push(Row { i, j: i, row });
+            }
+        }
         if !broken {
             return Report {
                 outcome: Outcome::Untouched,
@@ -200,7 +238,7 @@ impl SafetyFilter {
                 closest,
             };
         }
-        self.index_variables(agents, n);
+        self.index_variables(agents, n, settings.keep_weighted_sum);
         let outcome = match self.solve(settings, agents, commands, true) {
             Ok(relaxed) => Outcome::Filtered {
                 sum_kept: settings.keep_weighted_sum,
@@ -234,7 +272,12 @@ impl SafetyFilter {
                         Vector2::zeros()
                     }
                 };
-                r.row.a.dot(&(net(r.i) - net(r.j))) - r.row.b < ACTIVE_SLACK_MPS2
+                let other = if r.single() {
+                    Vector2::zeros()
+                } else {
+                    net(r.j)
+                };
+                r.row.a.dot(&(net(r.i) - other)) - r.row.b < ACTIVE_SLACK_MPS2
             })
             .count();
         Report {
@@ -250,21 +293,25 @@ impl SafetyFilter {
     pub fn close_pairs(&self, distance_m: f64) -> impl Iterator<Item = (usize, usize, f64)> + '_ {
         self.rows
             .iter()
-            .filter(move |r| r.row.distance_m < distance_m)
+            .filter(move |r| !r.single() && r.row.distance_m < distance_m)
             .map(|r| (r.i, r.j, r.row.distance_m))
     }
 
     /// The controlled agents of the rows, each given a variable index.
-    fn index_variables(&mut self, agents: &[Agent], n: usize) {
+    ///
+    /// A one-vehicle row (the fence) changes `Σ wᵢuᵢ`, which only other vehicles can give
+    /// back: when the sum is kept, every vehicle the filter commands is then a variable.
+    fn index_variables(&mut self, agents: &[Agent], n: usize, keep_sum: bool) {
         self.var_of.clear();
         self.var_of.resize(n, None);
         self.vars.clear();
-        for r in &self.rows {
-            for k in [r.i, r.j] {
-                if agents[k].controlled && self.var_of[k].is_none() {
-                    self.var_of[k] = Some(self.vars.len());
-                    self.vars.push(k);
-                }
+        let everyone = keep_sum && self.rows.iter().any(Row::single);
+        let rows = self.rows.iter().flat_map(|r| [r.i, r.j]);
+        let all = (0..n).filter(|_| everyone);
+        for k in rows.chain(all) {
+            if agents[k].controlled && self.var_of[k].is_none() {
+                self.var_of[k] = Some(self.vars.len());
+                self.vars.push(k);
             }
         }
     }
@@ -317,9 +364,18 @@ impl SafetyFilter {
             // a·(netᵢ − netⱼ) + σ ≥ b  ⇔  −a·xᵢ + a·xⱼ − σ + s = −b − a·cᵢ + a·cⱼ, s ≥ 0.
             // A bound beyond what the two envelopes can give asks for the same thing as
             // one just beyond it (all of both discs): clipped, the problem stays scaled.
-            let reach = limit(&agents[r.i]) + limit(&agents[r.j]);
+            let reach = if r.single() {
+                limit(&agents[r.i])
+            } else {
+                limit(&agents[r.i]) + limit(&agents[r.j])
+            };
             let mut rhs = -r.row.b.min(reach + 1.0);
-            for (k, sign) in [(r.i, -1.0), (r.j, 1.0)] {
+            let sides: &[(usize, f64)] = if r.single() {
+                &[(r.i, -1.0)]
+            } else {
+                &[(r.i, -1.0), (r.j, 1.0)]
+            };
+            for &(k, sign) in sides {
                 if let Some(v) = self.var_of[k] {
                     for axis in 0..2 {
                         entries.push((b.len(), 2 * v + axis, sign * r.row.a[axis]));
@@ -417,10 +473,14 @@ impl SafetyFilter {
             Some(_) => commands[k] - agents[k].drift_mps2,
             None => Vector2::zeros(),
         };
-        let relaxed = self
-            .rows
-            .iter()
-            .any(|r| r.row.a.dot(&(net(r.i) - net(r.j))) < r.row.b - tolerance);
+        let relaxed = self.rows.iter().any(|r| {
+            let other = if r.single() {
+                Vector2::zeros()
+            } else {
+                net(r.j)
+            };
+            r.row.a.dot(&(net(r.i) - other)) < r.row.b - tolerance
+        });
         Ok(relaxed)
     }
 
@@ -437,7 +497,7 @@ impl SafetyFilter {
                 .map(|r| {
                     if r.i == k {
                         r.row.a
-                    } else if r.j == k {
+                    } else if r.j == k && !r.single() {
                         -r.row.a
                     } else {
                         Vector2::zeros()

@@ -76,7 +76,7 @@ fn two_vehicles_head_on_are_slowed_and_the_weighted_sum_is_kept() {
     let before = [Vector2::new(1.0, 0.0), Vector2::new(-1.0, 0.0)];
     let mut commands = before;
     let mut filter = SafetyFilter::default();
-    let report = filter.filter(&settings(true), &agents, &mut commands);
+    let report = filter.filter(&settings(true), &agents, &mut commands, None);
     assert_eq!(
         report.outcome,
         Outcome::Filtered {
@@ -104,7 +104,7 @@ fn vehicles_far_apart_are_untouched() {
     ];
     let mut commands = [Vector2::new(1.0, 2.0), Vector2::new(-3.0, 0.5)];
     let before = commands;
-    let report = SafetyFilter::default().filter(&settings(true), &agents, &mut commands);
+    let report = SafetyFilter::default().filter(&settings(true), &agents, &mut commands, None);
     assert_eq!(report.outcome, Outcome::Untouched);
     assert_eq!(commands, before);
 }
@@ -124,7 +124,7 @@ fn a_pair_too_fast_to_stop_brakes_as_hard_as_the_envelopes_allow() {
     }
     let mut commands = [Vector2::new(0.3, 0.0), Vector2::new(-0.3, 0.0)];
     let mut filter = SafetyFilter::default();
-    let report = filter.filter(&settings(true), &agents, &mut commands);
+    let report = filter.filter(&settings(true), &agents, &mut commands, None);
     assert_eq!(
         report.outcome,
         Outcome::Filtered {
@@ -189,7 +189,7 @@ fn random_swarms_meet_every_row_keep_the_sum_and_stay_finite() {
         let mut commands = before.clone();
         let keep = case % 3 != 0;
         let s = settings(keep);
-        let report = filter.filter(&s, &agents, &mut commands);
+        let report = filter.filter(&s, &agents, &mut commands, None);
         assert!(commands.iter().all(|c| c.iter().all(|v| v.is_finite())));
         match report.outcome {
             Outcome::Untouched => assert_eq!(commands, before),
@@ -225,4 +225,45 @@ fn random_swarms_meet_every_row_keep_the_sum_and_stay_finite() {
     assert!(filtered > 100 && kept > 50, "{filtered} {kept}");
     // Slack makes every problem feasible: the solver never fails.
     assert_eq!(fallbacks, 0);
+}
+
+#[test]
+fn a_vehicle_heading_out_of_the_fence_is_turned_in_and_the_sum_is_kept() {
+    // A circle of radius 100 m, margin 5 m. Vehicle 0 is 12 m inside, flying outward at
+    // 6 m/s (braking 2 m/s² needs 9 m): its command pushing outward breaks its fence row.
+    // Vehicle 1, far inside, takes up the weighted sum.
+    let fence = Fence {
+        shape: FenceShape::Circle {
+            centre_m: Vector2::zeros(),
+            radius_m: 100.0,
+        },
+        min_altitude_m: 0.0,
+        max_altitude_m: 100.0,
+    };
+    let agents = [
+        agent([88.0, 0.0, 10.0], [6.0, 0.0, 0.0], 1.0),
+        agent([0.0, 0.0, 10.0], [0.0, 0.0, 0.0], 2.0),
+    ];
+    let before = [Vector2::new(1.0, 0.0), Vector2::new(0.0, 0.0)];
+    let mut commands = before;
+    let s = settings(true);
+    let report = SafetyFilter::default().filter(&s, &agents, &mut commands, Some((&fence, 5.0)));
+    assert_eq!(
+        report.outcome,
+        Outcome::Filtered {
+            sum_kept: true,
+            relaxed: false
+        },
+        "{report:?}"
+    );
+    let row = fence_row(&fence, 5.0, &agents[0].side.unwrap(), 2.0, s.age_s, 1.0).unwrap();
+    assert!(
+        row.a.dot(&commands[0]) >= row.b - 1e-9,
+        "{commands:?} {row:?}"
+    );
+    assert!(commands[0].x < before[0].x, "turned in: {commands:?}");
+    let delta: Vector2<f64> = (0..2)
+        .map(|k| agents[k].weight * (commands[k] - before[k]))
+        .sum();
+    assert!(delta.norm() < 1e-9, "{delta}");
 }

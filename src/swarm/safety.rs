@@ -94,9 +94,12 @@ impl Swarm {
             keep_weighted_sum: consensus,
             time_limit_s: 0.5 * period_s,
         };
-        let report = self
-            .safety_filter
-            .filter(&settings, &self.safety_agents, &mut self.safety_xy);
+        let report = self.safety_filter.filter(
+            &settings,
+            &self.safety_agents,
+            &mut self.safety_xy,
+            self.setup.fence.as_ref().map(|f| (&f.fence, f.margin_m)),
+        );
         let stats = &mut self.safety_stats;
         stats.ticks += 1;
         stats.active_ticks += u64::from(report.active > 0);
