@@ -10,6 +10,8 @@
 //!   bound, gain design, final velocity, achievable-velocity planner, per-agent law.
 //! - [`control`]: pure: altitude loop, actuator envelope and saturation, acceleration →
 //!   attitude quaternion and normalised thrust, frame conversions.
+//! - [`safety`]: pure: the pairwise barrier rows, the neighbour sweep, the fence and the
+//!   weighted QP that keeps vehicles apart and inside the fence.
 //! - [`frame`]: the common frame built from each vehicle's geodetic origin (pure).
 //! - [`link`]: the MAVLink edge: framing and message ↔ domain conversions.
 //! - [`vehicle`]: sans-IO machine for one vehicle: PX4 offboard handshake, link health.
