@@ -113,27 +113,45 @@ pub fn pair_row(
     let curvature = (dv.norm_squared() - s * s).max(0.0) / distance;
     // The vertical accelerations are given: their share of nᵀΔũ moves to the bound.
     let vertical = n.z * sep.vertical_scale() * (i.accel_z_mps2 - j.accel_z_mps2);
-    let a = Vector2::new(n.x, n.y);
-    if room < INSIDE_M {
+    Some(barrier_row(
+        Vector2::new(n.x, n.y),
+        (s, distance, room),
+        a_brake,
+        sep.gamma,
+        curvature + vertical,
+    ))
+}
+
+/// The row `aᵀu ≥ b` of a barrier `h = s + √(2A·room)` whose derivative is
+/// `aᵀu + known + A·s/√(2A·room)` (`known`: what the commands do not change, m/s²), from
+/// the closing rate `s`, the `distance` and the `room` left; inside (`room < INSIDE_M`)
+/// a closing `s` must turn at the full authority `A`, any other must not close.
+pub(super) fn barrier_row(
+    a: Vector2<f64>,
+    (s, distance_m, room_m): (f64, f64, f64),
+    a_brake: f64,
+    gamma: f64,
+    known: f64,
+) -> PairRow {
+    if room_m < INSIDE_M {
         let push = if s < 0.0 { a_brake } else { 0.0 };
-        return Some(PairRow {
+        return PairRow {
             a,
-            b: push - curvature - vertical,
+            b: push - known,
             h_mps: s,
-            distance_m: distance,
-            room_m: room,
-        });
+            distance_m,
+            room_m,
+        };
     }
-    let root = (2.0 * a_brake * room).sqrt();
+    let root = (2.0 * a_brake * room_m).sqrt();
     let h = s + root;
-    let b = -sep.gamma * h * h * h - curvature - a_brake * s / root - vertical;
-    Some(PairRow {
+    PairRow {
         a,
-        b,
+        b: -gamma * h * h * h - known - a_brake * s / root,
         h_mps: h,
-        distance_m: distance,
-        room_m: room,
-    })
+        distance_m,
+        room_m,
+    }
 }
 
 #[cfg(test)]

@@ -9,7 +9,7 @@
 
 use nalgebra::{Vector2, Vector3};
 
-use super::barrier::{INSIDE_M, PairRow, Side};
+use super::barrier::{PairRow, Side, barrier_row};
 
 /// The horizontal shape of the fence.
 #[derive(Debug, Clone, PartialEq)]
@@ -165,25 +165,13 @@ pub fn fence_row(
     let d = margin_m + v.norm() * age_s + 0.5 * braking_mps2 * age_s * age_s;
     let room = m - d;
     let curvature = radius.map_or(0.0, |r| (v.norm_squared() - s * s).max(0.0) / r);
-    if room < INSIDE_M {
-        let push = if s < 0.0 { braking_mps2 } else { 0.0 };
-        return Some(PairRow {
-            a: inward,
-            b: push + curvature,
-            h_mps: s,
-            distance_m: m,
-            room_m: room,
-        });
-    }
-    let root = (2.0 * braking_mps2 * room).sqrt();
-    let h = s + root;
-    Some(PairRow {
-        a: inward,
-        b: -gamma * h * h * h + curvature - braking_mps2 * s / root,
-        h_mps: h,
-        distance_m: m,
-        room_m: room,
-    })
+    Some(barrier_row(
+        inward,
+        (s, m, room),
+        braking_mps2,
+        gamma,
+        -curvature,
+    ))
 }
 
 /// Whether the polygon's edges cross each other anywhere but at shared vertices of

@@ -127,6 +127,26 @@ impl Row {
     fn single(&self) -> bool {
         self.i == self.j
     }
+
+    /// `aᵀ(netᵢ − netⱼ)` for the commands (`netⱼ` left out of a fence row).
+    fn lhs(&self, agents: &[Agent], commands: &[Vector2<f64>]) -> f64 {
+        let other = if self.single() {
+            Vector2::zeros()
+        } else {
+            net(agents, commands, self.j)
+        };
+        self.row.a.dot(&(net(agents, commands, self.i) - other))
+    }
+}
+
+/// Agent `k`'s net acceleration under its command (zero for one the filter does not
+/// command: its acceleration is not known, and taken as none).
+fn net(agents: &[Agent], commands: &[Vector2<f64>], k: usize) -> Vector2<f64> {
+    if agents[k].controlled {
+        commands[k] - agents[k].drift_mps2
+    } else {
+        Vector2::zeros()
+    }
 }
 
 /// The filter, with its buffers.
@@ -191,17 +211,9 @@ impl SafetyFilter {
             if !row.b.is_finite() || row.b <= -reach - 1.0 {
                 continue;
             }
-            let net = |k: usize| {
-                if agents[k].controlled {
-                    commands[k] - agents[k].drift_mps2
-                } else {
-                    Vector2::zeros()
-                }
-            };
-            if row.a.dot(&(net(i) - net(j))) < row.b {
-                broken = true;
-            }
-            self.rows.push(Row { i, j, row });
+            let row = Row { i, j, row };
+            broken |= row.lhs(agents, commands) < row.row.b;
+            self.rows.push(row);
         }
         if let Some((fence, margin_m)) = fence {
             for (i, a) in agents[..n].iter().enumerate() {
@@ -224,10 +236,9 @@ impl SafetyFilter {
                 if !row.b.is_finite() || row.b <= -limit(a) - 1.0 {
                     continue;
                 }
-                if row.a.dot(&(commands[i] - a.drift_mps2)) < row.b {
-                    broken = true;
-                }
-                self.rows.push(Row { i, j: i, row });
+                let row = Row { i, j: i, row };
+                broken |= row.lhs(agents, commands) < row.row.b;
+                self.rows.push(row);
             }
         }
         if !broken {
@@ -264,21 +275,7 @@ impl SafetyFilter {
         let active = self
             .rows
             .iter()
-            .filter(|r| {
-                let net = |k: usize| {
-                    if agents[k].controlled {
-                        commands[k] - agents[k].drift_mps2
-                    } else {
-                        Vector2::zeros()
-                    }
-                };
-                let other = if r.single() {
-                    Vector2::zeros()
-                } else {
-                    net(r.j)
-                };
-                r.row.a.dot(&(net(r.i) - other)) - r.row.b < ACTIVE_SLACK_MPS2
-            })
+            .filter(|r| r.lhs(agents, commands) - r.row.b < ACTIVE_SLACK_MPS2)
             .count();
         Report {
             outcome,
@@ -469,19 +466,11 @@ impl SafetyFilter {
         }
         // A row is relaxed when the commands miss it by more than the solver's tolerance.
         let tolerance = 1e-6 * (1.0 + b.iter().fold(0.0f64, |acc, v| acc.max(v.abs())));
-        let net = |k: usize| match self.var_of[k] {
-            Some(_) => commands[k] - agents[k].drift_mps2,
-            None => Vector2::zeros(),
-        };
-        let relaxed = self.rows.iter().any(|r| {
-            let other = if r.single() {
-                Vector2::zeros()
-            } else {
-                net(r.j)
-            };
-            r.row.a.dot(&(net(r.i) - other)) < r.row.b - tolerance
-        });
-        Ok(relaxed)
+        // (Every commanded vehicle of a row is a variable, so `lhs` reads the solution.)
+        Ok(self
+            .rows
+            .iter()
+            .any(|r| r.lhs(agents, commands) < r.row.b - tolerance))
     }
 
     /// The fallback, the manoeuvre the barrier counts on: every vehicle of the problem
