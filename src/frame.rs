@@ -38,6 +38,12 @@ impl CommonFrame {
         MapProjection::new(self.reference).project(point)
     }
 
+    /// The geodetic point at a NED offset (m) from the reference: the inverse of
+    /// [`CommonFrame::offset_ned_m`] (altitude from the down offset).
+    pub fn geodetic_of_ned_m(&self, offset_ned_m: &Vector3<f64>) -> Geodetic {
+        MapProjection::new(self.reference).reproject(offset_ned_m)
+    }
+
     /// A vehicle's position in the common frame (NED, m) from its origin and its local
     /// NED position.
     pub fn to_common_ned(&self, origin: &Geodetic, local_ned_m: &Vector3<f64>) -> Vector3<f64> {

@@ -68,4 +68,33 @@ fn a_swarm_that_would_leave_its_fence_holds_inside_it() {
         "{}",
         event.text
     );
+    // Every vehicle was given the fence before it was armed and holds it as one circle,
+    // and its own geofence never had to act: the coordinator stopped the swarm first.
+    for v in run.vehicles() {
+        assert_eq!(v.geofence().items().len(), 1);
+        assert_eq!(v.geofence().shapes(), 1);
+        assert!(!v.geofence().breached());
+        assert!(!v.status().failsafe);
+    }
+    let uploads = run
+        .swarm()
+        .events()
+        .iter()
+        .filter(|e| e.text == "holds the fence (1 fence item)")
+        .count();
+    assert_eq!(uploads, run.vehicles().len());
+}
+
+#[test]
+fn with_upload_off_the_vehicles_are_not_given_the_fence() {
+    let config = paper_sim1_with(
+        "[fence]\nkind = \"circle\"\ncentre_enu_m = [0.0, 0.0]\nradius_m = 400.0\n\
+         min_altitude_m = -50.0\nmax_altitude_m = 100.0\nupload = false\n",
+    );
+    let mut run = Lockstep::from_config(&config).unwrap();
+    run.run_until(SimTime::from_millis(5_000), |_| {});
+    assert!(matches!(run.swarm().phase(), SwarmPhase::Consensus(_)));
+    for v in run.vehicles() {
+        assert!(v.geofence().items().is_empty());
+    }
 }

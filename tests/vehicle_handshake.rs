@@ -600,3 +600,125 @@ fn a_vehicle_whose_autopilot_is_not_px4_is_refused_at_discovery() {
         assert!(matches!(msg, MavMessage::HEARTBEAT(_)), "{msg:?}");
     }
 }
+
+/// A link to vehicle 1 that gives it `fence` (ENU about the emulator's world reference,
+/// where vehicle 1 starts).
+fn fenced(fence: &ringswarm::safety::Fence) -> LinkConfig {
+    let frame = ringswarm::frame::CommonFrame::new(World::default().reference);
+    let plan = ringswarm::vehicle::FencePlan::new(fence, &frame).expect("a plan");
+    LinkConfig {
+        fence: Some(std::sync::Arc::new(plan)),
+        ..LinkConfig::new(1)
+    }
+}
+
+/// A regular polygon of `n` vertices and radius `r_m` about the start.
+fn polygon(n: usize, r_m: f64) -> ringswarm::safety::Fence {
+    let vertices_m = (0..n)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / n as f64;
+            nalgebra::Vector2::new(r_m * a.cos(), r_m * a.sin())
+        })
+        .collect();
+    ringswarm::safety::Fence {
+        shape: ringswarm::safety::FenceShape::Polygon { vertices_m },
+        min_altitude_m: 2.0,
+        max_altitude_m: 60.0,
+    }
+}
+
+#[test]
+fn the_fence_is_given_to_the_vehicle_before_it_is_armed() {
+    let mut h = Harness::with_config(fenced(&polygon(4, 100.0)), 1);
+    h.run(Duration::from_secs(3), &mut deliver_all);
+    assert_eq!(h.link.phase(), Phase::Flying);
+    let uploaded = h
+        .events
+        .iter()
+        .position(|(_, e)| *e == LinkEvent::FenceUploaded { items: 4 })
+        .expect("the fence acknowledged");
+    let armed = h
+        .events
+        .iter()
+        .position(|(_, e)| *e == LinkEvent::Armed)
+        .expect("armed");
+    assert!(uploaded < armed, "{:?}", h.events);
+    // The vehicle holds one polygon of the four vertices, each where the plan put it.
+    let fence = h.vehicle.geofence();
+    assert_eq!(fence.items().len(), 4);
+    assert_eq!(fence.shapes(), 1);
+    assert!(!fence.breached());
+    let frame = ringswarm::frame::CommonFrame::new(World::default().reference);
+    let first = fence.items()[0];
+    let (lat, lon) = first.lat_lon_deg();
+    let back = frame.offset_ned_m(&ringswarm::frame::Geodetic {
+        lat_deg: lat,
+        lon_deg: lon,
+        alt_amsl_m: World::default().reference.alt_amsl_m,
+    });
+    // Vertex 0 is 100 m east (ENU x): NED (0, 100), to the 1e-7° rounding (≤ 1.1 cm).
+    assert!(
+        back.x.abs() < 0.012 && (back.y - 100.0).abs() < 0.012,
+        "{back:?}"
+    );
+    assert_eq!((first.command, first.params[0]), (5001, 4.0));
+}
+
+#[test]
+fn a_lost_fence_request_is_asked_again_by_the_vehicle() {
+    let mut h = Harness::with_config(fenced(&polygon(5, 80.0)), 1);
+    let mut dropped = 0;
+    let mut lose_two = |to_vehicle: bool, m: &MavMessage| {
+        if !to_vehicle
+            && matches!(m, MavMessage::MISSION_REQUEST_INT(r) if r.seq == 2)
+            && dropped < 2
+        {
+            dropped += 1;
+            return false;
+        }
+        true
+    };
+    h.run(Duration::from_secs(4), &mut lose_two);
+    assert_eq!(dropped, 2);
+    assert_eq!(h.link.phase(), Phase::Flying);
+    assert_eq!(h.vehicle.geofence().items().len(), 5);
+}
+
+#[test]
+fn a_vehicle_that_refuses_the_fence_is_never_armed_and_the_reason_is_named() {
+    // 70 vertices: more than the 64 fence points PX4 stores.
+    let mut h = Harness::with_config(fenced(&polygon(70, 100.0)), 1);
+    h.run(Duration::from_secs(4), &mut deliver_all);
+    assert_eq!(h.link.phase(), Phase::Failed);
+    let reason = h.events.iter().find_map(|(_, e)| match e {
+        LinkEvent::Failed(r) => Some(r.clone()),
+        _ => None,
+    });
+    assert_eq!(
+        reason.as_deref(),
+        Some("vehicle 1: the vehicle refused the fence: MISSION_ACK MAV_MISSION_NO_SPACE")
+    );
+    assert!(!h.vehicle.status().armed);
+}
+
+#[test]
+fn a_vehicle_that_never_answers_the_fence_upload_is_not_armed() {
+    let mut h = Harness::with_config(fenced(&polygon(4, 100.0)), 1);
+    let mut no_mission = |to_vehicle: bool, m: &MavMessage| {
+        !(to_vehicle && matches!(m, MavMessage::MISSION_COUNT(_)))
+    };
+    h.run(Duration::from_secs(6), &mut no_mission);
+    assert_eq!(h.link.phase(), Phase::Failed);
+    let reason = h.events.iter().find_map(|(_, e)| match e {
+        LinkEvent::Failed(r) => Some(r.clone()),
+        _ => None,
+    });
+    // MISSION_COUNT at discovery and every second after: four sends, then given up.
+    assert_eq!(
+        reason.as_deref(),
+        Some(
+            "vehicle 1: the vehicle did not answer the fence upload (MISSION_COUNT 4 sent 4 times, 1000 ms apart)"
+        )
+    );
+    assert!(!h.vehicle.status().armed);
+}

@@ -100,6 +100,11 @@ pub struct FenceSection {
     /// What the swarm does: `hold` (brake and hover; default) or `land`.
     #[serde(default)]
     pub action: crate::swarm::LossPolicy,
+    /// Give the fence to every vehicle over the mission protocol (mission type FENCE)
+    /// before it is armed, so that its own geofence backs the coordinator's (default
+    /// true). A vehicle that refuses it is not flown.
+    #[serde(default = "default_true")]
+    pub upload: bool,
 }
 
 fn default_fence_margin_m() -> f64 {

@@ -206,6 +206,17 @@ impl Config {
             return Err("invalid configuration".to_owned());
         };
         let s = &self.swarm;
+        let frame = CommonFrame::new(Geodetic {
+            lat_deg: f.latitude_deg,
+            lon_deg: f.longitude_deg,
+            alt_amsl_m: f.altitude_amsl_m,
+        });
+        let fence_plan = match (&fence, &self.fence) {
+            (Some(setup), Some(section)) if section.upload => Some(std::sync::Arc::new(
+                crate::vehicle::FencePlan::new(&setup.fence, &frame)?,
+            )),
+            _ => None,
+        };
         Ok(SwarmSetup {
             ring,
             gains,
@@ -217,11 +228,7 @@ impl Config {
             envelope,
             saturation: e.saturation,
             control_interval: timing.control_interval,
-            frame: CommonFrame::new(Geodetic {
-                lat_deg: f.latitude_deg,
-                lon_deg: f.longitude_deg,
-                alt_amsl_m: f.altitude_amsl_m,
-            }),
+            frame,
             links: self
                 .vehicle
                 .iter()
@@ -234,6 +241,7 @@ impl Config {
                     retake_offboard: s.retake_offboard,
                     state_timeout: timing.state_timeout,
                     network: v.network.clone(),
+                    fence: fence_plan.clone(),
                     ..LinkConfig::new(v.system_id)
                 })
                 .collect(),

@@ -3,14 +3,15 @@
 //! `None`.
 
 use mavlink::dialects::common::{
-    AttitudeTargetTypemask, HEARTBEAT_DATA, MavAutopilot, MavFrame, MavMessage, MavModeFlag,
-    MavState, MavType, PositionTargetTypemask, SET_ATTITUDE_TARGET_DATA,
-    SET_POSITION_TARGET_LOCAL_NED_DATA,
+    AttitudeTargetTypemask, HEARTBEAT_DATA, MISSION_COUNT_DATA, MISSION_ITEM_INT_DATA,
+    MavAutopilot, MavCmd, MavFrame, MavMessage, MavMissionType, MavModeFlag, MavState, MavType,
+    PositionTargetTypemask, SET_ATTITUDE_TARGET_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA,
 };
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
 use crate::control::AttitudeThrust;
 use crate::frame::Geodetic;
+use crate::vehicle::{FenceItem, FenceItemKind};
 
 /// SET_ATTITUDE_TARGET with attitude and thrust, body rates ignored (type_mask 7).
 pub fn set_attitude_target(
@@ -68,6 +69,74 @@ pub fn set_position_target_acceleration(
         target_component: 1,
         coordinate_frame: MavFrame::MAV_FRAME_LOCAL_NED,
     })
+}
+
+/// MISSION_COUNT for a fence (mission type FENCE): `count` items follow on request.
+pub fn fence_count(target_system: u8, count: u16) -> MavMessage {
+    MavMessage::MISSION_COUNT(MISSION_COUNT_DATA {
+        count,
+        target_system,
+        target_component: 1,
+        mission_type: MavMissionType::MAV_MISSION_TYPE_FENCE,
+        opaque_id: 0,
+    })
+}
+
+/// MISSION_ITEM_INT number `seq` of a fence: MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+/// (5001, param1 the vertex count) or MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION (5003, param1
+/// the radius in m), latitude and longitude in degrees × 10⁷, frame GLOBAL (what
+/// QGroundControl sends; fence items carry no altitude).
+pub fn fence_item(target_system: u8, seq: u16, item: &FenceItem) -> MavMessage {
+    let (command, param1) = match item.kind {
+        FenceItemKind::PolygonVertex { vertex_count } => (
+            MavCmd::MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+            f32::from(vertex_count),
+        ),
+        FenceItemKind::Circle { radius_m } => {
+            (MavCmd::MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, radius_m as f32)
+        }
+    };
+    MavMessage::MISSION_ITEM_INT(MISSION_ITEM_INT_DATA {
+        param1,
+        param2: 0.0,
+        param3: 0.0,
+        param4: 0.0,
+        x: (item.lat_deg * 1e7).round() as i32,
+        y: (item.lon_deg * 1e7).round() as i32,
+        z: 0.0,
+        seq,
+        command,
+        target_system,
+        target_component: 1,
+        frame: MavFrame::MAV_FRAME_GLOBAL,
+        current: 0,
+        autocontinue: 0,
+        mission_type: MavMissionType::MAV_MISSION_TYPE_FENCE,
+    })
+}
+
+/// MAV_MISSION_RESULT's name.
+pub fn mission_result_name(result: u8) -> String {
+    let name = match result {
+        0 => "MAV_MISSION_ACCEPTED",
+        1 => "MAV_MISSION_ERROR",
+        2 => "MAV_MISSION_UNSUPPORTED_FRAME",
+        3 => "MAV_MISSION_UNSUPPORTED",
+        4 => "MAV_MISSION_NO_SPACE",
+        5 => "MAV_MISSION_INVALID",
+        6 => "MAV_MISSION_INVALID_PARAM1",
+        7 => "MAV_MISSION_INVALID_PARAM2",
+        8 => "MAV_MISSION_INVALID_PARAM3",
+        9 => "MAV_MISSION_INVALID_PARAM4",
+        10 => "MAV_MISSION_INVALID_PARAM5_X",
+        11 => "MAV_MISSION_INVALID_PARAM6_Y",
+        12 => "MAV_MISSION_INVALID_PARAM7",
+        13 => "MAV_MISSION_INVALID_SEQUENCE",
+        14 => "MAV_MISSION_DENIED",
+        15 => "MAV_MISSION_OPERATION_CANCELLED",
+        other => return format!("MAV_MISSION_RESULT {other}"),
+    };
+    name.to_owned()
 }
 
 /// The ground station's HEARTBEAT: type GCS, autopilot INVALID, no mode, state ACTIVE
@@ -132,6 +201,20 @@ pub enum Inbound {
         /// The flags as sent (ESTIMATOR_STATUS_FLAGS bits).
         flags: u16,
     },
+    /// MISSION_REQUEST_INT (or the legacy MISSION_REQUEST) in a fence upload.
+    FenceRequest {
+        /// The item asked for.
+        seq: u16,
+        /// The system it is addressed to.
+        target_system: u8,
+    },
+    /// MISSION_ACK of a fence upload.
+    FenceAck {
+        /// MAV_MISSION_RESULT value.
+        result: u8,
+        /// The system it is addressed to.
+        target_system: u8,
+    },
     /// COMMAND_ACK.
     Ack {
         /// MAV_CMD id.
@@ -195,6 +278,29 @@ pub fn inbound(msg: &MavMessage) -> Option<Inbound> {
             Some(Inbound::Estimator {
                 usable: flags & ESTIMATE_NEEDED == ESTIMATE_NEEDED,
                 flags,
+            })
+        }
+        MavMessage::MISSION_REQUEST_INT(r)
+            if r.mission_type == MavMissionType::MAV_MISSION_TYPE_FENCE =>
+        {
+            Some(Inbound::FenceRequest {
+                seq: r.seq,
+                target_system: r.target_system,
+            })
+        }
+        #[allow(deprecated)]
+        MavMessage::MISSION_REQUEST(r)
+            if r.mission_type == MavMissionType::MAV_MISSION_TYPE_FENCE =>
+        {
+            Some(Inbound::FenceRequest {
+                seq: r.seq,
+                target_system: r.target_system,
+            })
+        }
+        MavMessage::MISSION_ACK(a) if a.mission_type == MavMissionType::MAV_MISSION_TYPE_FENCE => {
+            Some(Inbound::FenceAck {
+                result: a.mavtype as u8,
+                target_system: a.target_system,
             })
         }
         MavMessage::COMMAND_ACK(a) => Some(Inbound::Ack {

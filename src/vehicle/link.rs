@@ -9,13 +9,19 @@ use mavlink::dialects::common::{MavCmd, MavMessage};
 use ringswarm_wire::codec::FramePool;
 use ringswarm_wire::time::SimTime;
 
+use super::fence_upload::{FenceUpload, UploadAnswer, UploadSend};
 use super::telemetry::{OriginVerdict, PositionVerdict, TelemetryGate};
 use super::{LinkConfig, LinkEvent, Phase, Setpoint, VehicleState};
 
 use crate::link::{
-    AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, frames, gcs_heartbeat, inbound,
-    set_attitude_target, set_position_target_acceleration,
+    AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, fence_count, fence_item, frames,
+    gcs_heartbeat, inbound, mission_result_name, set_attitude_target,
+    set_position_target_acceleration,
 };
+
+/// How long the fence upload waits for the vehicle before it sends its last message
+/// again (PX4 asks again for a missing item every 250 ms by itself).
+const FENCE_RETRY: Duration = Duration::from_secs(1);
 
 mod commands;
 mod signer;
@@ -65,6 +71,8 @@ pub struct VehicleLink {
     refusing: bool,
     refused_reports: u64,
     next_origin: Option<crate::frame::Geodetic>,
+    /// The fence upload, when the link has a fence to give.
+    fence: Option<FenceUpload>,
 }
 
 impl VehicleLink {
@@ -72,7 +80,12 @@ impl VehicleLink {
     /// takes over (normally level at hover throttle, or zero acceleration).
     pub fn new(cfg: LinkConfig, idle: impl Into<Setpoint>) -> Self {
         let encoder = Encoder::new(cfg.own_ids.0, cfg.own_ids.1);
+        let fence = cfg
+            .fence
+            .clone()
+            .map(|plan| FenceUpload::new(plan, FENCE_RETRY, cfg.max_attempts));
         Self {
+            fence,
             signer: cfg.signing.as_ref().map(Signer::new),
             cfg,
             phase: Phase::Discovering,
@@ -236,8 +249,14 @@ impl VehicleLink {
         if let Some(p) = self.pending {
             next = next.min(p.deadline);
         }
+        if let Some(fence) = &self.fence
+            && matches!(self.phase, Phase::Streaming(_))
+        {
+            next = next.min(fence.poll_timeout());
+        }
         if let Phase::Streaming(since) = self.phase
             && self.state.origin.is_some()
+            && self.fence_ready()
         {
             next = next.min(since + self.cfg.pre_stream);
         }
@@ -458,7 +477,69 @@ impl VehicleLink {
                 }
             }
             Inbound::Ack { command, result } => self.on_ack(now, command, result),
+            Inbound::FenceRequest { seq, target_system } => {
+                if self.fence_answer_is_ours(target_system) {
+                    let answer = self.fence.as_mut().map(|f| f.on_request(now, seq));
+                    self.on_fence_answer(answer);
+                }
+            }
+            Inbound::FenceAck {
+                result,
+                target_system,
+            } => {
+                if self.fence_answer_is_ours(target_system) {
+                    let name = mission_result_name(result);
+                    let answer = self.fence.as_mut().map(|f| f.on_ack(result, &name));
+                    self.on_fence_answer(answer);
+                }
+            }
         }
+    }
+
+    /// A fence answer counts while the handshake streams, addressed to us (or to all).
+    fn fence_answer_is_ours(&self, target_system: u8) -> bool {
+        matches!(self.phase, Phase::Streaming(_))
+            && (target_system == 0 || target_system == self.cfg.own_ids.0)
+    }
+
+    /// Starts (or starts over) the fence upload if the link has one not yet taken.
+    pub(super) fn start_fence_upload(&mut self, now: SimTime) {
+        if let Some(send) = self.fence.as_mut().and_then(|f| f.start(now)) {
+            self.send_fence(send);
+        }
+    }
+
+    fn send_fence(&mut self, send: UploadSend) {
+        let target = self.cfg.system_id;
+        let msg = match send {
+            UploadSend::Count(n) => fence_count(target, n),
+            UploadSend::Item { seq, item } => fence_item(target, seq, &item),
+        };
+        self.queue(&msg);
+    }
+
+    fn on_fence_answer(&mut self, answer: Option<UploadAnswer>) {
+        match answer {
+            Some(UploadAnswer::Send(send)) => self.send_fence(send),
+            Some(UploadAnswer::Done) => {
+                let items = self.fence.as_ref().map_or(0, FenceUpload::len);
+                self.events.push_back(LinkEvent::FenceUploaded { items });
+            }
+            Some(UploadAnswer::Failed(why)) => {
+                // Not armed without the fence the configuration asks it to hold.
+                self.phase = Phase::Failed;
+                self.pending = None;
+                let reason = format!("vehicle {}: {why}", self.cfg.system_id);
+                self.events.push_back(LinkEvent::Failed(reason));
+            }
+            Some(UploadAnswer::Ignored) | None => {}
+        }
+    }
+
+    /// Whether the vehicle may be armed as far as the fence goes: no fence to give, or
+    /// the vehicle holds it.
+    fn fence_ready(&self) -> bool {
+        self.fence.as_ref().is_none_or(FenceUpload::done)
     }
 
     /// A vehicle in the Hold we handed it to (to be taken back when fresh) is streamed to
@@ -547,9 +628,14 @@ impl VehicleLink {
         self.take_back_if_usable(now);
         // Arm and take OFFBOARD only once the origin is known: without it the swarm
         // cannot place the vehicle, and would hand it to its Hold on the first tick.
+        if matches!(self.phase, Phase::Streaming(_)) {
+            let answer = self.fence.as_mut().map(|f| f.handle_timeout(now));
+            self.on_fence_answer(answer);
+        }
         if let Phase::Streaming(since) = self.phase
             && now - since >= self.cfg.pre_stream
             && self.state.origin.is_some()
+            && self.fence_ready()
         {
             if self.state.armed {
                 self.request_offboard(now)

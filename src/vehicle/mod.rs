@@ -42,12 +42,17 @@
 //! [`telemetry::TelemetryGate`] first: what is non-finite, implausible or jumps is refused,
 //! named in an event, and never reaches the swarm.
 
+mod fence_upload;
 mod link;
 pub mod telemetry;
 
+pub use fence_upload::{
+    FenceItem, FenceItemKind, FencePlan, FenceUpload, UploadAnswer, UploadSend, UploadState,
+};
 pub use link::VehicleLink;
 
 use std::fmt;
+use std::sync::Arc;
 use std::time::Duration;
 
 use nalgebra::{UnitQuaternion, Vector3};
@@ -112,6 +117,8 @@ pub struct LinkConfig {
     /// The MAVLink network the vehicle is reached on (system ids repeat across
     /// networks): part of its name in files.
     pub network: Option<String>,
+    /// The fence to give the vehicle before it is armed (mission type FENCE), if any.
+    pub fence: Option<Arc<FencePlan>>,
 }
 
 impl LinkConfig {
@@ -159,6 +166,7 @@ impl LinkConfig {
             state_timeout: Duration::from_millis(300),
             retake_offboard: false,
             signing: None,
+            fence: None,
         }
     }
 }
@@ -291,6 +299,11 @@ pub enum LinkEvent {
     },
     /// Handed to its own Hold mode, and why.
     HandedToHold(String),
+    /// The vehicle acknowledged the fence (this many items).
+    FenceUploaded {
+        /// Items uploaded.
+        items: usize,
+    },
     /// A frame from the vehicle failed the signing rules (reported once per link; the
     /// count is in [`crate::vehicle::VehicleLink::refused_frames`]).
     SigningRefused(String),
@@ -307,6 +320,7 @@ impl LinkEvent {
                 | Self::Flying
                 | Self::Recovered
                 | Self::EstimateGood { .. }
+                | Self::FenceUploaded { .. }
                 | Self::Landing
                 | Self::Landed
                 | Self::Disarmed
@@ -366,6 +380,10 @@ impl fmt::Display for LinkEvent {
                 "estimator reports a good position and velocity again (flags 0x{flags:03x})"
             ),
             Self::HandedToHold(why) => write!(f, "handed to its own Hold: {why}"),
+            Self::FenceUploaded { items } => {
+                let s = if *items == 1 { "" } else { "s" };
+                write!(f, "holds the fence ({items} fence item{s})")
+            }
             Self::SigningRefused(why) => write!(
                 f,
                 "frames refused by signing ({why}); is the vehicle provisioned with this key?"

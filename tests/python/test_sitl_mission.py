@@ -92,10 +92,11 @@ def recv(conn, kind, timeout=3.0, where=lambda m: True):
     return None
 
 
-def upload(conn, items, drop=()):
+def upload(conn, items, drop=(), mission_type=None):
     """Answers each MISSION_REQUEST_INT with its item (never those in `drop` the first
     time); returns (the requested sequence numbers, the final MISSION_ACK)."""
-    conn.mav.mission_count_send(1, 1, len(items), M.MAV_MISSION_TYPE_MISSION)
+    mission_type = M.MAV_MISSION_TYPE_MISSION if mission_type is None else mission_type
+    conn.mav.mission_count_send(1, 1, len(items), mission_type)
     asked, dropped = [], set()
     while True:
         m = recv(conn, ["MISSION_REQUEST_INT", "MISSION_ACK"], timeout=6.0)
@@ -108,17 +109,18 @@ def upload(conn, items, drop=()):
         conn.mav.send(items[m.seq])
 
 
-def download(conn):
-    conn.mav.mission_request_list_send(1, 1, M.MAV_MISSION_TYPE_MISSION)
-    count = recv(conn, "MISSION_COUNT")
+def download(conn, mission_type=None):
+    mission_type = M.MAV_MISSION_TYPE_MISSION if mission_type is None else mission_type
+    conn.mav.mission_request_list_send(1, 1, mission_type)
+    count = recv(conn, "MISSION_COUNT", where=lambda m: m.mission_type == mission_type)
     assert count is not None
     got = []
     for seq in range(count.count):
-        conn.mav.mission_request_int_send(1, 1, seq, M.MAV_MISSION_TYPE_MISSION)
+        conn.mav.mission_request_int_send(1, 1, seq, mission_type)
         m = recv(conn, "MISSION_ITEM_INT", where=lambda m, s=seq: m.seq == s)
         assert m is not None, f"item {seq}"
         got.append(m)
-    conn.mav.mission_ack_send(1, 1, M.MAV_MISSION_ACCEPTED, M.MAV_MISSION_TYPE_MISSION)
+    conn.mav.mission_ack_send(1, 1, M.MAV_MISSION_ACCEPTED, mission_type)
     return got
 
 

@@ -164,9 +164,21 @@ impl Vehicle {
         }
     }
 
-    /// PX4's arming checks that the emulator can fail: the mode must be able to run, and
-    /// with NAV_DLL_ACT set a ground station must be connected.
-    fn arming_allowed(&self, now: SimTime) -> bool {
+    /// PX4's arming checks that the emulator can fail: not breaching the geofence (with
+    /// GF_ACTION set), the mode must be able to run, and with NAV_DLL_ACT set a ground
+    /// station must be connected.
+    fn arming_allowed(&mut self, now: SimTime) -> bool {
+        if self.geofence_denies_arming() {
+            tracing::info!(
+                sysid = self.cfg.system_id,
+                "arming denied: geofence breached"
+            );
+            self.send_statustext(
+                mavlink::dialects::common::MavSeverity::MAV_SEVERITY_CRITICAL,
+                "Arming denied: Resolve system health failures first",
+            );
+            return false;
+        }
         if !self.can_run(now, self.mode) {
             tracing::info!(
                 sysid = self.cfg.system_id,

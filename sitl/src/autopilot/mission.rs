@@ -160,7 +160,7 @@ impl MissionStore {
 }
 
 /// A checksum of the plan, PX4's `opaque_id` (CRC-32 of the items' numbers).
-fn crc_of(items: &[MissionItem]) -> u32 {
+pub(super) fn crc_of(items: &[MissionItem]) -> u32 {
     let mut crc = 0xFFFF_FFFFu32;
     for item in items {
         let mut bytes = Vec::with_capacity(32);
@@ -275,7 +275,7 @@ impl Vehicle {
             mission_state: state,
             mission_mode: if in_mission { 1 } else { 2 },
             mission_id: self.mission.crc,
-            fence_id: 0,
+            fence_id: self.geofence.crc,
             rally_points_id: 0,
         });
         let reached = self.mission.reached.map(|(seq, left)| {

@@ -1,6 +1,6 @@
 //! The MAVLink mission protocol as PX4's `mavlink_mission.cpp` speaks it, for mission
-//! items (fence and rally plans: only their clearing is accepted); the items' rules are
-//! in `mission`.
+//! items and fence plans (rally plans: only their clearing is accepted); the items' rules
+//! are in `mission` and `geofence`.
 //!
 //! ```text
 //!  Idle ──MISSION_COUNT n>0──► Receiving: MISSION_REQUEST_INT seq, re-sent every 250 ms;
@@ -25,6 +25,7 @@ use mavlink::dialects::common::{
     MavFrame, MavMessage, MavMissionResult, MavMissionType,
 };
 
+use super::geofence::{MAX_FENCE_ITEMS, check_fence_item};
 use super::mission::{MissionItem, check_item, item_from_int, mav_cmd};
 use super::{LinkId, Vehicle};
 use crate::time::SimTime;
@@ -49,6 +50,7 @@ pub(super) enum Transfer {
         last_request: SimTime,
         legacy: bool,
         current: Option<usize>,
+        mission_type: MavMissionType,
     },
     Sending {
         link: LinkId,
@@ -56,6 +58,7 @@ pub(super) enum Transfer {
         last_heard: SimTime,
         last_sent: SimTime,
         requested: bool,
+        mission_type: MavMissionType,
     },
 }
 
@@ -78,7 +81,7 @@ impl Vehicle {
         mission_type: MavMissionType,
     ) {
         let opaque_id = if result == MavMissionResult::MAV_MISSION_ACCEPTED {
-            self.mission.crc
+            self.plan_crc(mission_type)
         } else {
             0
         };
@@ -92,12 +95,37 @@ impl Vehicle {
         self.send(link, &ack);
     }
 
-    fn request_item(&mut self, link: LinkId, to: (u8, u8), seq: usize, legacy: bool) {
+    /// The stored plan's checksum (`opaque_id`) of a mission type.
+    fn plan_crc(&self, mission_type: MavMissionType) -> u32 {
+        match mission_type {
+            MavMissionType::MAV_MISSION_TYPE_MISSION => self.mission.crc,
+            MavMissionType::MAV_MISSION_TYPE_FENCE => self.geofence.crc,
+            _ => 0,
+        }
+    }
+
+    /// Items in the stored plan of a mission type.
+    fn plan_len(&self, mission_type: MavMissionType) -> usize {
+        match mission_type {
+            MavMissionType::MAV_MISSION_TYPE_MISSION => self.mission.items().len(),
+            MavMissionType::MAV_MISSION_TYPE_FENCE => self.geofence.items().len(),
+            _ => 0,
+        }
+    }
+
+    fn request_item(
+        &mut self,
+        link: LinkId,
+        to: (u8, u8),
+        seq: usize,
+        legacy: bool,
+        mission_type: MavMissionType,
+    ) {
         let data = MISSION_REQUEST_INT_DATA {
             seq: seq as u16,
             target_system: to.0,
             target_component: to.1,
-            mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
+            mission_type,
         };
         #[allow(deprecated)]
         let msg = if legacy {
@@ -125,26 +153,31 @@ impl Vehicle {
             return false;
         }
         let count = usize::from(m.count);
-        if m.mission_type != MavMissionType::MAV_MISSION_TYPE_MISSION {
-            // Fence and rally plans are not flown: only their clearing is accepted.
-            let result = if count == 0 {
-                MavMissionResult::MAV_MISSION_ACCEPTED
-            } else {
-                MavMissionResult::MAV_MISSION_UNSUPPORTED
-            };
-            self.send_mission_ack(link, sender, result, m.mission_type);
-            return true;
-        }
+        let max = match m.mission_type {
+            MavMissionType::MAV_MISSION_TYPE_MISSION => MAX_ITEMS,
+            MavMissionType::MAV_MISSION_TYPE_FENCE => MAX_FENCE_ITEMS,
+            _ => {
+                // Rally plans are not flown: only their clearing is accepted.
+                let result = if count == 0 {
+                    MavMissionResult::MAV_MISSION_ACCEPTED
+                } else {
+                    MavMissionResult::MAV_MISSION_UNSUPPORTED
+                };
+                self.send_mission_ack(link, sender, result, m.mission_type);
+                return true;
+            }
+        };
         match &self.mission.transfer {
             Transfer::Receiving {
                 partner,
                 items,
                 legacy,
+                mission_type,
                 ..
-            } if *partner == sender && items.is_empty() => {
+            } if *partner == sender && items.is_empty() && *mission_type == m.mission_type => {
                 // The partner did not hear our first request: ask again.
                 let legacy = *legacy;
-                self.request_item(link, sender, 0, legacy);
+                self.request_item(link, sender, 0, legacy, m.mission_type);
                 return true;
             }
             Transfer::Idle => {}
@@ -158,7 +191,7 @@ impl Vehicle {
                 return true;
             }
         }
-        if count > MAX_ITEMS {
+        if count > max {
             self.send_mission_ack(
                 link,
                 sender,
@@ -168,7 +201,11 @@ impl Vehicle {
             return true;
         }
         if count == 0 {
-            self.replace_mission(Vec::new(), Some(0));
+            if m.mission_type == MavMissionType::MAV_MISSION_TYPE_FENCE {
+                self.replace_fence(Vec::new());
+            } else {
+                self.replace_mission(Vec::new(), Some(0));
+            }
             self.send_mission_ack(
                 link,
                 sender,
@@ -186,8 +223,9 @@ impl Vehicle {
             last_request: now,
             legacy: false,
             current: None,
+            mission_type: m.mission_type,
         };
-        self.request_item(link, sender, 0, false);
+        self.request_item(link, sender, 0, false, m.mission_type);
         true
     }
 
@@ -211,11 +249,12 @@ impl Vehicle {
             last_request,
             legacy: transfer_legacy,
             current,
+            mission_type,
             ..
         } = &mut self.mission.transfer
         else {
             // The last item again after the final ack: the partner missed the ack.
-            if usize::from(m.seq) + 1 == self.mission.items().len() {
+            if usize::from(m.seq) + 1 == self.plan_len(m.mission_type) {
                 self.send_mission_ack(
                     link,
                     sender,
@@ -228,7 +267,8 @@ impl Vehicle {
         if *partner != sender {
             return true;
         }
-        if m.mission_type != MavMissionType::MAV_MISSION_TYPE_MISSION {
+        let mission_type = *mission_type;
+        if m.mission_type != mission_type {
             self.send_mission_ack(
                 link,
                 sender,
@@ -254,7 +294,12 @@ impl Vehicle {
             );
             return true;
         }
-        if let Err(result) = check_item(&item) {
+        let checked = if mission_type == MavMissionType::MAV_MISSION_TYPE_FENCE {
+            check_fence_item(&item, legacy)
+        } else {
+            check_item(&item)
+        };
+        if let Err(result) = checked {
             tracing::debug!(
                 sysid = self.cfg.system_id,
                 seq = m.seq,
@@ -272,11 +317,21 @@ impl Vehicle {
         if items.len() < *count {
             *last_request = now;
             let (next, legacy) = (items.len(), *transfer_legacy);
-            self.request_item(link, sender, next, legacy);
+            self.request_item(link, sender, next, legacy, mission_type);
             return true;
         }
         let (items, current) = (std::mem::take(items), *current);
         self.mission.transfer = Transfer::Idle;
+        if mission_type == MavMissionType::MAV_MISSION_TYPE_FENCE {
+            self.replace_fence(items);
+            self.send_mission_ack(
+                link,
+                sender,
+                MavMissionResult::MAV_MISSION_ACCEPTED,
+                mission_type,
+            );
+            return true;
+        }
         self.replace_mission(items, current);
         self.send_mission_ack(
             link,
@@ -311,18 +366,18 @@ impl Vehicle {
         if self.mission.transfer != Transfer::Idle && !restart {
             return true; // busy: PX4 only says so in a status text
         }
-        let count = if mission_type == MavMissionType::MAV_MISSION_TYPE_MISSION {
-            self.mission.items().len()
-        } else {
-            0
-        };
-        if mission_type == MavMissionType::MAV_MISSION_TYPE_MISSION {
+        let count = self.plan_len(mission_type);
+        if matches!(
+            mission_type,
+            MavMissionType::MAV_MISSION_TYPE_MISSION | MavMissionType::MAV_MISSION_TYPE_FENCE
+        ) {
             self.mission.transfer = Transfer::Sending {
                 link,
                 partner: sender,
                 last_heard: now,
                 last_sent: now,
                 requested: false,
+                mission_type,
             };
         }
         self.send_mission_count(link, sender, count, mission_type);
@@ -341,7 +396,7 @@ impl Vehicle {
             target_system: to.0,
             target_component: to.1,
             mission_type,
-            opaque_id: self.mission.crc,
+            opaque_id: self.plan_crc(mission_type),
         });
         self.send(link, &msg);
     }
@@ -363,6 +418,7 @@ impl Vehicle {
             partner,
             last_heard,
             requested,
+            mission_type,
             ..
         } = &mut self.mission.transfer
         else {
@@ -373,22 +429,43 @@ impl Vehicle {
         }
         *last_heard = now;
         *requested = true;
-        let Some(item) = self.mission.items().get(usize::from(seq)).copied() else {
+        let mission_type = *mission_type;
+        let fence = mission_type == MavMissionType::MAV_MISSION_TYPE_FENCE;
+        let stored = if fence {
+            self.geofence.items()
+        } else {
+            self.mission.items()
+        };
+        let Some(mut item) = stored.get(usize::from(seq)).copied() else {
             self.mission.transfer = Transfer::Idle;
             self.send_mission_ack(
                 link,
                 sender,
                 MavMissionResult::MAV_MISSION_ERROR,
-                MavMissionType::MAV_MISSION_TYPE_MISSION,
+                mission_type,
             );
             return true;
         };
+        if fence {
+            // PX4 keeps no altitude frame for fence points: they come back absolute, with
+            // param2-4 zero and autocontinue 0.
+            item.frame = 0;
+            item.params[1..].fill(0.0);
+            item.autocontinue = 0;
+        }
+        // As PX4, `current` compares with the mission's current item whatever the type.
         let current = u8::from(usize::from(seq) == self.mission.current_seq());
-        let msg = if legacy {
+        let mut msg = if legacy {
             item_message_float(&item, seq, sender, current)
         } else {
             item_message_int(&item, seq, sender, current)
         };
+        match &mut msg {
+            MavMessage::MISSION_ITEM_INT(d) => d.mission_type = mission_type,
+            #[allow(deprecated)]
+            MavMessage::MISSION_ITEM(d) => d.mission_type = mission_type,
+            _ => {}
+        }
         self.send(link, &msg);
         true
     }
@@ -426,6 +503,12 @@ impl Vehicle {
         ) {
             self.replace_mission(Vec::new(), Some(0));
         }
+        if matches!(
+            mission_type,
+            MavMissionType::MAV_MISSION_TYPE_FENCE | MavMissionType::MAV_MISSION_TYPE_ALL
+        ) {
+            self.replace_fence(Vec::new());
+        }
         self.send_mission_ack(
             link,
             sender,
@@ -457,6 +540,7 @@ impl Vehicle {
                 last_heard,
                 last_request,
                 legacy,
+                mission_type,
                 ..
             } => {
                 if now - *last_heard > TRANSFER_TIMEOUT {
@@ -464,8 +548,9 @@ impl Vehicle {
                     self.mission.transfer = Transfer::Idle;
                 } else if now - *last_request >= RETRY {
                     *last_request = now;
-                    let (link, partner, seq, legacy) = (*link, *partner, items.len(), *legacy);
-                    self.request_item(link, partner, seq, legacy);
+                    let (link, partner, seq, legacy, kind) =
+                        (*link, *partner, items.len(), *legacy, *mission_type);
+                    self.request_item(link, partner, seq, legacy, kind);
                 }
             }
             Transfer::Sending {
@@ -474,19 +559,15 @@ impl Vehicle {
                 last_heard,
                 last_sent,
                 requested,
+                mission_type,
             } => {
                 if now - *last_heard > TRANSFER_TIMEOUT {
                     self.mission.transfer = Transfer::Idle;
                 } else if !*requested && now - *last_sent >= RETRY {
                     *last_sent = now;
-                    let (link, partner) = (*link, *partner);
-                    let n = self.mission.items().len();
-                    self.send_mission_count(
-                        link,
-                        partner,
-                        n,
-                        MavMissionType::MAV_MISSION_TYPE_MISSION,
-                    );
+                    let (link, partner, kind) = (*link, *partner, *mission_type);
+                    let n = self.plan_len(kind);
+                    self.send_mission_count(link, partner, n, kind);
                 }
             }
             Transfer::Idle => {}

@@ -30,6 +30,7 @@ mod config;
 mod datalink;
 pub mod estimator;
 mod flight;
+mod geofence;
 mod inbound;
 mod mission;
 mod mission_run;
@@ -50,6 +51,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 pub use config::{BatteryConfig, StartState, VehicleConfig, WindConfig};
+pub use geofence::Geofence;
 pub use mission::{MissionItem, MissionStore};
 pub use mode::FlightMode;
 
@@ -209,6 +211,7 @@ pub struct Vehicle {
     nav: Nav,
     nav_yaw_rad: f64,
     mission: MissionStore,
+    geofence: Geofence,
     datalink: datalink::DataLink,
     battery: Battery,
     gust_ned_mps: Vector3<f64>,
@@ -226,6 +229,8 @@ pub struct Vehicle {
     last_step: SimTime,
     boot_at: SimTime,
     counters: Counters,
+    /// The id of the last STATUSTEXT sent in chunks.
+    statustext_id: u16,
 }
 
 impl Vehicle {
@@ -307,6 +312,7 @@ impl Vehicle {
             nav,
             nav_yaw_rad: start.yaw_rad,
             mission: MissionStore::default(),
+            geofence: Geofence::default(),
             datalink: datalink::DataLink::default(),
             battery: Battery {
                 consumed_mah: 0.0,
@@ -327,6 +333,7 @@ impl Vehicle {
             last_step: SimTime::ZERO,
             boot_at: SimTime::ZERO,
             counters: Counters::default(),
+            statustext_id: 0,
             state,
             cfg,
         })
@@ -429,6 +436,11 @@ impl Vehicle {
         &self.state
     }
 
+    /// The stored fence and its breach state.
+    pub fn geofence(&self) -> &Geofence {
+        &self.geofence
+    }
+
     /// The parameter table.
     pub fn params(&self) -> &ParamTable {
         &self.params
@@ -443,6 +455,7 @@ impl Vehicle {
         self.check_offboard_loss(t);
         self.check_datalink(t);
         self.mission_timers(t);
+        self.check_geofence(t);
         let dt = Self::dt_s();
         let sag = self.thrust_available();
         let motors = match self.attitude_command(t, dt) {
@@ -599,6 +612,8 @@ impl Vehicle {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_geofence;
 #[cfg(test)]
 mod tests_mission;
 #[cfg(test)]

@@ -102,15 +102,31 @@ impl Vehicle {
     }
 
     /// A STATUSTEXT on both links, as PX4's `mavlink_log` reaches every ground station.
+    /// A text longer than the field's 50 bytes goes in chunks of one nonzero `id`
+    /// (`chunk_seq` 0, 1, …; the last one shorter, or an empty one after a full last
+    /// chunk), as PX4's STATUSTEXT stream splits it.
     pub(super) fn send_statustext(&mut self, severity: MavSeverity, text: &str) {
-        let msg = MavMessage::STATUSTEXT(STATUSTEXT_DATA {
-            severity,
-            text: text.into(),
-            id: 0,
-            chunk_seq: 0,
-        });
-        for link in [LinkId::Offboard, LinkId::Gcs] {
-            self.send(link, &msg);
+        const FIELD: usize = 50;
+        let bytes = text.as_bytes();
+        let (id, chunks) = if bytes.len() <= FIELD {
+            (0, 1)
+        } else {
+            self.statustext_id = self.statustext_id.wrapping_add(1).max(1);
+            (self.statustext_id, bytes.len() / FIELD + 1)
+        };
+        for k in 0..chunks {
+            let chunk = &bytes[(k * FIELD).min(bytes.len())..((k + 1) * FIELD).min(bytes.len())];
+            let mut field = [0u8; FIELD];
+            field[..chunk.len()].copy_from_slice(chunk);
+            let msg = MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+                severity,
+                text: field.into(),
+                id,
+                chunk_seq: k as u8,
+            });
+            for link in [LinkId::Offboard, LinkId::Gcs] {
+                self.send(link, &msg);
+            }
         }
     }
 

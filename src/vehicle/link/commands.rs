@@ -135,6 +135,7 @@ impl VehicleLink {
             );
         }
         self.request_origin();
+        self.start_fence_upload(now);
     }
 
     /// Asks for GPS_GLOBAL_ORIGIN once (fire and forget: the heartbeat timer asks again
