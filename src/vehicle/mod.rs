@@ -4,7 +4,10 @@
 //! ```text
 //!  Discovering ──heartbeat from the expected system──► Streaming (setpoints at the stream rate,
 //!                                                      intervals requested, origin asked for)
-//!  Streaming ──pre_stream elapsed──► Arming ──ack ACCEPTED or heartbeat armed──► Offboarding
+//!  Streaming ──pre_stream elapsed (origin known, fence held)──► Arming ──ack ACCEPTED or
+//!            heartbeat armed──► Offboarding
+//!  Streaming with a fence: the fence upload (`fence_upload`) runs first; a refusal or
+//!            silence ──► Failed (the MISSION_ACK result named)
 //!  Offboarding ──heartbeat OFFBOARD, or ACCEPTED with no other answer within 100 ms──► Flying
 //!              (PX4 main answers DO_SET_MODE twice: an early ACCEPTED from its MAVLink
 //!              module, then the commander's verdict; a refusal after it is a refusal)
