@@ -175,6 +175,18 @@ impl FenceStopped {
     pub const EXIT_CODE: u8 = 5;
 }
 
+/// The safety filter could not keep two vehicles apart while the swarm flew its law; the
+/// vehicles were held or landed by `safety.action`. `fly` and `demo` exit with
+/// [`SeparationStopped::EXIT_CODE`].
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("{0}")]
+pub struct SeparationStopped(pub String);
+
+impl SeparationStopped {
+    /// The process exit code for it.
+    pub const EXIT_CODE: u8 = 6;
+}
+
 /// A finished flight's outcome as the process sees it: [`GaveUp`] when the swarm gave up
 /// before its flight, [`GuardStopped`] when the divergence guard ended the consensus.
 ///
@@ -186,6 +198,12 @@ pub fn flight_result(summary: &crate::record::metrics::Summary) -> anyhow::Resul
     }
     if let Some(guard) = &summary.guard {
         return Err(GuardStopped(guard.clone()).into());
+    }
+    if summary.stop_reason.as_deref() == Some("separation") {
+        return Err(SeparationStopped(
+            "two vehicles came too close and the safety action ended the consensus (events.csv names them)".to_owned(),
+        )
+        .into());
     }
     if summary.stop_reason.as_deref() == Some("fence") {
         return Err(FenceStopped(

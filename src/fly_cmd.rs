@@ -308,6 +308,7 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
         SwarmPhase::Ended(_) => "ended (hovering)",
         SwarmPhase::Stopped(_) => match swarm.stop_reason() {
             Some(StopReason::Fence) => "STOPPED at the fence (hovering)",
+            Some(StopReason::Separation) => "STOPPED: two vehicles too close (hovering)",
             _ => "STOPPED by the divergence guard (hovering)",
         },
         other => other.name(),

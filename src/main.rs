@@ -15,7 +15,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use ringswarm::cli::{AnalyzeArgs, Cli, Command, PlanArgs};
 use ringswarm::consensus::PlanRequest;
-use ringswarm::error::{FenceStopped, GaveUp, GuardStopped};
+use ringswarm::error::{FenceStopped, GaveUp, GuardStopped, SeparationStopped};
 use ringswarm::report::{AnalyzeRequest, emit, run_analyze, run_plan_everyone};
 use tracing_subscriber::EnvFilter;
 use tracing_subscriber::filter::LevelFilter;
@@ -53,6 +53,8 @@ fn main() -> ExitCode {
                 ExitCode::from(GuardStopped::EXIT_CODE)
             } else if err.downcast_ref::<FenceStopped>().is_some() {
                 ExitCode::from(FenceStopped::EXIT_CODE)
+            } else if err.downcast_ref::<SeparationStopped>().is_some() {
+                ExitCode::from(SeparationStopped::EXIT_CODE)
             } else {
                 ExitCode::from(2)
             }

@@ -574,6 +574,20 @@ fn the_safety_keys_are_checked_by_name_and_close_places_are_refused() {
         ),
         (3.0, 9.0, 0.5)
     );
+    assert_eq!(s.action, ringswarm::swarm::BreachAction::Hold);
+    // The action is one of three words, and a wrong one is named.
+    let text = with("[formation]", "[safety]\naction = \"brake\"\n\n[formation]");
+    let err = Config::from_toml(&text).unwrap_err();
+    assert!(
+        err.contains("unknown variant `brake`, expected one of `continue`, `hold`, `land`"),
+        "{err}"
+    );
+    let text = with("[formation]", "[safety]\naction = \"land\"\n\n[formation]");
+    let setup = Config::from_toml(&text).unwrap().validate().unwrap();
+    assert_eq!(
+        setup.safety.map(|s| s.action),
+        Some(ringswarm::swarm::BreachAction::Land)
+    );
 }
 
 #[test]

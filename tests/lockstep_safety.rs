@@ -9,7 +9,7 @@ use ringswarm::config::Config;
 use ringswarm::control::ned_to_enu;
 use ringswarm::driver::lockstep::Lockstep;
 use ringswarm::safety::Separation;
-use ringswarm::swarm::SwarmPhase;
+use ringswarm::swarm::{BreachAction, StopReason, SwarmPhase};
 use ringswarm_wire::time::SimTime;
 
 fn load(name: &str) -> Config {
@@ -124,4 +124,87 @@ fn the_shipped_scenarios_keep_the_separation_with_takeoff_and_landing() {
             "{name}: {f:?}"
         );
     }
+}
+
+/// The crossing flown with `latency_ms` each way on every link and `action` for a pair
+/// the filter cannot keep apart: the truth's smallest separation, and the swarm.
+fn crossing_late(latency_ms: f64, action: BreachAction) -> (f64, Lockstep) {
+    let mut config = load("crossing");
+    config.emulator.latency_ms = latency_ms;
+    config.safety.action = action;
+    let sep = Separation {
+        horizontal_m: 3.0,
+        vertical_m: 9.0,
+        gamma: 1.0,
+    };
+    let mut run = Lockstep::from_config(&config).unwrap();
+    let mut min_m = f64::INFINITY;
+    run.run_until(SimTime::from_millis(40_000), |r| {
+        let p: Vec<Vector3<f64>> = r
+            .vehicles()
+            .iter()
+            .map(|v| ned_to_enu(v.status().pos_world_ned_m))
+            .collect();
+        for (i, a) in p.iter().enumerate() {
+            for b in &p[i + 1..] {
+                min_m = min_m.min(sep.distance_m(*a, *b));
+            }
+        }
+    });
+    (min_m, run)
+}
+
+#[test]
+fn the_round_trip_is_counted_in_the_barrier() {
+    // 150 ms each way: TIMESYNC measures 300 ms (and a control period's wait at most),
+    // and the barrier counts it: the separation holds. Without the round trip the same
+    // flight came within 2.75 m.
+    let (min_m, run) = crossing_late(150.0, BreachAction::Hold);
+    for link in run.swarm().links() {
+        let rtt = link.round_trip().expect("measured").as_secs_f64();
+        assert!((0.300..0.321).contains(&rtt), "round trip {rtt} s");
+    }
+    assert!(min_m >= 3.0, "{min_m}");
+    assert_eq!(run.swarm().safety_stats().separation_actions, 0);
+}
+
+#[test]
+fn a_pair_the_filter_cannot_keep_apart_stops_the_swarm_as_safety_action_says() {
+    // 250 ms each way is more than the crossing's gains can fly (the divergence guard
+    // ends it too): a pair comes inside 95 % of the separation.
+    let (_, run) = crossing_late(250.0, BreachAction::Hold);
+    assert_eq!(run.swarm().stop_reason(), Some(StopReason::Separation));
+    assert!(matches!(run.swarm().phase(), SwarmPhase::Stopped(_)));
+    assert_eq!(run.swarm().safety_stats().separation_actions, 1);
+    let event = run
+        .swarm()
+        .events()
+        .iter()
+        .find(|e| e.text.starts_with("safety: vehicles"))
+        .expect("an event names the pair");
+    assert!(
+        event.warning
+            && event
+                .text
+                .ends_with("inside 95 % of the 3 m separation: the swarm holds"),
+        "{}",
+        event.text
+    );
+    let (_, run) = crossing_late(250.0, BreachAction::Land);
+    assert_eq!(run.swarm().stop_reason(), Some(StopReason::Separation));
+    assert!(matches!(run.swarm().phase(), SwarmPhase::Landing(_)));
+    // `continue`: reported once, and the flight goes on (here until the guard ends it).
+    let (_, run) = crossing_late(250.0, BreachAction::Continue);
+    assert_ne!(run.swarm().stop_reason(), Some(StopReason::Separation));
+    assert_eq!(run.swarm().safety_stats().separation_actions, 0);
+    let goes_on = run
+        .swarm()
+        .events()
+        .iter()
+        .filter(|e| {
+            e.text
+                .ends_with("the flight goes on (safety.action = \"continue\")")
+        })
+        .count();
+    assert_eq!(goes_on, 1);
 }

@@ -196,12 +196,12 @@ fn the_link_turns_off_the_streams_it_does_not_read_and_waits_for_the_origin() {
     }
     // And the vehicle stopped sending the ones it has: over a second only heartbeats,
     // the two asked for, EXTENDED_SYS_STATE (5 Hz), GPS_GLOBAL_ORIGIN (0.2 Hz),
-    // ESTIMATOR_STATUS (1 Hz: whether the position is good) and the acknowledgements
-    // remain.
+    // ESTIMATOR_STATUS (1 Hz: whether the position is good), the acknowledgements and the
+    // answers to our TIMESYNC (1 Hz) remain.
     let seen = h.ids_sent_by_vehicle(Duration::from_secs(1));
     for id in &seen {
         assert!(
-            [0, 31, 32, 49, 77, 245, 42, 230].contains(id),
+            [0, 31, 32, 49, 77, 245, 42, 230, 111].contains(id),
             "{id} still sent: {seen:?}"
         );
     }
@@ -721,4 +721,28 @@ fn a_vehicle_that_never_answers_the_fence_upload_is_not_armed() {
         )
     );
     assert!(!h.vehicle.status().armed);
+}
+
+#[test]
+fn the_round_trip_is_timed_with_timesync_once_a_second() {
+    let mut h = Harness::new(1, 1);
+    assert_eq!(h.link.round_trip(), None);
+    h.run(Duration::from_secs(3), &mut deliver_all);
+    let requests: Vec<i64> = h
+        .sent_to_vehicle
+        .iter()
+        .filter_map(|m| match m {
+            MavMessage::TIMESYNC(t) if t.tc1 == 0 => Some(t.ts1),
+            _ => None,
+        })
+        .collect();
+    // With every heartbeat from discovery on (the first in the same 1 ms step as the
+    // vehicle's first heartbeat), stamped with the link's clock in ns + 1.
+    assert_eq!(
+        requests,
+        [1_000_001, 1_000_000_001, 2_000_000_001, 3_000_000_001]
+    );
+    // The harness delivers within its 1 ms step, both ways.
+    let rtt = h.link.round_trip().expect("measured");
+    assert!(rtt <= Duration::from_millis(2), "{rtt:?}");
 }

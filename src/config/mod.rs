@@ -128,6 +128,10 @@ pub struct SafetySection {
     /// The share of each vehicle's horizontal envelope the barrier counts on for braking
     /// (default 0.5: the rest stays for the law and the disturbances).
     pub braking_share: f64,
+    /// What the swarm does when the filter cannot keep a pair apart (a pair closer than
+    /// 95 % of the separation, or a fallback) while it flies its law: `hold` (default),
+    /// `land` or `continue`.
+    pub action: crate::swarm::BreachAction,
 }
 
 impl Default for SafetySection {
@@ -137,6 +141,7 @@ impl Default for SafetySection {
             horizontal_m: 3.0,
             vertical_m: 9.0,
             braking_share: 0.5,
+            action: crate::swarm::BreachAction::Hold,
         }
     }
 }

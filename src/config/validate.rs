@@ -302,6 +302,7 @@ impl Config {
                 gamma: crate::swarm::SAFETY_GAMMA,
             },
             braking_share: s.braking_share,
+            action: s.action,
         })
     }
 

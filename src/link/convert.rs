@@ -6,6 +6,7 @@ use mavlink::dialects::common::{
     AttitudeTargetTypemask, HEARTBEAT_DATA, MISSION_COUNT_DATA, MISSION_ITEM_INT_DATA,
     MavAutopilot, MavCmd, MavFrame, MavMessage, MavMissionType, MavModeFlag, MavState, MavType,
     PositionTargetTypemask, SET_ATTITUDE_TARGET_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA,
+    TIMESYNC_DATA,
 };
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
@@ -115,6 +116,17 @@ pub fn fence_item(target_system: u8, seq: u16, item: &FenceItem) -> MavMessage {
     })
 }
 
+/// TIMESYNC request (`tc1` 0) stamped `ts1_ns`: the vehicle answers with `tc1` its own
+/// time and `ts1` echoed, which times the round trip.
+pub fn timesync_request(ts1_ns: i64) -> MavMessage {
+    MavMessage::TIMESYNC(TIMESYNC_DATA {
+        tc1: 0,
+        ts1: ts1_ns,
+        target_system: 0,
+        target_component: 0,
+    })
+}
+
 /// MAV_MISSION_RESULT's name.
 pub fn mission_result_name(result: u8) -> String {
     let name = match result {
@@ -215,6 +227,13 @@ pub enum Inbound {
         /// The system it is addressed to.
         target_system: u8,
     },
+    /// A TIMESYNC answer (`tc1` ≠ 0): the `ts1` we sent, echoed.
+    TimesyncReply {
+        /// Our stamp (ns).
+        ts1_ns: i64,
+        /// The system it is addressed to (0: any).
+        target_system: u8,
+    },
     /// COMMAND_ACK.
     Ack {
         /// MAV_CMD id.
@@ -303,6 +322,10 @@ pub fn inbound(msg: &MavMessage) -> Option<Inbound> {
                 target_system: a.target_system,
             })
         }
+        MavMessage::TIMESYNC(t) if t.tc1 != 0 => Some(Inbound::TimesyncReply {
+            ts1_ns: t.ts1,
+            target_system: t.target_system,
+        }),
         MavMessage::COMMAND_ACK(a) => Some(Inbound::Ack {
             command: a.command as u16,
             result: a.result as u8,

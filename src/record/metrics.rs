@@ -274,6 +274,9 @@ pub struct SafetyReport {
     pub fallbacks: u64,
     /// Times the fence made the swarm hold or land.
     pub fence_actions: u64,
+    /// Times a pair the filter could not keep apart made the swarm hold or land
+    /// (`safety.action`).
+    pub separation_actions: u64,
 }
 
 impl SafetyReport {
@@ -295,6 +298,7 @@ impl SafetyReport {
             relaxed_ticks: s.relaxed_ticks,
             fallbacks: s.fallbacks,
             fence_actions: s.fence_actions,
+            separation_actions: s.separation_actions,
         })
     }
 }

@@ -65,8 +65,8 @@ pub use guard::{DivergenceGuard, GuardLimits, GuardTrip};
 use model::FlownModel;
 pub use safety::SafetyStats;
 pub use setup::{
-    EndAction, FenceSetup, LossPolicy, PlanDecision, Retargeted, SAFETY_GAMMA, SafetySetup,
-    SetpointKind, SwarmSetup, TargetVelocity,
+    BREACH_SHARE, BreachAction, EndAction, FenceSetup, LossPolicy, PlanDecision, Retargeted,
+    SAFETY_GAMMA, SafetySetup, SetpointKind, SwarmSetup, TargetVelocity,
 };
 
 /// Where the swarm is.
@@ -155,10 +155,13 @@ pub enum StopReason {
     Requested,
     /// A vehicle could no longer stop inside the fence's margin.
     Fence,
+    /// The safety filter could not keep two vehicles apart.
+    Separation,
 }
 
 impl StopReason {
-    /// A short name: `duration`, `guard`, `handshake`, `link_loss`, `requested`, `fence`.
+    /// A short name: `duration`, `guard`, `handshake`, `link_loss`, `requested`, `fence`,
+    /// `separation`.
     pub fn name(&self) -> &'static str {
         match self {
             Self::DurationOver => "duration",
@@ -167,6 +170,7 @@ impl StopReason {
             Self::LinkLoss => "link_loss",
             Self::Requested => "requested",
             Self::Fence => "fence",
+            Self::Separation => "separation",
         }
     }
 }

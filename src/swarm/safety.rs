@@ -4,7 +4,7 @@
 
 use ringswarm_wire::time::SimTime;
 
-use super::{Swarm, SwarmPhase};
+use super::{BREACH_SHARE, BreachAction, SafetySetup, StopReason, Swarm, SwarmPhase};
 use crate::safety::{Agent, Outcome, Settings, Side};
 
 /// The attitude response counted for a vehicle not measured yet (s): the emulated
@@ -32,6 +32,10 @@ pub struct SafetyStats {
     pub fallbacks: u64,
     /// Times the fence made the swarm hold or land.
     pub fence_actions: u64,
+    /// Times a pair the filter could not keep apart made the swarm hold or land.
+    pub separation_actions: u64,
+    /// `safety.action = "continue"` was reported (once a flight).
+    continue_reported: bool,
     /// The smallest ellipsoidal distance between two vehicles with a usable state, seen
     /// on a control tick (m; infinite while never two).
     pub min_seen_m: f64,
@@ -100,6 +104,7 @@ impl Swarm {
             &mut self.safety_xy,
             self.setup.fence.as_ref().map(|f| (&f.fence, f.margin_m)),
         );
+        let fell_back = matches!(report.outcome, Outcome::Fallback { .. });
         let stats = &mut self.safety_stats;
         stats.ticks += 1;
         stats.active_ticks += u64::from(report.active > 0);
@@ -150,23 +155,86 @@ impl Swarm {
             }
         }
         self.log_pairs_inside(now, setup.separation);
+        self.act_on_breach(now, &setup, fell_back);
+    }
+
+    /// Applies `safety.action` when, while the swarm flies its law (the re-target stage
+    /// or consensus), the filter did not keep a pair with a vehicle it commands apart: a
+    /// pair closer than [`BREACH_SHARE`] of the separation, or a fallback.
+    fn act_on_breach(&mut self, now: SimTime, setup: &SafetySetup, fell_back: bool) {
+        if !matches!(
+            self.phase,
+            SwarmPhase::Consensus(_) | SwarmPhase::Retargeting(_)
+        ) {
+            return;
+        }
+        let limit_m = BREACH_SHARE * setup.separation.horizontal_m;
+        let closest = self
+            .safety_filter
+            .close_pairs(limit_m)
+            .min_by(|a, b| a.2.total_cmp(&b.2));
+        let what = match closest {
+            Some((i, j, d)) => format!(
+                "vehicles {} and {} are {d:.2} m apart, inside {:.0} % of the {} m separation",
+                self.setup.links[i].system_id,
+                self.setup.links[j].system_id,
+                100.0 * BREACH_SHARE,
+                setup.separation.horizontal_m
+            ),
+            None if fell_back => "no command keeps every pair apart".to_owned(),
+            None => return,
+        };
+        match setup.action {
+            BreachAction::Continue => {
+                if !self.safety_stats.continue_reported {
+                    self.safety_stats.continue_reported = true;
+                    self.log.push(
+                        now,
+                        true,
+                        format!(
+                            "safety: {what}: the flight goes on (safety.action = \"continue\")"
+                        ),
+                    );
+                }
+            }
+            BreachAction::Hold => {
+                self.safety_stats.separation_actions += 1;
+                self.stop = Some(StopReason::Separation);
+                self.log
+                    .push(now, true, format!("safety: {what}: the swarm holds"));
+                self.hold_points.iter_mut().for_each(|p| *p = None);
+                self.phase = SwarmPhase::Stopped(now);
+            }
+            BreachAction::Land => {
+                self.safety_stats.separation_actions += 1;
+                self.log
+                    .push(now, true, format!("safety: {what}: the swarm lands"));
+                self.land_because(now, StopReason::Separation);
+            }
+        }
     }
 
     /// How old what is known of vehicle `i` is by the time a command sent now acts (s):
-    /// its state's age, a control period, and its attitude response (measured; a fit
-    /// beyond [`MAX_RESPONSE_S`] is not trusted and [`UNMEASURED_RESPONSE_S`] is used).
+    /// its state's age since it arrived, a control period, and the time from a command
+    /// sent to a state that shows it: the measured attitude response (which holds the
+    /// uplink and the downlink), but never less than the link's round trip (TIMESYNC);
+    /// a fit beyond [`MAX_RESPONSE_S`] is not trusted, and then the round trip plus
+    /// [`UNMEASURED_RESPONSE_S`] is counted.
     pub(super) fn command_age_s(&self, i: usize, now: SimTime) -> f64 {
         let state = self.links[i]
             .state()
             .last_position
             .map_or(0.0, |at| (now - at).as_secs_f64());
+        let round_trip = self.links[i]
+            .round_trip()
+            .map_or(0.0, |rtt| rtt.as_secs_f64());
         // A fit beyond a second is no attitude loop a swarm flies with (the emulator's
         // ideal vehicles, which have none, fit 4.5 s): not counted.
         let response = self.flown[i]
             .attitude_response()
             .map(|r| r.response_s)
             .filter(|r| (0.0..=MAX_RESPONSE_S).contains(r))
-            .unwrap_or(UNMEASURED_RESPONSE_S);
+            .map_or(round_trip + UNMEASURED_RESPONSE_S, |r| r.max(round_trip));
         state + self.setup.control_interval.as_secs_f64() + response
     }
 

@@ -88,6 +88,8 @@ pub struct SafetySetup {
     pub separation: crate::safety::Separation,
     /// The share of each vehicle's horizontal envelope counted on for braking.
     pub braking_share: f64,
+    /// What the swarm does when the filter cannot keep a pair apart.
+    pub action: BreachAction,
 }
 
 /// The barrier's class-K gain `γ` in `ḣ ≥ −γh³` (s/m²): a pair 1 m/s from its braking
@@ -159,6 +161,24 @@ pub enum EndAction {
     /// Every vehicle brakes and hovers in place until told to land.
     Hold,
 }
+
+/// What the swarm does when the safety filter could not keep two vehicles apart (a pair
+/// closer than [`BREACH_SHARE`] of the separation, or a fallback).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BreachAction {
+    /// The flight goes on (the filter keeps pushing the pair apart); a warning is logged.
+    Continue,
+    /// Every vehicle brakes and hovers where it is, the filter still acting.
+    #[default]
+    Hold,
+    /// Every vehicle lands.
+    Land,
+}
+
+/// A pair closer than this share of the separation counts as the filter not keeping it
+/// (the 5 % below the separation the relaxed rows and the state's age may take).
+pub const BREACH_SHARE: f64 = 0.95;
 
 /// What the swarm does when a vehicle's link is lost during consensus.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]

@@ -16,7 +16,7 @@ use super::{LinkConfig, LinkEvent, Phase, Setpoint, VehicleState};
 use crate::link::{
     AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, fence_count, fence_item, frames,
     gcs_heartbeat, inbound, mission_result_name, set_attitude_target,
-    set_position_target_acceleration,
+    set_position_target_acceleration, timesync_request,
 };
 
 /// How long the fence upload waits for the vehicle before it sends its last message
@@ -73,6 +73,11 @@ pub struct VehicleLink {
     next_origin: Option<crate::frame::Geodetic>,
     /// The fence upload, when the link has a fence to give.
     fence: Option<FenceUpload>,
+    /// The stamp (ns of the link's clock) of the TIMESYNC request in flight.
+    timesync_sent_ns: Option<i64>,
+    /// The round trip to the vehicle: the newest TIMESYNC sample when it is longer, else
+    /// decaying toward the new one by a tenth (a rise is believed at once).
+    round_trip: Option<Duration>,
 }
 
 impl VehicleLink {
@@ -85,6 +90,8 @@ impl VehicleLink {
             .clone()
             .map(|plan| FenceUpload::new(plan, FENCE_RETRY, cfg.max_attempts));
         Self {
+            timesync_sent_ns: None,
+            round_trip: None,
             fence,
             signer: cfg.signing.as_ref().map(Signer::new),
             cfg,
@@ -150,6 +157,12 @@ impl VehicleLink {
     /// Position reports and origins refused by the telemetry gate.
     pub fn refused_reports(&self) -> u64 {
         self.refused_reports
+    }
+
+    /// The round trip to the vehicle as TIMESYNC measures it (a rise at once, a fall a
+    /// tenth per sample); `None` before the first answer.
+    pub fn round_trip(&self) -> Option<Duration> {
+        self.round_trip
     }
 
     /// Whether the last accepted position is younger than the state timeout (its origin
@@ -477,6 +490,22 @@ impl VehicleLink {
                 }
             }
             Inbound::Ack { command, result } => self.on_ack(now, command, result),
+            Inbound::TimesyncReply {
+                ts1_ns,
+                target_system,
+            } => {
+                let ours = target_system == 0 || target_system == self.cfg.own_ids.0;
+                if ours && self.timesync_sent_ns == Some(ts1_ns) {
+                    self.timesync_sent_ns = None;
+                    let sample = Duration::from_nanos(
+                        (now.as_micros() * 1000).saturating_sub(ts1_ns.max(0) as u64),
+                    );
+                    self.round_trip = Some(match self.round_trip {
+                        Some(rtt) if sample < rtt => rtt.mul_f64(0.9) + sample.mul_f64(0.1),
+                        _ => sample,
+                    });
+                }
+            }
             Inbound::FenceRequest { seq, target_system } => {
                 if self.fence_answer_is_ours(target_system) {
                     let answer = self.fence.as_mut().map(|f| f.on_request(now, seq));
@@ -577,6 +606,17 @@ impl VehicleLink {
         self.clock(now);
         if now >= self.next_heartbeat {
             self.queue(&gcs_heartbeat());
+            // The round trip of the vehicles we command (none to one someone else flies).
+            let commanded = !matches!(
+                self.phase,
+                Phase::Discovering | Phase::Done | Phase::Failed | Phase::Overridden | Phase::Lost
+            );
+            if commanded {
+                // Stamps are the link's clock + 1 ns: never 0, which means "no stamp".
+                let stamp = (now.as_micros() * 1000 + 1) as i64;
+                self.timesync_sent_ns = Some(stamp);
+                self.queue(&timesync_request(stamp));
+            }
             let streaming = matches!(
                 self.phase,
                 Phase::Streaming(_)
