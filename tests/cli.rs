@@ -678,3 +678,39 @@ fn demo_exits_5_when_the_fence_ends_the_consensus() {
     assert_eq!(summary["safety"]["fence_actions"], 1);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn demo_exits_6_when_two_vehicles_come_too_close() {
+    // The crossing with 250 ms each way on every link: more delay than the filter and the
+    // gains can fly, a pair comes inside 95 % of the separation and the swarm holds.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/crossing.toml");
+    let text = std::fs::read_to_string(path)
+        .unwrap()
+        .replacen("[emulator]\n", "[emulator]\nlatency_ms = 250.0\n", 1)
+        .replacen("duration_s = 60.0", "duration_s = 20.0", 1);
+    let dir = std::env::temp_dir().join(format!("ringswarm-cli-sep-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let config = dir.join("late.toml");
+    std::fs::write(&config, text).unwrap();
+    let run = dir.join("run");
+    let out = ringswarm(&[
+        "demo",
+        "--scenario",
+        config.to_str().unwrap(),
+        "--no-plots",
+        "--out",
+        run.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(6), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("two vehicles came too close"),
+        "{}",
+        stderr(&out)
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["stop_reason"], "separation");
+    assert_eq!(summary["safety"]["separation_actions"], 1);
+    let _ = std::fs::remove_dir_all(&dir);
+}
