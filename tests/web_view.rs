@@ -125,6 +125,33 @@ fn the_state_api_shows_every_vehicle_where_the_swarm_has_it() {
         assert!((0.0..50.0).contains(&age), "telemetry age {age} ms");
         centre += (s.pos_enu_m.xy() - offsets[i]) * w[i] / 21.0;
     }
+    // The closest pair, against every pair by the 3 m × 9 m ellipsoid (vertical offsets
+    // count a third), and no constraint bound in the hexagon's 20 m sides.
+    let mut closest = (0, 0, f64::INFINITY);
+    for i in 0..6 {
+        for j in i + 1..6 {
+            let d = swarm.common_state(i).expect("known").pos_enu_m
+                - swarm.common_state(j).expect("known").pos_enu_m;
+            let d = nalgebra::Vector3::new(d.x, d.y, d.z / 3.0).norm();
+            if d < closest.2 {
+                closest = (i, j, d);
+            }
+        }
+    }
+    let pair = &state["closest_pair"];
+    assert_eq!(
+        pair["vehicles"],
+        serde_json::json!([closest.0, closest.1]),
+        "{pair}"
+    );
+    assert_eq!(
+        pair["sysids"],
+        serde_json::json!([closest.0 + 1, closest.1 + 1])
+    );
+    assert!((pair["distance_m"].as_f64().expect("distance") - closest.2).abs() < 1e-9);
+    assert!(closest.2 > 15.0, "{closest:?}");
+    assert_eq!(state["active_pairs"], serde_json::json!([]));
+    assert!(vehicles.iter().all(|v| v["constrained"] == false));
     let c = &state["formation_centre_enu_m"];
     assert!((c[0].as_f64().expect("x") - centre.x).abs() < 1e-9);
     assert!((c[1].as_f64().expect("y") - centre.y).abs() < 1e-9);
@@ -140,6 +167,11 @@ fn the_state_api_shows_every_vehicle_where_the_swarm_has_it() {
     assert_eq!(info["mode"], "live");
     assert_eq!(info["setup"]["vehicles"].as_array().map(Vec::len), Some(6));
     assert_eq!(info["setup"]["k"].as_f64(), Some(5.0));
+    assert_eq!(
+        info["setup"]["separation"],
+        serde_json::json!({"horizontal_m": 3.0, "vertical_m": 9.0})
+    );
+    assert_eq!(info["setup"]["fence"], serde_json::Value::Null);
     let (status, page) = get(server.addr(), "/");
     assert_eq!(status, 200);
     assert!(page.contains("<canvas id=\"map\""), "the page");
@@ -195,8 +227,11 @@ fn state_of(n: usize, t_s: f64) -> ViewState {
                 telemetry_age_ms: Some(12.0),
                 speed_mps: Some(5f64.sqrt()),
                 saturated: Some(false),
+                constrained: Some(false),
             })
             .collect(),
+        closest_pair: None,
+        active_pairs: Vec::new(),
         events: Vec::new(),
         events_total: 0,
     }
@@ -209,6 +244,8 @@ fn live_server() -> (WebServer, LiveFeed) {
         k: 1.0,
         altitude_m: 10.0,
         control_rate_hz: 50.0,
+        separation: None,
+        fence: None,
     };
     let server = WebServer::start(
         "127.0.0.1:0".parse().expect("addr"),
@@ -425,4 +462,46 @@ fn a_directory_that_is_not_a_run_directory_is_named() {
     assert!(err.contains("setup.json"), "{err}");
     assert!(err.contains("ringswarm fly"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_state_names_the_constraints_the_safety_filter_bound() {
+    // crossing.toml: eight x500s through the centre; find ticks where the filter bound
+    // pairs and compare the view with the filter's own rows.
+    let text = include_str!("../config/crossing.toml");
+    let mut run =
+        Lockstep::from_config(&Config::from_toml(text).expect("parses")).expect("scenario");
+    let mut checked = 0;
+    let mut tick = 0;
+    let mut states = Vec::new();
+    run.run_until(SimTime::from_millis(30_000), |r| {
+        let swarm = r.swarm();
+        if swarm.control_ticks() == tick {
+            return;
+        }
+        tick = swarm.control_ticks();
+        let rows = swarm.safety_active_rows().to_vec();
+        if rows.iter().any(|(i, j)| i != j) && states.len() < 20 {
+            states.push((rows, ViewState::of_swarm(swarm, r.now(), None)));
+        }
+    });
+    for (rows, state) in &states {
+        let pairs: Vec<[usize; 2]> = rows
+            .iter()
+            .filter(|(i, j)| i != j)
+            .map(|&(i, j)| [i, j])
+            .collect();
+        assert_eq!(state.active_pairs, pairs);
+        for (k, v) in state.vehicles.iter().enumerate() {
+            let bound = rows.iter().any(|&(i, j)| i == k || j == k);
+            assert_eq!(v.constrained, Some(bound), "vehicle {k}");
+        }
+        let pair = state.closest_pair.as_ref().expect("a closest pair");
+        assert!(pair.distance_m >= 2.85, "{pair:?}");
+        checked += 1;
+    }
+    assert!(checked >= 5, "the filter bound pairs on {checked} ticks");
+    let setup = RunSetup::of(run.swarm());
+    let sep = setup.separation.expect("on");
+    assert_eq!((sep.horizontal_m, sep.vertical_m), (3.0, 9.0));
 }

@@ -59,6 +59,70 @@ pub struct RunSetup {
     pub altitude_m: f64,
     /// The control rate (Hz).
     pub control_rate_hz: f64,
+    /// The separation the safety filter enforces, centre to centre (m; `null`: off).
+    #[serde(default)]
+    pub separation: Option<SeparationView>,
+    /// The fence (`null`: none).
+    #[serde(default)]
+    pub fence: Option<FenceView>,
+}
+
+/// The enforced separation in `setup.json`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SeparationView {
+    /// Horizontal (m).
+    pub horizontal_m: f64,
+    /// Vertical (m).
+    pub vertical_m: f64,
+}
+
+/// The fence in `setup.json` (ENU, common frame): a circle or a polygon and the band.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FenceView {
+    /// `circle` or `polygon`.
+    pub kind: String,
+    /// The circle's centre (m), or `null`.
+    pub centre_enu_m: Option<[f64; 2]>,
+    /// The circle's radius (m), or `null`.
+    pub radius_m: Option<f64>,
+    /// The polygon's vertices (m; empty for a circle).
+    pub vertices_enu_m: Vec<[f64; 2]>,
+    /// The altitude band (m, up).
+    pub min_altitude_m: f64,
+    /// The altitude band (m, up).
+    pub max_altitude_m: f64,
+    /// How close a stopping point may come (m).
+    pub margin_m: f64,
+}
+
+impl FenceView {
+    fn of(setup: &crate::swarm::FenceSetup) -> Self {
+        use crate::safety::FenceShape;
+        let f = &setup.fence;
+        let (kind, centre, radius, vertices) = match &f.shape {
+            FenceShape::Circle { centre_m, radius_m } => (
+                "circle",
+                Some([centre_m.x, centre_m.y]),
+                Some(*radius_m),
+                Vec::new(),
+            ),
+            FenceShape::Polygon { vertices_m } => (
+                "polygon",
+                None,
+                None,
+                vertices_m.iter().map(|v| [v.x, v.y]).collect(),
+            ),
+        };
+        Self {
+            kind: kind.to_owned(),
+            centre_enu_m: centre,
+            radius_m: radius,
+            vertices_enu_m: vertices,
+            min_altitude_m: f.min_altitude_m,
+            max_altitude_m: f.max_altitude_m,
+            margin_m: setup.margin_m,
+        }
+    }
 }
 
 /// One vehicle of [`RunSetup`].
@@ -97,6 +161,11 @@ impl RunSetup {
             k: setup.ring.k(),
             altitude_m: setup.altitude_m,
             control_rate_hz: 1.0 / setup.control_interval.as_secs_f64(),
+            separation: setup.safety.map(|s| SeparationView {
+                horizontal_m: s.separation.horizontal_m,
+                vertical_m: s.separation.vertical_m,
+            }),
+            fence: setup.fence.as_ref().map(FenceView::of),
         }
     }
 }

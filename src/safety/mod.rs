@@ -157,6 +157,9 @@ pub struct SafetyFilter {
     rows: Vec<Row>,
     var_of: Vec<Option<usize>>,
     vars: Vec<usize>,
+    /// The rows of the last call the filtered commands meet with less than
+    /// `ACTIVE_SLACK_MPS2` to spare, as `(i, j)` (`i == j`: the fence).
+    active: Vec<(usize, usize)>,
 }
 
 impl SafetyFilter {
@@ -188,6 +191,7 @@ impl SafetyFilter {
             .sweep
             .pairs_within(&self.positions, sep.vertical_scale(), radius);
         self.rows.clear();
+        self.active.clear();
         let mut closest: Option<(usize, usize, f64)> = None;
         let mut broken = false;
         for &(i, j) in pairs {
@@ -272,17 +276,25 @@ impl SafetyFilter {
                 Outcome::Fallback { reason }
             }
         };
-        let active = self
-            .rows
-            .iter()
-            .filter(|r| r.lhs(agents, commands) - r.row.b < ACTIVE_SLACK_MPS2)
-            .count();
+        self.active.extend(
+            self.rows
+                .iter()
+                .filter(|r| r.lhs(agents, commands) - r.row.b < ACTIVE_SLACK_MPS2)
+                .map(|r| (r.i, r.j)),
+        );
+        let active = self.active.len();
         Report {
             outcome,
             rows: self.rows.len(),
             active,
             closest,
         }
+    }
+
+    /// The rows the last call's commands meet with (almost) nothing to spare, as the
+    /// agents' indices `(i, j)`; `i == j` for a vehicle's row against the fence.
+    pub fn active_rows(&self) -> &[(usize, usize)] {
+        &self.active
     }
 
     /// The pairs of the last call closer than `distance_m` (scaled), with their distance:

@@ -265,6 +265,16 @@ impl Swarm {
         }
     }
 
+    /// The safety filter's rows that bound on the last control tick (`(i, j)` vehicle
+    /// indices; `i == j` against the fence); empty when it is off or changed nothing.
+    pub fn safety_active_rows(&self) -> &[(usize, usize)] {
+        if self.setup.safety.is_some() {
+            self.safety_filter.active_rows()
+        } else {
+            &[]
+        }
+    }
+
     /// What the safety filter did so far.
     pub fn safety_stats(&self) -> &SafetyStats {
         &self.safety_stats

@@ -6,7 +6,9 @@ use std::path::Path;
 
 use nalgebra::{Vector2, Vector3};
 
-use super::state::{EventView, RECENT_EVENTS, VehicleView, ViewState, formation_targets};
+use super::state::{
+    EventView, PairView, RECENT_EVENTS, VehicleView, ViewState, closest_pair, formation_targets,
+};
 use crate::record::RunSetup;
 use crate::record::metrics::{altitude_error_m, formation_error_m};
 
@@ -190,8 +192,19 @@ impl Replay {
                 telemetry_age_ms: row.map(|r| f64::from(r.age_ms)).filter(|a| a.is_finite()),
                 speed_mps: row.map(|r| vel(r).xy().norm()),
                 saturated: None,
+                constrained: None,
             })
             .collect();
+        let positions: Vec<_> = rows.iter().map(|r| r.map(pos)).collect();
+        let vertical_per_horizontal = self
+            .setup
+            .separation
+            .map_or(1.0, |s| s.vertical_m / s.horizontal_m);
+        let closest = closest_pair(&positions, vertical_per_horizontal).map(|(i, j, d)| PairView {
+            vehicles: [i, j],
+            sysids: [self.setup.vehicles[i].sysid, self.setup.vehicles[j].sysid],
+            distance_m: d,
+        });
         let happened = self.events.partition_point(|e| e.t_s <= t_s);
         ViewState {
             t_s,
@@ -203,6 +216,8 @@ impl Replay {
             altitude_error_m: altitude,
             altitude_target_m: self.setup.altitude_m,
             formation_centre_enu_m: targets.map(|(c, _)| c.into()),
+            closest_pair: closest,
+            active_pairs: Vec::new(),
             vehicles,
             events: self.events[happened.saturating_sub(RECENT_EVENTS)..happened].to_vec(),
             events_total: happened,

@@ -3,7 +3,7 @@
 //! m/s), as in the run directory's CSVs. Pure: built from a [`Swarm`] or from a run
 //! directory's rows, serialised by the server.
 
-use nalgebra::Vector2;
+use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 use serde::{Deserialize, Serialize};
 
@@ -41,6 +41,13 @@ pub struct ViewState {
     pub formation_centre_enu_m: Option<[f64; 2]>,
     /// One entry per vehicle, in the config's order.
     pub vehicles: Vec<VehicleView>,
+    /// The two vehicles closest to each other (ellipsoidal distance, horizontal metres),
+    /// among pairs near enough to matter to the safety filter (live), or among all
+    /// (replay); `null` when there is none.
+    pub closest_pair: Option<PairView>,
+    /// Pairs whose separation constraint bound the commands on the last control tick
+    /// (indices into `vehicles`); empty in a replay.
+    pub active_pairs: Vec<[usize; 2]>,
     /// The newest events (at most [`RECENT_EVENTS`]), oldest first.
     pub events: Vec<EventView>,
     /// How many events there have been.
@@ -72,6 +79,21 @@ pub struct VehicleView {
     pub speed_mps: Option<f64>,
     /// Whether the envelope limited its last command (`null` in a replay).
     pub saturated: Option<bool>,
+    /// Whether a safety constraint (a pair or the fence) bound its last command (`null`
+    /// in a replay).
+    pub constrained: Option<bool>,
+}
+
+/// Two vehicles and their distance.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PairView {
+    /// Indices into `vehicles`.
+    pub vehicles: [usize; 2],
+    /// Their system ids.
+    pub sysids: [u8; 2],
+    /// Their ellipsoidal distance (m, horizontal metres: the vertical offset divided by
+    /// the vertical-to-horizontal ratio of the separation).
+    pub distance_m: f64,
 }
 
 /// An event (lost link, failsafe, refused command, timeout, …).
@@ -123,6 +145,28 @@ pub fn formation_targets(
     Some((centre, offsets_m.iter().map(|d| centre + d).collect()))
 }
 
+/// The closest two of `positions` (m, ENU; `None`: unknown) by the separation's
+/// ellipsoidal distance: the vertical offset divided by `vertical_per_horizontal`.
+/// All pairs: for a replay's state, not for a control tick.
+pub fn closest_pair(
+    positions: &[Option<Vector3<f64>>],
+    vertical_per_horizontal: f64,
+) -> Option<(usize, usize, f64)> {
+    let scale = Vector3::new(1.0, 1.0, 1.0 / vertical_per_horizontal);
+    let mut best: Option<(usize, usize, f64)> = None;
+    for (i, a) in positions.iter().enumerate() {
+        let Some(a) = a else { continue };
+        for (j, b) in positions.iter().enumerate().skip(i + 1) {
+            let Some(b) = b else { continue };
+            let d = (a - b).component_mul(&scale).norm();
+            if d.is_finite() && best.is_none_or(|(_, _, m)| d < m) {
+                best = Some((i, j, d));
+            }
+        }
+    }
+    best
+}
+
 impl ViewState {
     /// The live swarm at `now`; `figures` is the run's latest snapshot of its figures.
     pub fn of_swarm(swarm: &Swarm, now: SimTime, figures: Option<Snapshot>) -> Self {
@@ -133,6 +177,7 @@ impl ViewState {
         let w: Vec<f64> = (0..n).map(|i| setup.ring.w(i)).collect();
         let targets = formation_targets(&xy, &setup.offsets_m, &w);
         let predicted = swarm.predicted_final_velocity();
+        let active = swarm.safety_active_rows();
         let vehicles = swarm
             .links()
             .iter()
@@ -152,6 +197,7 @@ impl ViewState {
                     telemetry_age_ms: state.last_heard.map(|t| (now - t).as_secs_f64() * 1e3),
                     speed_mps: states[i].map(|s| s.vel_enu_mps.xy().norm()),
                     saturated: Some(swarm.command_limited(i)),
+                    constrained: Some(active.iter().any(|&(a, b)| a == i || b == i)),
                 }
             })
             .collect();
@@ -167,6 +213,16 @@ impl ViewState {
             altitude_error_m: figures.map(|f| f.altitude_error_m),
             altitude_target_m: setup.altitude_m,
             formation_centre_enu_m: targets.map(|(c, _)| c.into()),
+            closest_pair: swarm.closest_pair().map(|(i, j, d)| PairView {
+                vehicles: [i, j],
+                sysids: [setup.links[i].system_id, setup.links[j].system_id],
+                distance_m: d,
+            }),
+            active_pairs: active
+                .iter()
+                .filter(|(a, b)| a != b)
+                .map(|&(a, b)| [a, b])
+                .collect(),
             vehicles,
             events: events[events.len().saturating_sub(RECENT_EVENTS)..]
                 .iter()

@@ -276,3 +276,46 @@ def test_the_replay_page_of_a_lockstep_run_moves_with_its_slider(tmp_path):
         driver.quit()
         view.terminate()
         view.wait(timeout=30)
+
+
+def test_the_replay_draws_the_fence_the_separation_circles_and_the_closest_pair(tmp_path):
+    """crossing.toml (eight x500s through the centre) inside a circle of 80 m: the page
+    draws the fence, one separation circle per vehicle, and names the closest pair."""
+    config = tmp_path / "fenced-crossing.toml"
+    text = (ROOT / "config" / "crossing.toml").read_text()
+    fence = ('[fence]\nkind = "circle"\ncentre_enu_m = [0.0, 0.0]\nradius_m = 80.0\n'
+             'min_altitude_m = 20.0\nmax_altitude_m = 100.0\n\n[[vehicle]]')
+    config.write_text(text.replace("[[vehicle]]", fence, 1))
+    out = tmp_path / "run"
+    done = subprocess.run([BIN, "demo", "--scenario", str(config), "--out", str(out), "--no-plots"],
+                          capture_output=True, text=True, timeout=300)
+    # The swarm flies out at (2, 1) m/s and the fence stops it: exit code 5.
+    assert done.returncode == 5, done.stderr
+    port = free_port()
+    view = subprocess.Popen([BIN, "view", str(out), "--web", f"127.0.0.1:{port}"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    driver = browser()
+    try:
+        def opened():
+            try:
+                driver.get(f"http://127.0.0.1:{port}/")
+                return driver.find_elements("css selector", "#vehicles tbody tr[data-sysid]")
+            except Exception:
+                return None
+        wait_for("the replay page", opened, timeout_s=60, every_s=0.5)
+        driver.execute_script(
+            "const s = document.getElementById('slider'); s.value = '12';"
+            "s.dispatchEvent(new Event('input'));")
+        at = lambda: driver.execute_script("return window.ringswarmView.state && window.ringswarmView.state.t_s")
+        wait_for("the state at 12 s", lambda: abs((at() or -1) - 12) < 0.06)
+        drawn = driver.execute_script("return window.ringswarmView.drawnSafety")
+        assert drawn["fence"] == "circle"
+        assert drawn["circles"] == 8
+        a, b, distance = drawn["closest"]
+        assert a != b and distance >= 2.85, drawn
+        closest = driver.find_element("id", "closest").text
+        assert closest.startswith(f"{a}–{b}: ") and closest.endswith("(separation 3.0 m)"), closest
+    finally:
+        driver.quit()
+        view.terminate()
+        view.wait(timeout=30)

@@ -122,6 +122,69 @@ function figures(s) {
   $("predicted").textContent = fmtVec(s.predicted_final_velocity);
   $("velocity-error").textContent = s.velocity_error_mps === null ? "–" : `${fmt(s.velocity_error_mps, 3)} m/s`;
   $("altitude").textContent = s.altitude_error_m === null ? "–" : `±${fmt(s.altitude_error_m)} m of ${fmt(s.altitude_target_m, 1)} m`;
+  const c = s.closest_pair, sep = view.setup.separation;
+  const bound = sep ? ` (separation ${fmt(sep.horizontal_m, 1)} m)` : "";
+  $("closest").textContent = c ? `${c.sysids[0]}–${c.sysids[1]}: ${fmt(c.distance_m)} m${bound}` : "–";
+  $("closest").classList.toggle("bad", Boolean(c && sep && c.distance_m < sep.horizontal_m));
+}
+
+// The fence (red; a circle's margin dashed inside it), in map pixels.
+function drawFence(ctx, px, scale) {
+  const f = view.setup.fence;
+  if (!f) return null;
+  ctx.strokeStyle = "#b22"; ctx.lineWidth = 2; ctx.beginPath();
+  if (f.kind === "circle") {
+    const [x, y] = px(f.centre_enu_m[0], f.centre_enu_m[1]);
+    ctx.arc(x, y, f.radius_m * scale, 0, 2 * Math.PI); ctx.stroke();
+    if (f.margin_m > 0 && f.radius_m > f.margin_m) {
+      ctx.setLineDash([6, 4]); ctx.lineWidth = 1; ctx.beginPath();
+      ctx.arc(x, y, (f.radius_m - f.margin_m) * scale, 0, 2 * Math.PI); ctx.stroke(); ctx.setLineDash([]);
+    }
+  } else {
+    f.vertices_enu_m.forEach((v, i) => { const [x, y] = px(v[0], v[1]); i ? ctx.lineTo(x, y) : ctx.moveTo(x, y); });
+    ctx.closePath(); ctx.stroke();
+  }
+  ctx.lineWidth = 1;
+  return f.kind;
+}
+
+// Each vehicle's separation circle (radius half the separation: two vehicles at the
+// separation touch), red where a constraint bound its command; the bound pairs joined in
+// red and the closest pair dashed.
+function drawSeparation(ctx, s, px, scale) {
+  const sep = view.setup.separation;
+  const drawn = { circles: 0, constrained: [], activePairs: 0, closest: null };
+  const pos = (i) => s.vehicles[i] && s.vehicles[i].position_enu_m;
+  if (sep && s.vehicles.length <= 200) {
+    s.vehicles.forEach((v) => {
+      if (!v.position_enu_m) return;
+      const [x, y] = px(v.position_enu_m[0], v.position_enu_m[1]);
+      ctx.strokeStyle = v.constrained ? "rgba(200, 30, 30, 0.9)" : "rgba(90, 90, 110, 0.35)";
+      ctx.lineWidth = v.constrained ? 2 : 1;
+      ctx.beginPath(); ctx.arc(x, y, sep.horizontal_m / 2 * scale, 0, 2 * Math.PI); ctx.stroke();
+      drawn.circles += 1;
+      if (v.constrained) drawn.constrained.push(v.sysid);
+    });
+    ctx.lineWidth = 1;
+  }
+  ctx.strokeStyle = "rgba(200, 30, 30, 0.9)"; ctx.lineWidth = 2;
+  for (const [i, j] of s.active_pairs ?? []) {
+    const a = pos(i), b = pos(j);
+    if (!a || !b) continue;
+    const [x0, y0] = px(a[0], a[1]), [x1, y1] = px(b[0], b[1]);
+    ctx.beginPath(); ctx.moveTo(x0, y0); ctx.lineTo(x1, y1); ctx.stroke();
+    drawn.activePairs += 1;
+  }
+  ctx.lineWidth = 1;
+  const c = s.closest_pair;
+  if (c && pos(c.vehicles[0]) && pos(c.vehicles[1])) {
+    const a = pos(c.vehicles[0]), b = pos(c.vehicles[1]);
+    const [x0, y0] = px(a[0], a[1]), [x1, y1] = px(b[0], b[1]);
+    ctx.strokeStyle = "#c60"; ctx.setLineDash([3, 3]);
+    ctx.beginPath(); ctx.moveTo(x0, y0); ctx.lineTo(x1, y1); ctx.stroke(); ctx.setLineDash([]);
+    drawn.closest = [c.sysids[0], c.sysids[1], c.distance_m];
+  }
+  return drawn;
 }
 
 function draw(s) {
@@ -146,6 +209,8 @@ function draw(s) {
   const scale = (W - 2 * pad) / span;
   const px = (x, y) => [W / 2 + (x - cx) * scale, H / 2 - (y - cy) * scale];
   grid(ctx, W, H, cx, cy, scale, px);
+  const fence = drawFence(ctx, px, scale);
+  view.drawnSafety = { fence, ...drawSeparation(ctx, s, px, scale) };
   // The target formation, in ring order.
   const targets = s.vehicles.map((v) => v.target_enu_m).filter(Boolean);
   if (targets.length > 1) {
