@@ -2,10 +2,13 @@
 //! processes on loopback, a ring of N ideal quadrotors on MAVLink networks of 250, 50 Hz
 //! control with LOCAL_POSITION_NED and ATTITUDE_QUATERNION at 50 Hz.
 //!
-//! `cargo bench --bench realtime [-- N ...]` (default 64 250 500 1000) prints, per N: CPU
+//! `cargo bench --bench realtime [-- [dense] N ...]` (default 64 250 500 1000; `dense`:
+//! the ring packed so that the safety filter's constraints bind) prints, per N: CPU
 //! per vehicle-tick of each process over a steady window, control ticks started over half
 //! a period late, the age of the flown positions (p50/p99; `summary.json`), the setpoint
-//! rate the emulator took (its fleet line), and the kernel's UDP drops; beside them the
+//! rate the emulator took (its fleet line), the kernel's UDP drops, and what the safety
+//! filter did (`summary.json`: the share of ticks with a bound constraint, the closest
+//! two vehicles came); beside them the
 //! machine's floor, one datagram sent and received on loopback, measured first.
 
 use std::io::{BufRead, BufReader};
@@ -15,7 +18,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::ring;
+use common::{dense_ring, ring};
 
 /// Seconds before the steady window: handshake and the first transients.
 const WARM_UP: Duration = Duration::from_secs(10);
@@ -31,6 +34,7 @@ fn main() {
         .skip(1)
         .filter_map(|a| a.parse().ok())
         .collect();
+    let dense = std::env::args().any(|a| a == "dense");
     let cases = if cases.is_empty() {
         vec![64, 250, 500, 1000]
     } else {
@@ -45,16 +49,16 @@ fn main() {
     println!(
         "| vehicles | emulator µs/vehicle-tick | coordinator µs/vehicle-tick | both / floor | \
          late ticks (> T/2) | tick lateness p99 / max (ms) | state age p50 / p99 (ms) | setpoints taken, lowest / mean (Hz) | \
-         UDP drops |"
+         UDP drops | filter active / closest (m) |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for n in cases {
-        match run_case(n) {
+        match run_case(n, dense) {
             Ok(r) => {
                 let per_tick = |cpu_s: f64| cpu_s * 1e6 / (n as f64 * RATE_HZ * r.window_s);
                 let (e, c) = (per_tick(r.emulator_cpu_s), per_tick(r.coordinator_cpu_s));
                 println!(
-                    "| {n} | {e:.2} | {c:.2} | {:.1} | {} of {} ({:.3} %) | {} / {} | {} / {} | {} | {} |",
+                    "| {n} | {e:.2} | {c:.2} | {:.1} | {} of {} ({:.3} %) | {} / {} | {} / {} | {} | {} | {} |",
                     (e + c) / (floor_us * DATAGRAMS_PER_TICK),
                     r.late_ticks,
                     r.ticks,
@@ -68,9 +72,10 @@ fn main() {
                             "{lo:.1} / {mean:.1}"
                         )),
                     r.udp_drops,
+                    r.safety,
                 );
             }
-            Err(e) => println!("| {n} | failed: {e} ||||||||"),
+            Err(e) => println!("| {n} | failed: {e} |||||||||"),
         }
     }
 }
@@ -91,6 +96,8 @@ struct CaseResult {
     age_p99_ms: Option<f64>,
     setpoint_rates: Option<(f64, f64)>,
     udp_drops: u64,
+    /// The safety filter: active share of ticks and closest pair, or "off".
+    safety: String,
 }
 
 /// Kills a child when dropped (a failed case leaves nothing running).
@@ -103,13 +110,18 @@ impl Drop for Running {
     }
 }
 
-fn run_case(n: usize) -> Result<CaseResult, String> {
+fn run_case(n: usize, dense: bool) -> Result<CaseResult, String> {
     let bin = env!("CARGO_BIN_EXE_ringswarm");
     let dir = std::env::temp_dir().join(format!("ringswarm-realtime-{}-{n}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let config = dir.join("ring.toml");
-    std::fs::write(&config, ring(n, RATE_HZ)).map_err(|e| e.to_string())?;
+    let text = if dense {
+        dense_ring(n, RATE_HZ)
+    } else {
+        ring(n, RATE_HZ)
+    };
+    std::fs::write(&config, text).map_err(|e| e.to_string())?;
 
     // The emulator stands for the vehicles' own computers: on this shared machine it
     // runs at a lower priority (nice 10), so that the coordinator's schedule is what is
@@ -203,8 +215,17 @@ fn run_case(n: usize) -> Result<CaseResult, String> {
     if let Some(at) = timing["latest_tick_due_s"].as_f64() {
         eprintln!("{n} vehicles: the latest tick was due at {at:.2} s");
     }
+    let safety = &summary["safety"];
+    let safety = match (
+        safety["active_fraction"].as_f64(),
+        safety["min_separation_seen_m"].as_f64(),
+    ) {
+        (Some(active), Some(closest)) => format!("{:.1} % / {closest:.2}", 100.0 * active),
+        _ => "off".to_owned(),
+    };
     let _ = std::fs::remove_dir_all(&dir);
     Ok(CaseResult {
+        safety,
         window_s,
         emulator_cpu_s: cpu_after.0 - cpu_before.0,
         coordinator_cpu_s: cpu_after.1 - cpu_before.1,

@@ -50,6 +50,9 @@ pub const SLACK_COST: f64 = 1e4;
 
 /// A barrier row counts as active when the command leaves less slack than this (m/s²).
 pub const ACTIVE_SLACK_MPS2: f64 = 1e-6;
+/// Rounds of the piecewise solve (rows an answer breaks join the pieces) before the
+/// whole problem is solved at once.
+pub const PIECE_ROUNDS: usize = 4;
 
 /// One vehicle as the filter sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -160,6 +163,9 @@ pub struct SafetyFilter {
     /// The rows of the last call the filtered commands meet with less than
     /// `ACTIVE_SLACK_MPS2` to spare, as `(i, j)` (`i == j`: the fence).
     active: Vec<(usize, usize)>,
+    /// Solve every problem at once, never piece by piece (for comparing the two).
+    #[cfg(test)]
+    pub(crate) whole_only: bool,
 }
 
 impl SafetyFilter {
@@ -253,29 +259,54 @@ impl SafetyFilter {
                 closest,
             };
         }
+        if let Some(relaxed) = self.solve_in_pieces(settings, agents, &mut commands[..n]) {
+            let outcome = Outcome::Filtered {
+                sum_kept: settings.keep_weighted_sum,
+                relaxed,
+            };
+            return self.report(agents, commands, outcome, closest);
+        }
         self.index_variables(agents, n, settings.keep_weighted_sum);
-        let outcome = match self.solve(settings, agents, commands, true) {
+        let all: Vec<usize> = (0..self.rows.len()).collect();
+        let (vars, var_of) = (
+            std::mem::take(&mut self.vars),
+            std::mem::take(&mut self.var_of),
+        );
+        let solved = self.solve(settings, agents, commands, &all, &vars, &var_of, true);
+        let outcome = match solved {
             Ok(relaxed) => Outcome::Filtered {
                 sum_kept: settings.keep_weighted_sum,
                 relaxed,
             },
             Err(_) if settings.keep_weighted_sum => {
-                match self.solve(settings, agents, commands, false) {
+                match self.solve(settings, agents, commands, &all, &vars, &var_of, false) {
                     Ok(relaxed) => Outcome::Filtered {
                         sum_kept: false,
                         relaxed,
                     },
                     Err(reason) => {
-                        self.brake(agents, commands);
+                        self.brake(agents, commands, &vars);
                         Outcome::Fallback { reason }
                     }
                 }
             }
             Err(reason) => {
-                self.brake(agents, commands);
+                self.brake(agents, commands, &vars);
                 Outcome::Fallback { reason }
             }
         };
+        (self.vars, self.var_of) = (vars, var_of);
+        self.report(agents, commands, outcome, closest)
+    }
+
+    /// The report of a filtered tick, with the rows left active.
+    fn report(
+        &mut self,
+        agents: &[Agent],
+        commands: &[Vector2<f64>],
+        outcome: Outcome,
+        closest: Option<(usize, usize, f64)>,
+    ) -> Report {
         self.active.extend(
             self.rows
                 .iter()
@@ -314,7 +345,9 @@ impl SafetyFilter {
         self.var_of.clear();
         self.var_of.resize(n, None);
         self.vars.clear();
-        let everyone = keep_sum && self.rows.iter().any(Row::single);
+        // A row with one commanded vehicle (the fence, or a neighbour the filter does not
+        // command) changes Σ wᵢuᵢ, which only the others can give back.
+        let everyone = keep_sum && self.rows.iter().any(|r| !two_sided(agents, r));
         let rows = self.rows.iter().flat_map(|r| [r.i, r.j]);
         let all = (0..n).filter(|_| everyone);
         for k in rows.chain(all) {
@@ -327,24 +360,28 @@ impl SafetyFilter {
 
     /// One QP over the variables; writes the commands when solved and says whether a
     /// row had to be relaxed (its slack used).
+    #[allow(clippy::too_many_arguments)]
     fn solve(
         &self,
         settings: &Settings,
         agents: &[Agent],
         commands: &mut [Vector2<f64>],
+        rows: &[usize],
+        vars: &[usize],
+        var_of: &[Option<usize>],
         with_sum: bool,
     ) -> Result<bool, &'static str> {
-        let n_u = 2 * self.vars.len();
-        let n_rows = self.rows.len();
+        let n_u = 2 * vars.len();
+        let n_rows = rows.len();
         let nv = n_u + n_rows;
         let weight = |k: usize| agents[k].weight.max(1e-9);
-        let max_weight = self.vars.iter().map(|&k| weight(k)).fold(1.0, f64::max);
+        let max_weight = vars.iter().map(|&k| weight(k)).fold(1.0, f64::max);
         // Objective ½xᵀPx + qᵀx: P = 2W and q = −2Wû on the commands, and ρσ on each row's
         // slack, linear: an exact penalty, so a row that can be met is met exactly
         // (ρ = 10⁴·max w is far above any multiplier a row of these sizes needs).
         let mut p_diag = Vec::with_capacity(nv);
         let mut q = Vec::with_capacity(nv);
-        for &k in &self.vars {
+        for &k in vars {
             for component in commands[k].iter() {
                 p_diag.push(2.0 * weight(k));
                 q.push(-2.0 * weight(k) * component);
@@ -361,7 +398,7 @@ impl SafetyFilter {
         if with_sum && settings.keep_weighted_sum {
             for axis in [0, 1] {
                 let mut total = 0.0;
-                for (v, &k) in self.vars.iter().enumerate() {
+                for (v, &k) in vars.iter().enumerate() {
                     entries.push((b.len(), 2 * v + axis, weight(k)));
                     total += weight(k) * commands[k][axis];
                 }
@@ -369,7 +406,7 @@ impl SafetyFilter {
                 zero_rows += 1;
             }
         }
-        for (r_index, r) in self.rows.iter().enumerate() {
+        for (r_index, r) in rows.iter().map(|&k| &self.rows[k]).enumerate() {
             // a·(netᵢ − netⱼ) + σ ≥ b  ⇔  −a·xᵢ + a·xⱼ − σ + s = −b − a·cᵢ + a·cⱼ, s ≥ 0.
             // A bound beyond what the two envelopes can give asks for the same thing as
             // one just beyond it (all of both discs): clipped, the problem stays scaled.
@@ -385,7 +422,7 @@ impl SafetyFilter {
                 &[(r.i, -1.0), (r.j, 1.0)]
             };
             for &(k, sign) in sides {
-                if let Some(v) = self.var_of[k] {
+                if let Some(v) = var_of[k] {
                     for axis in 0..2 {
                         entries.push((b.len(), 2 * v + axis, sign * r.row.a[axis]));
                     }
@@ -402,7 +439,7 @@ impl SafetyFilter {
         }
         let nonnegative = b.len() - zero_rows;
         // Each command inside its disc: s = (L, x, y) in the second-order cone.
-        for (v, &k) in self.vars.iter().enumerate() {
+        for (v, &k) in vars.iter().enumerate() {
             b.push(limit(&agents[k]));
             entries.push((b.len(), 2 * v, -1.0));
             b.push(0.0);
@@ -420,18 +457,14 @@ impl SafetyFilter {
                 .map(|(c, &x)| (c, c, x))
                 .collect::<Vec<_>>(),
         );
-        let mut cones = Vec::with_capacity(2 + self.vars.len());
+        let mut cones = Vec::with_capacity(2 + vars.len());
         if zero_rows > 0 {
             cones.push(SupportedConeT::ZeroConeT(zero_rows));
         }
         if nonnegative > 0 {
             cones.push(SupportedConeT::NonnegativeConeT(nonnegative));
         }
-        cones.extend(
-            self.vars
-                .iter()
-                .map(|_| SupportedConeT::SecondOrderConeT(3)),
-        );
+        cones.extend(vars.iter().map(|_| SupportedConeT::SecondOrderConeT(3)));
         let time_limit = if settings.time_limit_s.is_finite() && settings.time_limit_s > 0.0 {
             settings.time_limit_s
         } else {
@@ -457,21 +490,17 @@ impl SafetyFilter {
         if x.len() != nv || x.iter().any(|v| !v.is_finite()) {
             return Err("not converged");
         }
-        for (v, &k) in self.vars.iter().enumerate() {
+        for (v, &k) in vars.iter().enumerate() {
             commands[k] = Vector2::new(x[2 * v], x[2 * v + 1]);
         }
         if with_sum && settings.keep_weighted_sum {
             // The solver meets the equality to its tolerance (1e-8); the least weighted
             // change that meets it exactly is uₖ −= δ/Σw (δ the sum's error per axis).
-            let total_w: f64 = self.vars.iter().map(|&k| weight(k)).sum();
+            let total_w: f64 = vars.iter().map(|&k| weight(k)).sum();
             for axis in 0..2 {
-                let got: f64 = self
-                    .vars
-                    .iter()
-                    .map(|&k| weight(k) * commands[k][axis])
-                    .sum();
+                let got: f64 = vars.iter().map(|&k| weight(k) * commands[k][axis]).sum();
                 let delta = (got - b[axis]) / total_w;
-                for &k in &self.vars {
+                for &k in vars {
                     commands[k][axis] -= delta;
                 }
             }
@@ -479,18 +508,125 @@ impl SafetyFilter {
         // A row is relaxed when the commands miss it by more than the solver's tolerance.
         let tolerance = 1e-6 * (1.0 + b.iter().fold(0.0f64, |acc, v| acc.max(v.abs())));
         // (Every commanded vehicle of a row is a variable, so `lhs` reads the solution.)
-        Ok(self
+        Ok(rows
+            .iter()
+            .map(|&k| &self.rows[k])
+            .any(|r| r.lhs(agents, commands) < r.row.b - tolerance))
+    }
+
+    /// The broken rows solved piece by piece, when every one of them has two commanded
+    /// vehicles: the rows that bind fall apart into groups that share no vehicle, and
+    /// each group is its own QP with its own `Σ wᵢuᵢ` kept (which keeps the whole sum); a
+    /// group of one row not pushed out of a disc is solved in closed form. Rows an
+    /// answer breaks join and the pieces are solved again (at most [`PIECE_ROUNDS`]).
+    /// `None` when the whole problem must be solved at once: a row with one commanded
+    /// vehicle (the fence, a neighbour the filter does not command), no convergence, or
+    /// a piece the solver could not solve. On `None` the commands are as given.
+    fn solve_in_pieces(
+        &mut self,
+        settings: &Settings,
+        agents: &[Agent],
+        commands: &mut [Vector2<f64>],
+    ) -> Option<bool> {
+        let n = commands.len();
+        #[cfg(test)]
+        if self.whole_only {
+            return None;
+        }
+        if self.rows.iter().any(|r| !two_sided(agents, r)) {
+            return None;
+        }
+        let given: Vec<Vector2<f64>> = commands.to_vec();
+        let mut work: Vec<bool> = self
             .rows
             .iter()
-            .any(|r| r.lhs(agents, commands) < r.row.b - tolerance))
+            .map(|r| r.lhs(agents, commands) < r.row.b)
+            .collect();
+        let mut var_of = vec![None; n];
+        for _ in 0..PIECE_ROUNDS {
+            commands.copy_from_slice(&given);
+            let mut parent: Vec<usize> = (0..n).collect();
+            for (r, _) in self.rows.iter().zip(&work).filter(|(_, w)| **w) {
+                let (a, b) = (root(&mut parent, r.i), root(&mut parent, r.j));
+                parent[a] = b;
+            }
+            let mut pieces: Vec<(usize, usize)> = (0..self.rows.len())
+                .filter(|&k| work[k])
+                .map(|k| (root(&mut parent, self.rows[k].i), k))
+                .collect();
+            pieces.sort_unstable();
+            let mut relaxed = false;
+            for piece in pieces.chunk_by(|a, b| a.0 == b.0) {
+                let rows: Vec<usize> = piece.iter().map(|p| p.1).collect();
+                if rows.len() == 1 && self.closed_form(agents, commands, rows[0]) {
+                    continue;
+                }
+                let mut vars: Vec<usize> = rows
+                    .iter()
+                    .flat_map(|&k| [self.rows[k].i, self.rows[k].j])
+                    .collect();
+                vars.sort_unstable();
+                vars.dedup();
+                for (v, &k) in vars.iter().enumerate() {
+                    var_of[k] = Some(v);
+                }
+                let solved = self.solve(settings, agents, commands, &rows, &vars, &var_of, true);
+                for &k in &vars {
+                    var_of[k] = None;
+                }
+                match solved {
+                    Ok(r) => relaxed |= r,
+                    Err(_) => {
+                        commands.copy_from_slice(&given);
+                        return None;
+                    }
+                }
+            }
+            let mut joined = false;
+            for (k, r) in self.rows.iter().enumerate() {
+                if !work[k] && r.lhs(agents, commands) < r.row.b - 1e-9 {
+                    work[k] = true;
+                    joined = true;
+                }
+            }
+            if !joined {
+                return Some(relaxed);
+            }
+        }
+        commands.copy_from_slice(&given);
+        None
+    }
+
+    /// One broken row with two commanded vehicles, solved exactly: the least weighted
+    /// change `Δuᵢ = λa/wᵢ`, `Δuⱼ = −λa/wⱼ` that meets it (`Σ wΔu = 0` by construction).
+    /// `false` (nothing changed) when that would take a command out of its disc.
+    fn closed_form(&self, agents: &[Agent], commands: &mut [Vector2<f64>], k: usize) -> bool {
+        let r = &self.rows[k];
+        let weight = |k: usize| agents[k].weight.max(1e-9);
+        let a = r.row.a;
+        let deficit = r.row.b - r.lhs(agents, commands);
+        let norm2 = a.norm_squared();
+        if !(deficit.is_finite() && norm2 > 1e-12) {
+            return false;
+        }
+        let lambda = deficit / (norm2 * (1.0 / weight(r.i) + 1.0 / weight(r.j)));
+        let ui = commands[r.i] + a * (lambda / weight(r.i));
+        let uj = commands[r.j] - a * (lambda / weight(r.j));
+        let inside = |u: &Vector2<f64>, k: usize| u.norm() <= limit(&agents[k]) + 1e-12;
+        if !(inside(&ui, r.i) && inside(&uj, r.j)) {
+            return false;
+        }
+        commands[r.i] = ui;
+        commands[r.j] = uj;
+        true
     }
 
     /// The fallback, the manoeuvre the barrier counts on: every vehicle of the problem
     /// accelerates at its share of the authority away from the vehicles of its rows (the
     /// sum of their directions), or, where those cancel, brakes along its velocity; inside
     /// its disc.
-    fn brake(&self, agents: &[Agent], commands: &mut [Vector2<f64>]) {
-        for &k in &self.vars {
+    fn brake(&self, agents: &[Agent], commands: &mut [Vector2<f64>], vars: &[usize]) {
+        for &k in vars {
             let a = &agents[k];
             let away: Vector2<f64> = self
                 .rows
@@ -527,6 +663,21 @@ impl SafetyFilter {
             };
         }
     }
+}
+
+/// A row with both vehicles commanded (not the fence's, not against one the filter does
+/// not command).
+fn two_sided(agents: &[Agent], r: &Row) -> bool {
+    !r.single() && agents[r.i].controlled && agents[r.j].controlled
+}
+
+/// The root of `k` in a union-find forest (halving the path).
+fn root(parent: &mut [usize], mut k: usize) -> usize {
+    while parent[k] != k {
+        parent[k] = parent[parent[k]];
+        k = parent[k];
+    }
+    k
 }
 
 fn braking(a: &Agent) -> f64 {
