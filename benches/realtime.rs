@@ -223,7 +223,11 @@ fn run_case(n: usize, dense: bool) -> Result<CaseResult, String> {
         (Some(active), Some(closest)) => format!("{:.1} % / {closest:.2}", 100.0 * active),
         _ => "off".to_owned(),
     };
-    let _ = std::fs::remove_dir_all(&dir);
+    if std::env::var_os("RINGSWARM_BENCH_KEEP").is_some() {
+        eprintln!("{n} vehicles: run directory kept in {}", dir.display());
+    } else {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
     Ok(CaseResult {
         safety,
         window_s,

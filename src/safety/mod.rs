@@ -514,14 +514,17 @@ impl SafetyFilter {
             .any(|r| r.lhs(agents, commands) < r.row.b - tolerance))
     }
 
-    /// The broken rows solved piece by piece, when every one of them has two commanded
-    /// vehicles: the rows that bind fall apart into groups that share no vehicle, and
-    /// each group is its own QP with its own `Σ wᵢuᵢ` kept (which keeps the whole sum); a
-    /// group of one row not pushed out of a disc is solved in closed form. Rows an
-    /// answer breaks join and the pieces are solved again (at most [`PIECE_ROUNDS`]).
-    /// `None` when the whole problem must be solved at once: a row with one commanded
-    /// vehicle (the fence, a neighbour the filter does not command), no convergence, or
-    /// a piece the solver could not solve. On `None` the commands are as given.
+    /// The broken rows solved piece by piece: the rows that bind fall apart into groups
+    /// that share no vehicle, and each group is its own QP (a lone row: closed form,
+    /// unless that leaves a disc). A group of rows with two commanded vehicles each keeps
+    /// its own `Σ wᵢuᵢ`. A group with a one-vehicle row (the fence, a neighbour the filter
+    /// does not command) cannot; when the sum is kept, what the groups changed of it is
+    /// given back by every commanded vehicle in no binding row, all by the same amount
+    /// (the least weighted change that does it). Rows an answer breaks join and the
+    /// pieces are solved again (at most [`PIECE_ROUNDS`]). `None` when the whole problem
+    /// must be solved at once: no convergence, a piece the solver could not solve, or a
+    /// sum no free vehicle can give back inside its disc. On `None` the commands are as
+    /// given.
     fn solve_in_pieces(
         &mut self,
         settings: &Settings,
@@ -533,9 +536,7 @@ impl SafetyFilter {
         if self.whole_only {
             return None;
         }
-        if self.rows.iter().any(|r| !two_sided(agents, r)) {
-            return None;
-        }
+        let weight = |k: usize| agents[k].weight.max(1e-9);
         let given: Vec<Vector2<f64>> = commands.to_vec();
         let mut work: Vec<bool> = self
             .rows
@@ -543,12 +544,16 @@ impl SafetyFilter {
             .map(|r| r.lhs(agents, commands) < r.row.b)
             .collect();
         let mut var_of = vec![None; n];
+        let mut in_rows = vec![false; n];
         for _ in 0..PIECE_ROUNDS {
             commands.copy_from_slice(&given);
             let mut parent: Vec<usize> = (0..n).collect();
+            in_rows.iter_mut().for_each(|x| *x = false);
             for (r, _) in self.rows.iter().zip(&work).filter(|(_, w)| **w) {
                 let (a, b) = (root(&mut parent, r.i), root(&mut parent, r.j));
                 parent[a] = b;
+                in_rows[r.i] = true;
+                in_rows[r.j] = true;
             }
             let mut pieces: Vec<(usize, usize)> = (0..self.rows.len())
                 .filter(|&k| work[k])
@@ -561,16 +566,26 @@ impl SafetyFilter {
                 if rows.len() == 1 && self.closed_form(agents, commands, rows[0]) {
                     continue;
                 }
+                let keeps_own_sum = rows.iter().all(|&k| two_sided(agents, &self.rows[k]));
                 let mut vars: Vec<usize> = rows
                     .iter()
                     .flat_map(|&k| [self.rows[k].i, self.rows[k].j])
+                    .filter(|&k| agents[k].controlled)
                     .collect();
                 vars.sort_unstable();
                 vars.dedup();
                 for (v, &k) in vars.iter().enumerate() {
                     var_of[k] = Some(v);
                 }
-                let solved = self.solve(settings, agents, commands, &rows, &vars, &var_of, true);
+                let solved = self.solve(
+                    settings,
+                    agents,
+                    commands,
+                    &rows,
+                    &vars,
+                    &var_of,
+                    keeps_own_sum,
+                );
                 for &k in &vars {
                     var_of[k] = None;
                 }
@@ -579,6 +594,30 @@ impl SafetyFilter {
                     Err(_) => {
                         commands.copy_from_slice(&given);
                         return None;
+                    }
+                }
+            }
+            if settings.keep_weighted_sum {
+                let changed: Vector2<f64> = (0..n)
+                    .filter(|&k| agents[k].controlled)
+                    .map(|k| weight(k) * (commands[k] - given[k]))
+                    .sum();
+                if changed.norm() > 1e-12 {
+                    let free: Vec<usize> = (0..n)
+                        .filter(|&k| agents[k].controlled && !in_rows[k])
+                        .collect();
+                    let free_weight: f64 = free.iter().map(|&k| weight(k)).sum();
+                    if free.is_empty() || free_weight <= 0.0 {
+                        commands.copy_from_slice(&given);
+                        return None;
+                    }
+                    let shift = -changed / free_weight;
+                    for &k in &free {
+                        commands[k] += shift;
+                        if commands[k].norm() > limit(&agents[k]) {
+                            commands.copy_from_slice(&given);
+                            return None;
+                        }
                     }
                 }
             }
@@ -597,9 +636,10 @@ impl SafetyFilter {
         None
     }
 
-    /// One broken row with two commanded vehicles, solved exactly: the least weighted
-    /// change `Δuᵢ = λa/wᵢ`, `Δuⱼ = −λa/wⱼ` that meets it (`Σ wΔu = 0` by construction).
-    /// `false` (nothing changed) when that would take a command out of its disc.
+    /// One broken row solved exactly: the least weighted change that meets it, `Δuᵢ =
+    /// λa/wᵢ` and `Δuⱼ = −λa/wⱼ` for two commanded vehicles (`Σ wΔu = 0` by
+    /// construction), `Δuᵢ = λa` for one. `false` (nothing changed) when that would take
+    /// a command out of its disc.
     fn closed_form(&self, agents: &[Agent], commands: &mut [Vector2<f64>], k: usize) -> bool {
         let r = &self.rows[k];
         let weight = |k: usize| agents[k].weight.max(1e-9);
@@ -609,15 +649,27 @@ impl SafetyFilter {
         if !(deficit.is_finite() && norm2 > 1e-12) {
             return false;
         }
-        let lambda = deficit / (norm2 * (1.0 / weight(r.i) + 1.0 / weight(r.j)));
+        // Which commanded vehicles move, and by which sign of `a`.
+        let i_moves = agents[r.i].controlled;
+        let j_moves = !r.single() && agents[r.j].controlled;
+        let inverse_weights =
+            f64::from(u8::from(i_moves)) / weight(r.i) + f64::from(u8::from(j_moves)) / weight(r.j);
+        if inverse_weights <= 0.0 {
+            return false;
+        }
+        let lambda = deficit / (norm2 * inverse_weights);
         let ui = commands[r.i] + a * (lambda / weight(r.i));
         let uj = commands[r.j] - a * (lambda / weight(r.j));
         let inside = |u: &Vector2<f64>, k: usize| u.norm() <= limit(&agents[k]) + 1e-12;
-        if !(inside(&ui, r.i) && inside(&uj, r.j)) {
+        if (i_moves && !inside(&ui, r.i)) || (j_moves && !inside(&uj, r.j)) {
             return false;
         }
-        commands[r.i] = ui;
-        commands[r.j] = uj;
+        if i_moves {
+            commands[r.i] = ui;
+        }
+        if j_moves {
+            commands[r.j] = uj;
+        }
         true
     }
 
