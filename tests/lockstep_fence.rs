@@ -1,8 +1,8 @@
 //! The fence in lockstep: the paper's first simulation flies east-north-east at 14.9 m/s
 //! for 60 s, about 900 m, so a fence of radius 400 m around the common reference must stop
-//! it. Measured on the emulator's truth every control tick. The band's lowest altitude
-//! holds from the start of the law: a swarm that climbs into its band must start the law
-//! inside it (here the paper's vehicles start at z = 0, inside a band from −50 m).
+//! it. Measured on the emulator's truth every control tick. The altitude band counts for a
+//! vehicle once it has been inside it by the margin (the paper's vehicles start at z = 0,
+//! inside a band from −50 m; a swarm climbing from the ground is the last test).
 
 use nalgebra::Vector2;
 use ringswarm::config::Config;
@@ -96,5 +96,36 @@ fn with_upload_off_the_vehicles_are_not_given_the_fence() {
     assert!(matches!(run.swarm().phase(), SwarmPhase::Consensus(_)));
     for v in run.vehicles() {
         assert!(v.geofence().items().is_empty());
+    }
+}
+
+#[test]
+fn a_swarm_that_climbs_from_the_ground_into_its_band_is_not_stopped_by_it() {
+    // ground-diamond: four x500s on the ground; consensus starts as soon as all four fly
+    // in OFFBOARD, still on the ground, and the altitude loop climbs them to 5 m. A band
+    // from 3 m holds each vehicle from when it is inside it by the 1 m margin; below,
+    // only the horizontal fence counts (the whole band from the start stopped this swarm
+    // at once, as it stopped six PX4 SIH vehicles 2.3 s into their flight).
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/ground-diamond.toml");
+    let text = std::fs::read_to_string(path).unwrap().replacen(
+        "[[vehicle]]",
+        "[fence]\nkind = \"circle\"\ncentre_enu_m = [0.0, 0.0]\nradius_m = 500.0\n\
+         min_altitude_m = 3.0\nmax_altitude_m = 60.0\nmargin_m = 1.0\n\n[[vehicle]]",
+        1,
+    );
+    let config = Config::from_toml(&text).unwrap();
+    let mut run = Lockstep::from_config(&config).unwrap();
+    let mut highest = vec![f64::NEG_INFINITY; 4];
+    run.run_until(SimTime::from_millis(9_000), |r| {
+        for (h, v) in highest.iter_mut().zip(r.vehicles()) {
+            *h = h.max(ned_to_enu(v.status().pos_world_ned_m).z);
+        }
+    });
+    assert_eq!(run.swarm().safety_stats().fence_actions, 0);
+    assert_ne!(run.swarm().stop_reason(), Some(StopReason::Fence));
+    // Every vehicle climbed into the band (ground at z = 0, the formation at 5 m).
+    for h in highest {
+        assert!(h > 3.0 + 1.0, "{h}");
     }
 }

@@ -1,6 +1,8 @@
 //! The fence in the control tick: while the swarm flies its law (the re-target stage or
 //! consensus), each vehicle's stopping point is checked against the fence, and the first
-//! that comes within the margin makes the whole swarm hold or land.
+//! that comes within the margin makes the whole swarm hold or land. The altitude band
+//! counts for a vehicle once it has been inside it by the margin: a swarm that starts on
+//! the ground climbs into its band while the law already flies.
 
 use ringswarm_wire::time::SimTime;
 
@@ -31,11 +33,14 @@ impl Swarm {
             .map_or(BRAKING_SHARE_WITHOUT_FILTER, |s| s.braking_share);
         let envelope = &self.setup.envelope;
         let mut worst: Option<(usize, f64, nalgebra::Vector3<f64>)> = None;
+        self.fence_band_reached.resize(self.links.len(), false);
         for i in 0..self.links.len() {
             let Some(s) = self.states[i] else { continue };
             if !self.ours_in_air(i) {
                 continue;
             }
+            let in_band = setup.fence.vertical_margin_m(s.pos_enu_m.z) >= setup.margin_m;
+            self.fence_band_reached[i] |= in_band;
             let model = &self.flown_models[i];
             let braking = share * envelope.horizontal_limit_mps2(0.0, model);
             // Vertically: the smaller of what the thrust limits give up and down.
@@ -52,7 +57,11 @@ impl Swarm {
                 braking,
                 vertical,
             );
-            let margin = setup.fence.margin_m(stop);
+            let margin = if self.fence_band_reached[i] {
+                setup.fence.margin_m(stop)
+            } else {
+                setup.fence.horizontal_margin_m(stop.xy())
+            };
             if margin < setup.margin_m && worst.is_none_or(|w| margin < w.1) {
                 worst = Some((i, margin, stop));
             }

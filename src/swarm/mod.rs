@@ -205,6 +205,10 @@ pub struct Swarm {
     safety_xy: Vec<Vector2<f64>>,
     safety_stats: SafetyStats,
     closest_pair: Option<(usize, usize, f64)>,
+    /// Per vehicle: whether it has been inside the fence's altitude band (by its margin):
+    /// from then on the band counts for it (a swarm climbing into the band from the
+    /// ground is not stopped by it).
+    fence_band_reached: Vec<bool>,
     /// Each link's origin with its NED offset (m) from the common reference, projected
     /// once when the origin is learnt (not at every use: the projection costs trigonometry).
     origin_offsets: Vec<Option<(Geodetic, Vector3<f64>)>>,
@@ -324,6 +328,7 @@ impl Swarm {
             safety_xy: Vec::with_capacity(n),
             safety_stats: SafetyStats::new(),
             closest_pair: None,
+            fence_band_reached: Vec::new(),
             origin_offsets: vec![None; n],
             saturated_ticks: 0,
             consensus_ticks: 0,
