@@ -416,48 +416,43 @@ fn safety_table() {
                 agent(Vector3::new(x, 0.0, 50.0), Vector3::new(v, 0.0, 0.0), k)
             })
             .collect();
-        let time = |agents: &[Agent], push: f64| {
+        // µs per tick of filtering `agents`' commands, set afresh each tick by `command`.
+        let time = |agents: &[Agent], command: &dyn Fn(usize) -> Vector2<f64>| {
             let mut filter = SafetyFilter::default();
             let ticks = (20_000 / n).max(10);
             let mut commands = vec![Vector2::zeros(); n];
             let start = Instant::now();
             for _ in 0..ticks {
                 for (k, c) in commands.iter_mut().enumerate() {
-                    *c = Vector2::new(if k % 2 == 0 { push } else { -push }, 0.0);
+                    *c = command(k);
                 }
                 black_box(filter.filter(&settings, agents, &mut commands, None));
             }
             start.elapsed().as_secs_f64() * 1e6 / ticks as f64
         };
+        let push = |push: f64| {
+            move |k: usize| Vector2::new(if k.is_multiple_of(2) { push } else { -push }, 0.0)
+        };
         // A ring 3.3 m apart, every vehicle flying at the centre at 3 m/s and pushed on
         // inward: every row binds, one piece round the ring.
         let radius = 3.3 / (2.0 * (std::f64::consts::PI / n as f64).sin());
+        let inward = |k: usize| {
+            let t = std::f64::consts::TAU * k as f64 / n as f64;
+            -Vector2::new(t.cos(), t.sin())
+        };
         let packed: Vec<Agent> = (0..n)
             .map(|k| {
-                let t = std::f64::consts::TAU * k as f64 / n as f64;
+                let d = inward(k);
                 agent(
-                    Vector3::new(radius * t.cos(), radius * t.sin(), 50.0),
-                    Vector3::new(-3.0 * t.cos(), -3.0 * t.sin(), 0.0),
+                    Vector3::new(-radius * d.x, -radius * d.y, 50.0),
+                    Vector3::new(3.0 * d.x, 3.0 * d.y, 0.0),
                     k,
                 )
             })
             .collect();
-        let packed_us = {
-            let mut filter = SafetyFilter::default();
-            let ticks = (20_000 / n).max(10);
-            let mut commands = vec![Vector2::zeros(); n];
-            let start = Instant::now();
-            for _ in 0..ticks {
-                for (k, c) in commands.iter_mut().enumerate() {
-                    let t = std::f64::consts::TAU * k as f64 / n as f64;
-                    *c = -Vector2::new(t.cos(), t.sin()) * 0.8;
-                }
-                black_box(filter.filter(&settings, &packed, &mut commands, None));
-            }
-            start.elapsed().as_secs_f64() * 1e6 / ticks as f64
-        };
-        let calm = time(&formation, 0.0);
-        let busy = time(&conflict, 1.0);
+        let packed_us = time(&packed, &|k| inward(k) * 0.8);
+        let calm = time(&formation, &push(0.0));
+        let busy = time(&conflict, &push(1.0));
         println!(
             "| {n} | {law:.1} | {calm:.1} | {:.2} | {busy:.1} | {:.1} | {packed_us:.1} | {:.1} |",
             calm / law,

@@ -642,20 +642,13 @@ fn web_and_mirror_without_realtime_and_a_view_of_no_run_directory_are_refused_by
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-#[test]
-fn demo_exits_5_when_the_fence_ends_the_consensus() {
-    // paper-sim1 in a circle of radius 400 m: it flies out at 14.9 m/s and is held.
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml");
-    let text = std::fs::read_to_string(path).unwrap().replacen(
-        "[[vehicle]]",
-        "[fence]\nkind = \"circle\"\ncentre_enu_m = [0.0, 0.0]\nradius_m = 400.0\n\
-         min_altitude_m = -50.0\nmax_altitude_m = 100.0\n\n[[vehicle]]",
-        1,
-    );
-    let dir = std::env::temp_dir().join(format!("ringswarm-cli-fence-{}", std::process::id()));
+/// `demo --scenario` of `text` (written as `<name>.toml` in a directory of its own):
+/// the process's output and the run's `summary.json`.
+fn demo_of(name: &str, text: &str) -> (Output, serde_json::Value) {
+    let dir = std::env::temp_dir().join(format!("ringswarm-cli-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let config = dir.join("fenced.toml");
+    let config = dir.join(format!("{name}.toml"));
     std::fs::write(&config, text).unwrap();
     let run = dir.join("run");
     let out = ringswarm(&[
@@ -666,17 +659,32 @@ fn demo_exits_5_when_the_fence_ends_the_consensus() {
         "--out",
         run.to_str().unwrap(),
     ]);
+    let summary = std::fs::read_to_string(run.join("summary.json"))
+        .map(|text| serde_json::from_str(&text).unwrap())
+        .unwrap_or(serde_json::Value::Null);
+    let _ = std::fs::remove_dir_all(&dir);
+    (out, summary)
+}
+
+#[test]
+fn demo_exits_5_when_the_fence_ends_the_consensus() {
+    // paper-sim1 in a circle of radius 400 m: it flies out at 14.9 m/s and is held.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml");
+    let text = std::fs::read_to_string(path).unwrap().replacen(
+        "[[vehicle]]",
+        "[fence]\nkind = \"circle\"\ncentre_enu_m = [0.0, 0.0]\nradius_m = 400.0\n\
+         min_altitude_m = -50.0\nmax_altitude_m = 100.0\n\n[[vehicle]]",
+        1,
+    );
+    let (out, summary) = demo_of("fenced", &text);
     assert_eq!(out.status.code(), Some(5), "{}", stderr(&out));
     assert!(
         stderr(&out).contains("the fence ended the consensus"),
         "{}",
         stderr(&out)
     );
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["stop_reason"], "fence");
     assert_eq!(summary["safety"]["fence_actions"], 1);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -688,29 +696,13 @@ fn demo_exits_6_when_two_vehicles_come_too_close() {
         .unwrap()
         .replacen("[emulator]\n", "[emulator]\nlatency_ms = 250.0\n", 1)
         .replacen("duration_s = 60.0", "duration_s = 20.0", 1);
-    let dir = std::env::temp_dir().join(format!("ringswarm-cli-sep-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let config = dir.join("late.toml");
-    std::fs::write(&config, text).unwrap();
-    let run = dir.join("run");
-    let out = ringswarm(&[
-        "demo",
-        "--scenario",
-        config.to_str().unwrap(),
-        "--no-plots",
-        "--out",
-        run.to_str().unwrap(),
-    ]);
+    let (out, summary) = demo_of("late", &text);
     assert_eq!(out.status.code(), Some(6), "{}", stderr(&out));
     assert!(
         stderr(&out).contains("two vehicles came too close"),
         "{}",
         stderr(&out)
     );
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["stop_reason"], "separation");
     assert_eq!(summary["safety"]["separation_actions"], 1);
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -19,6 +19,22 @@ fn load(name: &str) -> Config {
     Config::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// The smallest ellipsoidal distance between two of the emulator's vehicles now (truth).
+fn closest_now_m(run: &Lockstep, sep: &Separation) -> f64 {
+    let p: Vec<Vector3<f64>> = run
+        .vehicles()
+        .iter()
+        .map(|v| ned_to_enu(v.status().pos_world_ned_m))
+        .collect();
+    let mut min_m = f64::INFINITY;
+    for (i, a) in p.iter().enumerate() {
+        for b in &p[i + 1..] {
+            min_m = min_m.min(sep.distance_m(*a, *b));
+        }
+    }
+    min_m
+}
+
 #[derive(Debug)]
 struct Flight {
     /// Smallest ellipsoidal distance between two vehicles (m, horizontal metres).
@@ -44,16 +60,7 @@ fn fly(config: &Config, until_s: f64) -> Flight {
             return;
         }
         tick = r.swarm().control_ticks();
-        let p: Vec<Vector3<f64>> = r
-            .vehicles()
-            .iter()
-            .map(|v| ned_to_enu(v.status().pos_world_ned_m))
-            .collect();
-        for (i, a) in p.iter().enumerate() {
-            for b in &p[i + 1..] {
-                min_sep = min_sep.min(sep.distance_m(*a, *b));
-            }
-        }
+        min_sep = min_sep.min(closest_now_m(r, &sep));
         if matches!(r.swarm().phase(), SwarmPhase::Consensus(_))
             && let Some(predicted) = r.swarm().predicted_final_velocity()
         {
@@ -140,16 +147,7 @@ fn crossing_late(latency_ms: f64, action: BreachAction) -> (f64, Lockstep) {
     let mut run = Lockstep::from_config(&config).unwrap();
     let mut min_m = f64::INFINITY;
     run.run_until(SimTime::from_millis(40_000), |r| {
-        let p: Vec<Vector3<f64>> = r
-            .vehicles()
-            .iter()
-            .map(|v| ned_to_enu(v.status().pos_world_ned_m))
-            .collect();
-        for (i, a) in p.iter().enumerate() {
-            for b in &p[i + 1..] {
-                min_m = min_m.min(sep.distance_m(*a, *b));
-            }
-        }
+        min_m = min_m.min(closest_now_m(r, &sep));
     });
     (min_m, run)
 }

@@ -114,6 +114,14 @@ impl Harness {
         seen
     }
 
+    /// The reason of the first `Failed` event.
+    fn failure(&self) -> Option<String> {
+        self.events.iter().find_map(|(_, e)| match e {
+            LinkEvent::Failed(r) => Some(r.clone()),
+            _ => None,
+        })
+    }
+
     fn flying_at(&self) -> Option<SimTime> {
         self.events
             .iter()
@@ -312,10 +320,7 @@ fn a_vehicle_that_never_acknowledges_makes_the_handshake_fail_clearly() {
     };
     h.run(Duration::from_secs(5), &mut filter);
     assert_eq!(h.link.phase(), Phase::Failed);
-    let reason = h.events.iter().find_map(|(_, e)| match e {
-        LinkEvent::Failed(r) => Some(r.clone()),
-        _ => None,
-    });
+    let reason = h.failure();
     assert_eq!(
         reason.as_deref(),
         Some("vehicle 1: MAV_CMD_COMPONENT_ARM_DISARM not accepted after 4 attempts")
@@ -690,10 +695,7 @@ fn a_vehicle_that_refuses_the_fence_is_never_armed_and_the_reason_is_named() {
     let mut h = Harness::with_config(fenced(&polygon(70, 100.0)), 1);
     h.run(Duration::from_secs(4), &mut deliver_all);
     assert_eq!(h.link.phase(), Phase::Failed);
-    let reason = h.events.iter().find_map(|(_, e)| match e {
-        LinkEvent::Failed(r) => Some(r.clone()),
-        _ => None,
-    });
+    let reason = h.failure();
     assert_eq!(
         reason.as_deref(),
         Some("vehicle 1: the vehicle refused the fence: MISSION_ACK MAV_MISSION_NO_SPACE")
@@ -709,10 +711,7 @@ fn a_vehicle_that_never_answers_the_fence_upload_is_not_armed() {
     };
     h.run(Duration::from_secs(6), &mut no_mission);
     assert_eq!(h.link.phase(), Phase::Failed);
-    let reason = h.events.iter().find_map(|(_, e)| match e {
-        LinkEvent::Failed(r) => Some(r.clone()),
-        _ => None,
-    });
+    let reason = h.failure();
     // MISSION_COUNT at discovery and every second after: four sends, then given up.
     assert_eq!(
         reason.as_deref(),

@@ -154,15 +154,21 @@ fn a_pair_too_fast_to_stop_brakes_as_hard_as_the_envelopes_allow() {
     );
 }
 
-#[test]
-fn random_swarms_meet_every_row_keep_the_sum_and_stay_finite() {
-    let mut x: u64 = 2024;
-    let mut next = || {
+/// Uniform numbers in [0, 1) from a 64-bit linear congruential generator (Knuth's MMIX
+/// constants): the same swarms on every run.
+fn uniform(seed: u64) -> impl FnMut() -> f64 {
+    let mut x = seed;
+    move || {
         x = x
             .wrapping_mul(6364136223846793005)
             .wrapping_add(1442695040888963407);
         (x >> 11) as f64 / (1u64 << 53) as f64
-    };
+    }
+}
+
+#[test]
+fn random_swarms_meet_every_row_keep_the_sum_and_stay_finite() {
+    let mut next = uniform(2024);
     let (mut filtered, mut kept, mut fallbacks, mut relaxed_cases) = (0, 0, 0, 0);
     let mut filter = SafetyFilter::default();
     for case in 0..300 {
@@ -239,13 +245,7 @@ fn pieces_give_what_the_whole_problem_gives_when_no_disc_binds() {
     // Random swarms of commanded vehicles with wide envelopes: the piecewise solve (one
     // QP per group of rows sharing no vehicle, closed form for a lone row) and one QP
     // over everything meet the same optimum, which with no disc binding is unique.
-    let mut x: u64 = 77;
-    let mut next = || {
-        x = x
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (x >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut next = uniform(77);
     let (mut compared, mut max_diff) = (0, 0.0f64);
     for case in 0..200 {
         let n = 2 + case % 13;

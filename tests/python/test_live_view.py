@@ -227,6 +227,17 @@ def test_the_mirror_carries_every_vehicle_and_ignores_what_comes_back(flight):
         assert len(stamps) * 0.99 <= seen <= len(stamps), (sysid, seen, len(stamps))
 
 
+def open_page(driver, port):
+    """Loads the page of a `view` server once it answers; its vehicle rows."""
+    def opened():
+        try:
+            driver.get(f"http://127.0.0.1:{port}/")
+            return driver.find_elements("css selector", "#vehicles tbody tr[data-sysid]")
+        except Exception:
+            return None
+    return wait_for("the replay page", opened, timeout_s=60, every_s=0.5)
+
+
 def test_the_replay_page_of_a_lockstep_run_moves_with_its_slider(tmp_path):
     out = tmp_path / "run"
     subprocess.run([BIN, "demo", "--scenario", str(CONFIG), "--out", str(out), "--no-plots"],
@@ -236,13 +247,7 @@ def test_the_replay_page_of_a_lockstep_run_moves_with_its_slider(tmp_path):
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     driver = browser()
     try:
-        def opened():
-            try:
-                driver.get(f"http://127.0.0.1:{port}/")
-                return driver.find_elements("css selector", "#vehicles tbody tr[data-sysid]")
-            except Exception:
-                return None
-        rows = wait_for("the replay page", opened, timeout_s=60, every_s=0.5)
+        rows = open_page(driver, port)
         assert sorted(int(r.get_attribute("data-sysid")) for r in rows) == VEHICLES
         assert driver.find_element("id", "replay").is_displayed()
         duration = float(driver.find_element("id", "slider").get_attribute("max"))
@@ -296,13 +301,7 @@ def test_the_replay_draws_the_fence_the_separation_circles_and_the_closest_pair(
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     driver = browser()
     try:
-        def opened():
-            try:
-                driver.get(f"http://127.0.0.1:{port}/")
-                return driver.find_elements("css selector", "#vehicles tbody tr[data-sysid]")
-            except Exception:
-                return None
-        wait_for("the replay page", opened, timeout_s=60, every_s=0.5)
+        open_page(driver, port)
         driver.execute_script(
             "const s = document.getElementById('slider'); s.value = '12';"
             "s.dispatchEvent(new Event('input'));")
