@@ -137,21 +137,23 @@ pub(crate) async fn fly(
     let recorder = Recorder::create(out, &swarm, epoch_us, RowText::Inline)
         .with_context(|| format!("create the run directory {}", out.display()))?;
     eprintln!(
-        "flying {} vehicles; Ctrl-C lands them, twice stops at once. Run directory: {}",
+        "flying {} vehicles; Ctrl-C (or SIGTERM, SIGHUP) lands them, twice stops at once. Run directory: {}",
         swarm.links().len(),
         out.display()
     );
     let (command_tx, command_rx) = watch::channel(DriverCommand::Fly);
+    let mut terminations = crate::driver::signals::Terminations::new()
+        .context("install the handlers of SIGINT, SIGTERM and SIGHUP")?;
     tokio::spawn(async move {
         for command in [DriverCommand::Land, DriverCommand::Stop] {
-            if tokio::signal::ctrl_c().await.is_err() {
+            let Some(signal) = terminations.next().await else {
                 return;
-            }
+            };
             eprintln!(
-                "\n{}",
+                "\n{signal}: {}",
                 match command {
-                    DriverCommand::Land => "Ctrl-C: landing every vehicle (again to stop now)",
-                    _ => "Ctrl-C: stopping",
+                    DriverCommand::Land => "landing every vehicle (again to stop now)",
+                    _ => "stopping",
                 }
             );
             command_tx.send_replace(command);

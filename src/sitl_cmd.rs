@@ -282,12 +282,13 @@ async fn serve(
     let mut drawn = 0;
     let mut tally = SetpointTally::default();
     // One listener for the whole run: a future made anew on every turn of the loop would
-    // miss a Ctrl-C that arrives while the loop body runs.
-    let ctrl_c = tokio::signal::ctrl_c();
-    tokio::pin!(ctrl_c);
+    // miss a signal that arrives while the loop body runs. SIGTERM and SIGHUP end the
+    // emulator as Ctrl-C does (shards stopped, the fleet line printed).
+    let mut terminations = crate::driver::signals::Terminations::new()
+        .context("install the handlers of SIGINT, SIGTERM and SIGHUP")?;
     loop {
         tokio::select! {
-            _ = &mut ctrl_c => break,
+            _ = terminations.next() => break,
             line = stdin.next_line(), if stdin_open => match line {
                 Ok(Some(line)) => {
                     if let Err(err) = apply_control(&line, &system_ids, &shards).await {

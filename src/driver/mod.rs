@@ -12,6 +12,7 @@
 #[cfg(feature = "emulator")]
 pub mod lockstep;
 pub mod mirror;
+pub mod signals;
 pub mod udp;
 
 use std::net::SocketAddr;

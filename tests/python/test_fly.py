@@ -129,3 +129,48 @@ def test_the_coordinator_heartbeat_is_in_the_tlog_at_one_hertz_per_link(run_dir)
     span = messages[-1]._timestamp - messages[0]._timestamp
     rate = len(beats) / span
     assert rate == pytest.approx(N * 1.0, rel=0.1), f"{rate:.2f} heartbeats/s for {N} links"
+
+
+def test_sigterm_lands_the_swarm_and_writes_the_run_directory(tmp_path):
+    """What `timeout`, systemd and `docker stop` send: `fly` lands every vehicle and
+    writes its run directory, as for Ctrl-C, and exits 0 once they are down."""
+    import signal
+    import threading
+    import time
+
+    out = tmp_path / "run"
+    log = open(tmp_path / "sitl.log", "w")
+    sitl = subprocess.Popen([BIN, "sitl", "--config", str(CONFIG)], stdout=log, stderr=subprocess.STDOUT)
+    fly = subprocess.Popen([BIN, "fly", "--config", str(CONFIG), "--out", str(out)],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    lines = []
+    reader = threading.Thread(target=lambda: lines.extend(fly.stderr), daemon=True)
+    reader.start()
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not any("consensus" in line for line in list(lines)):
+            time.sleep(0.1)
+        assert any("consensus" in line for line in list(lines)), "".join(lines)[-2000:]
+        fly.send_signal(signal.SIGTERM)
+        fly.wait(timeout=60)
+    finally:
+        if fly.poll() is None:
+            fly.kill()
+        sitl.send_signal(signal.SIGTERM)
+        sitl.wait(timeout=10)
+        log.close()
+    reader.join(timeout=5)
+    assert fly.returncode == 0, "".join(lines)[-3000:]
+    assert sitl.returncode == 0
+    assert any("SIGTERM: landing every vehicle" in line for line in lines), "".join(lines)[-2000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stop_reason"] == "requested"
+    assert summary["final_phase"] == "landing"
+    # Every vehicle was told to land and disarmed on the ground.
+    messages = read_tlog(out / "traffic.tlog")
+    landed = {m.target_system for m in messages
+              if m.get_type() == "COMMAND_LONG" and m.command == NAV_LAND}
+    assert landed == set(range(1, N + 1)), landed
+    disarmed = {m.target_system for m in messages
+                if m.get_type() == "COMMAND_LONG" and m.command == ARM_DISARM and m.param1 == 0}
+    assert disarmed == set(range(1, N + 1)), disarmed
