@@ -251,7 +251,14 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
     if !e.silence.is_empty() {
         eprintln!("note: [[emulator.silence]] applies to lockstep runs only");
     }
-    let faults = LinkFaults::from_percent_and_ms(e.loss_pct, e.latency_ms, e.jitter_ms, 0.0);
+    let faults = LinkFaults::from_percent_and_ms(
+        e.loss_pct,
+        e.latency_ms,
+        e.jitter_ms,
+        0.0,
+        crate::config::EMULATOR_FAULT_NAMES,
+    )
+    .map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
     let transport = config.transport_plan().map_err(anyhow::Error::msg)?;
     let placements = config
         .emulator_placements()

@@ -180,22 +180,19 @@ fn config_from_flags(args: &SitlArgs) -> anyhow::Result<SitlConfig> {
     if vehicles == 0 || vehicles > 250 {
         bail!("--vehicles must be between 1 and 250, got {vehicles}");
     }
-    for (name, pct) in [
-        ("--loss-pct", args.loss_pct),
-        ("--duplicate-pct", args.duplicate_pct),
-    ] {
-        if !(0.0..=100.0).contains(&pct) {
-            bail!("{name} must be a percentage in [0, 100], got {pct}");
-        }
-    }
-    for (name, ms) in [
-        ("--latency-ms", args.latency_ms),
-        ("--jitter-ms", args.jitter_ms),
-    ] {
-        if !(ms.is_finite() && (0.0..=10_000.0).contains(&ms)) {
-            bail!("{name} must be in [0, 10000] ms, got {ms}");
-        }
-    }
+    let faults = LinkFaults::from_percent_and_ms(
+        args.loss_pct,
+        args.latency_ms,
+        args.jitter_ms,
+        args.duplicate_pct,
+        [
+            "--loss-pct",
+            "--latency-ms",
+            "--jitter-ms",
+            "--duplicate-pct",
+        ],
+    )
+    .map_err(anyhow::Error::msg)?;
     if !args.spacing_m.is_finite() {
         bail!(
             "--spacing-m must be a finite number, got {}",
@@ -205,12 +202,7 @@ fn config_from_flags(args: &SitlArgs) -> anyhow::Result<SitlConfig> {
     let profile: Profile = args.profile.parse()?;
     Ok(SitlConfig {
         world: World::default(),
-        faults: LinkFaults::from_percent_and_ms(
-            args.loss_pct,
-            args.latency_ms,
-            args.jitter_ms,
-            args.duplicate_pct,
-        ),
+        faults,
         fault_seed: args.seed,
         vehicles: (0..vehicles)
             .map(|i| {

@@ -706,3 +706,51 @@ fn demo_exits_6_when_two_vehicles_come_too_close() {
     assert_eq!(summary["stop_reason"], "separation");
     assert_eq!(summary["safety"]["separation_actions"], 1);
 }
+
+#[test]
+fn a_link_fault_out_of_range_is_named_on_every_path_never_a_panic() {
+    // `demo --realtime` used to panic on a negative latency (Duration::from_secs_f64);
+    // lockstep, real time and `sitl` now check it in one place.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml");
+    let text = std::fs::read_to_string(path).unwrap();
+    let text = if text.contains("[emulator]\n") {
+        text.replacen(
+            "[emulator]\n",
+            "[emulator]\nlatency_ms = -1.0\njitter_ms = nan\n",
+            1,
+        )
+    } else {
+        format!("{text}\n[emulator]\nlatency_ms = -1.0\njitter_ms = nan\n")
+    };
+    let dir = std::env::temp_dir().join(format!("ringswarm-cli-faults-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let config = dir.join("faults.toml");
+    std::fs::write(&config, text).unwrap();
+    for realtime in [false, true] {
+        let mut args = vec!["demo", "--scenario", config.to_str().unwrap(), "--no-plots"];
+        if realtime {
+            args.push("--realtime");
+        }
+        let out = ringswarm(&args);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "realtime {realtime}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(
+            err.contains("emulator.latency_ms must be in [0, 10000] ms, got -1"),
+            "{err}"
+        );
+        assert!(
+            err.contains("emulator.jitter_ms must be in [0, 10000] ms, got NaN"),
+            "{err}"
+        );
+    }
+    let out = ringswarm(&["sitl", "--vehicles", "1", "--latency-ms=-5"]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("--latency-ms must be in [0, 10000] ms, got -5"),
+        "{}",
+        stderr(&out)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

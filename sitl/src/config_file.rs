@@ -204,22 +204,22 @@ impl SitlConfig {
             }
         }
         let f = &raw.faults;
-        for (key, v) in [
-            ("faults.loss_pct", f.loss_pct),
-            ("faults.duplicate_pct", f.duplicate_pct),
-        ] {
-            if !(0.0..=100.0).contains(&v) {
-                problems.push(format!("{key} must be a percentage in [0, 100], got {v}"));
-            }
-        }
-        for (key, v) in [
-            ("faults.latency_ms", f.latency_ms),
-            ("faults.jitter_ms", f.jitter_ms),
-        ] {
-            if !(0.0..=10_000.0).contains(&v) {
-                problems.push(format!("{key} must be in [0, 10000] ms, got {v}"));
-            }
-        }
+        let faults = LinkFaults::from_percent_and_ms(
+            f.loss_pct,
+            f.latency_ms,
+            f.jitter_ms,
+            f.duplicate_pct,
+            [
+                "faults.loss_pct",
+                "faults.latency_ms",
+                "faults.jitter_ms",
+                "faults.duplicate_pct",
+            ],
+        )
+        .unwrap_or_else(|why| {
+            problems.push(why);
+            LinkFaults::default()
+        });
         if raw.vehicle.is_empty() {
             problems.push("no [[vehicle]] table: at least one vehicle is needed".to_owned());
         }
@@ -306,12 +306,7 @@ impl SitlConfig {
         }
         Ok(Self {
             world,
-            faults: LinkFaults::from_percent_and_ms(
-                f.loss_pct,
-                f.latency_ms,
-                f.jitter_ms,
-                f.duplicate_pct,
-            ),
+            faults,
             fault_seed: f.seed,
             vehicles,
         })

@@ -19,20 +19,46 @@ pub struct LinkFaults {
     pub duplicate: f64,
 }
 
+/// The longest latency or jitter a link takes (ms).
+pub const MAX_DELAY_MS: f64 = 10_000.0;
+
 impl LinkFaults {
-    /// From the units a user types: percentages and milliseconds.
+    /// From the units a user types: percentages in [0, 100] and milliseconds in
+    /// [0, [`MAX_DELAY_MS`]]. The one place these are checked, for every way they come
+    /// in (the coordinator's `[emulator]`, `sitl`'s flags and its `[faults]`).
+    ///
+    /// # Errors
+    /// Every value out of its range (NaN included), one per line, named by `names`
+    /// (loss, latency, jitter, duplicate, as the caller's user wrote them).
     pub fn from_percent_and_ms(
         loss_pct: f64,
         latency_ms: f64,
         jitter_ms: f64,
         duplicate_pct: f64,
-    ) -> Self {
-        Self {
+        names: [&str; 4],
+    ) -> Result<Self, String> {
+        let mut problems = Vec::new();
+        for (name, pct) in [(names[0], loss_pct), (names[3], duplicate_pct)] {
+            if !(0.0..=100.0).contains(&pct) {
+                problems.push(format!(
+                    "{name} must be a percentage in [0, 100], got {pct}"
+                ));
+            }
+        }
+        for (name, ms) in [(names[1], latency_ms), (names[2], jitter_ms)] {
+            if !(0.0..=MAX_DELAY_MS).contains(&ms) {
+                problems.push(format!("{name} must be in [0, 10000] ms, got {ms}"));
+            }
+        }
+        if !problems.is_empty() {
+            return Err(problems.join("\n"));
+        }
+        Ok(Self {
             loss: loss_pct / 100.0,
             latency: Duration::from_secs_f64(latency_ms / 1000.0),
             jitter: Duration::from_secs_f64(jitter_ms / 1000.0),
             duplicate: duplicate_pct / 100.0,
-        }
+        })
     }
 
     /// Whether nothing is injected.

@@ -17,6 +17,15 @@ use super::validate::Problems;
 use super::{Config, FaultKindName, LockstepFaults};
 use crate::control::enu_to_ned;
 
+/// How `[emulator]`'s link faults are named in messages (loss, latency, jitter, and the
+/// duplication it does not offer).
+pub const EMULATOR_FAULT_NAMES: [&str; 4] = [
+    "emulator.loss_pct",
+    "emulator.latency_ms",
+    "emulator.jitter_ms",
+    "emulator.duplicate_pct",
+];
+
 impl Config {
     /// The lockstep link faults of `[emulator]`.
     ///
@@ -25,17 +34,17 @@ impl Config {
     pub fn lockstep_faults(&self) -> Result<LockstepFaults, String> {
         let e = &self.emulator;
         let mut problems = Vec::new();
-        for (name, v) in [("latency_ms", e.latency_ms), ("jitter_ms", e.jitter_ms)] {
-            if !(v.is_finite() && (0.0..=10_000.0).contains(&v)) {
-                problems.push(format!("emulator.{name} must be in [0, 10000], got {v}"));
-            }
-        }
-        if !(0.0..=100.0).contains(&e.loss_pct) {
-            problems.push(format!(
-                "emulator.loss_pct must be in [0, 100], got {}",
-                e.loss_pct
-            ));
-        }
+        let faults = ringswarm_sitl::link_faults::LinkFaults::from_percent_and_ms(
+            e.loss_pct,
+            e.latency_ms,
+            e.jitter_ms,
+            0.0,
+            EMULATOR_FAULT_NAMES,
+        )
+        .unwrap_or_else(|why| {
+            problems.push(why);
+            Default::default()
+        });
         let mut silences = Vec::new();
         for (j, s) in e.silence.iter().enumerate() {
             if s.vehicle == 0 || s.vehicle > self.vehicle.len() {
@@ -64,12 +73,7 @@ impl Config {
         }
         Ok(LockstepFaults {
             conditions: crate::driver::lockstep::LinkConditions {
-                faults: ringswarm_sitl::link_faults::LinkFaults::from_percent_and_ms(
-                    e.loss_pct,
-                    e.latency_ms,
-                    e.jitter_ms,
-                    0.0,
-                ),
+                faults,
                 seed: e.seed,
             },
             silences,

@@ -20,6 +20,7 @@ use serde::Deserialize;
 use crate::control::SaturationMode;
 use crate::swarm::{EndAction, LossPolicy, SetpointKind};
 
+pub use emulator::EMULATOR_FAULT_NAMES;
 pub use gate::warn_if_too_fast;
 pub(crate) use validate::show;
 pub use validate::{MAX_DISTANCE_M, MAX_DURATION_S, MAX_GAIN, MAX_SPEED_MPS};
