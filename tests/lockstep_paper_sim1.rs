@@ -95,7 +95,14 @@ fn six_vehicles_are_handshaken_and_consensus_starts_with_the_papers_prediction()
 fn two_runs_with_the_same_seed_are_identical_bit_for_bit() {
     // 10 % loss and 0-5 ms of jitter on every link, drawn from the seed.
     let lossy = |seed| LinkConditions {
-        faults: ringswarm_sitl::link_faults::LinkFaults::from_percent_and_ms(10.0, 2.0, 5.0, 0.0),
+        faults: ringswarm_sitl::link_faults::LinkFaults::from_percent_and_ms(
+            10.0,
+            2.0,
+            5.0,
+            0.0,
+            ringswarm::config::EMULATOR_FAULT_NAMES,
+        )
+        .expect("in range"),
         seed,
     };
     let same = |x: &[[f64; 6]], y: &[[f64; 6]]| {
