@@ -164,7 +164,7 @@ fn lockstep_faults_are_checked_and_converted() {
         .lockstep_faults()
         .unwrap_err();
     for needle in [
-        "emulator.loss_pct must be in [0, 100], got 150",
+        "emulator.loss_pct must be a percentage in [0, 100], got 150",
         "emulator.silence[0].vehicle must be 1..=6, got 9",
         "emulator.silence[0] needs 0 <= from_s < until_s, got 5 .. 4",
     ] {
