@@ -13,6 +13,8 @@ echo "== cargo clippy"
 cargo clippy --workspace --all-targets --locked -- -D warnings
 # The flight coordinator alone, without the emulator.
 cargo clippy --no-default-features --lib --bins --locked -- -D warnings
+echo "== fuzz/Cargo.lock resolves as committed"
+cargo metadata --locked --format-version 1 --manifest-path fuzz/Cargo.toml >/dev/null
 echo "== cargo test"
 cargo test --workspace --locked
 cargo build --workspace --locked --bins
