@@ -288,6 +288,7 @@ pub fn coordinator_config(bytes: &[u8]) {
     if let Ok(config) = Config::from_toml(&String::from_utf8_lossy(bytes)) {
         let _ = config.validate();
         let _ = config.emulator();
+        let _ = config.lockstep_faults();
     }
 }
 

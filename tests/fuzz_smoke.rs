@@ -137,6 +137,36 @@ fn coordinator_inbound_survives_its_seeds_and_mutations() {
 
 #[test]
 fn config_parsers_survive_their_seeds_and_mutations() {
+    // The seeds are the shipped configurations as they are now…
+    let shipped = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+    let seeds = corpus("coordinator_config");
+    for entry in std::fs::read_dir(&shipped).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap();
+        let seed = seeds.iter().find(|(p, _)| p.file_name() == Some(name));
+        assert!(
+            seed.is_some_and(|(_, bytes)| *bytes == std::fs::read(&path).unwrap()),
+            "fuzz/corpus/coordinator_config/{} is not config/{0} as it is now",
+            name.to_string_lossy()
+        );
+    }
+    // …and each is taken whole (a parser that refused them all would also survive every
+    // mutation).
+    for (path, bytes) in corpus("coordinator_config") {
+        let text = String::from_utf8_lossy(&bytes);
+        let config = ringswarm::config::Config::from_toml(&text)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        if let Err(e) = config.validate() {
+            panic!("{}: {e}", path.display());
+        }
+        assert!(config.emulator().is_ok(), "{}", path.display());
+        assert!(config.lockstep_faults().is_ok(), "{}", path.display());
+    }
+    for (path, bytes) in corpus("sitl_config") {
+        let text = String::from_utf8_lossy(&bytes);
+        let parsed = ringswarm_sitl::config_file::SitlConfig::from_toml(&text);
+        assert!(parsed.is_ok(), "{}: {:?}", path.display(), parsed.err());
+    }
     run("coordinator_config", fuzzing::coordinator_config, 2_000);
     run("sitl_config", fuzzing::sitl_config, 2_000);
 }

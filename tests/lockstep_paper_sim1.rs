@@ -151,23 +151,25 @@ fn the_swarm_reaches_the_predicted_velocity_in_formation_at_50_m_within_40_s() {
             Vector2::new(a.cos(), a.sin()) * 20.0
         })
         .collect();
+    // Measured (deterministic): velocity within 0.061 % of the prediction, altitude within
+    // 0.11 m, formation within 0.036 m at 40 s; the bounds leave half as much again.
     let truth: Vec<_> = run.vehicles().iter().map(|v| v.status()).collect();
     let enu = |v: nalgebra::Vector3<f64>| ringswarm::control::ned_to_enu(v);
     for (i, s) in truth.iter().enumerate() {
         let v = enu(s.vel_ned_mps).xy();
         assert!(
-            (v - predicted).norm() <= 0.01 * predicted.norm(),
+            (v - predicted).norm() <= 0.001 * predicted.norm(),
             "vehicle {}: velocity {v:?}, predicted {predicted:?}",
             i + 1
         );
         let altitude = enu(s.pos_world_ned_m).z;
         assert!(
-            (altitude - 50.0).abs() <= 0.5,
+            (altitude - 50.0).abs() <= 0.15,
             "vehicle {}: altitude {altitude} m",
             i + 1
         );
     }
-    // Formation: every p_i - d_i at the same point (their mean) within 0.5 m.
+    // Formation: every p_i - d_i at the same point (their mean) within 5 cm.
     let shifted: Vec<Vector2<f64>> = truth
         .iter()
         .zip(&offsets)
@@ -176,7 +178,7 @@ fn the_swarm_reaches_the_predicted_velocity_in_formation_at_50_m_within_40_s() {
     let centre = shifted.iter().sum::<Vector2<f64>>() / 6.0;
     for (i, p) in shifted.iter().enumerate() {
         assert!(
-            (p - centre).norm() < 0.5,
+            (p - centre).norm() < 0.05,
             "vehicle {}: {} m from its formation slot",
             i + 1,
             (p - centre).norm()

@@ -151,9 +151,14 @@ fn hexagon_x500_conserve_reaches_the_prediction_and_clip_misses_it() {
             "{mode:?}"
         );
         // At 0.28 of the speed the formation is still closing after 60 s (from 52 m at the
-        // start to about 3 m: measured 2.93 m with conserve).
+        // start to about 3 m: measured 2.93 and 2.94 m with conserve, 2.26 and 2.36 m with
+        // clip; deterministic, so a few percent above).
         let formation = formation_error_m(&run);
-        assert!(formation < 3.5, "{mode:?}: formation {formation} m");
+        let bound = match mode {
+            SaturationMode::Conserve => 3.0,
+            _ => 2.45,
+        };
+        assert!(formation < bound, "{mode:?}: formation {formation} m");
         assert!(
             seen.min_separation_m > 0.5,
             "{mode:?}: {}",
