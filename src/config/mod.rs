@@ -20,6 +20,7 @@ use serde::Deserialize;
 use crate::control::SaturationMode;
 use crate::swarm::{EndAction, LossPolicy, SetpointKind};
 
+#[cfg(feature = "emulator")]
 pub use emulator::EMULATOR_FAULT_NAMES;
 pub use gate::warn_if_too_fast;
 pub(crate) use validate::show;
