@@ -745,3 +745,42 @@ fn the_round_trip_is_timed_with_timesync_once_a_second() {
     let rtt = h.link.round_trip().expect("measured");
     assert!(rtt <= Duration::from_millis(2), "{rtt:?}");
 }
+
+#[test]
+fn two_foreign_systems_interleaved_on_one_link_are_reported_once_each() {
+    // Frames from systems 2 and 3, alternating, on the link of vehicle 1: two events in
+    // all, not one per frame.
+    let mut link = VehicleLink::new(
+        LinkConfig::new(1),
+        AttitudeThrust {
+            attitude_ned_frd: UnitQuaternion::identity(),
+            thrust_norm: 0.5,
+            thrust_n: 0.0,
+        },
+    );
+    let beat = |system: u8| {
+        ringswarm::link::Encoder::new(system, 1).encode(&MavMessage::HEARTBEAT(
+            mavlink::dialects::common::HEARTBEAT_DATA {
+                custom_mode: 0,
+                mavtype: mavlink::dialects::common::MavType::MAV_TYPE_QUADROTOR,
+                autopilot: mavlink::dialects::common::MavAutopilot::MAV_AUTOPILOT_PX4,
+                base_mode: mavlink::dialects::common::MavModeFlag::empty(),
+                system_status: mavlink::dialects::common::MavState::MAV_STATE_STANDBY,
+                mavlink_version: 3,
+            },
+        ))
+    };
+    for k in 0..1000u64 {
+        let now = SimTime::from_millis(k);
+        link.handle_datagram(now, &beat(2 + (k % 2) as u8));
+    }
+    let mut reported = Vec::new();
+    while let Some(e) = link.poll_event() {
+        if let LinkEvent::WrongSystem { system_id } = e {
+            reported.push(system_id);
+        }
+    }
+    assert_eq!(reported, [2, 3]);
+    assert_eq!(link.ignored_frames(), 1000);
+    assert_eq!(link.phase(), Phase::Discovering);
+}

@@ -56,7 +56,9 @@ pub struct VehicleLink {
     spare: FramePool,
     events: VecDeque<LinkEvent>,
     ignored_frames: u64,
-    wrong_system: Option<u8>,
+    /// Foreign system ids already reported (a bit per id): each is reported once, however
+    /// their frames interleave.
+    wrong_systems: [u64; 4],
     land_requested: bool,
     never_heard_reported: bool,
     heartbeats_out_of_offboard: u8,
@@ -106,7 +108,7 @@ impl VehicleLink {
             spare: FramePool::default(),
             events: VecDeque::new(),
             ignored_frames: 0,
-            wrong_system: None,
+            wrong_systems: [0; 4],
             land_requested: false,
             never_heard_reported: false,
             heartbeats_out_of_offboard: 0,
@@ -351,9 +353,10 @@ impl VehicleLink {
             let system_id = frame.header.system_id as u8;
             if system_id != self.cfg.system_id {
                 self.ignored_frames += 1;
-                if self.wrong_system != Some(system_id) {
+                let (word, bit) = (usize::from(system_id / 64), 1u64 << (system_id % 64));
+                if self.wrong_systems[word] & bit == 0 {
                     // Reported once per foreign system id, not per frame.
-                    self.wrong_system = Some(system_id);
+                    self.wrong_systems[word] |= bit;
                     self.events.push_back(LinkEvent::WrongSystem { system_id });
                 }
                 continue;
