@@ -69,26 +69,18 @@ impl Swarm {
         let Some((i, margin, stop)) = worst else {
             return;
         };
-        let (action, verb) = match setup.action {
-            LossPolicy::Hold => (LossPolicy::Hold, "holds"),
-            LossPolicy::Land => (LossPolicy::Land, "lands"),
-        };
+        let land = setup.action == LossPolicy::Land;
         let text = format!(
-            "fence: vehicle {} would stop at ({:.1}, {:.1}, {:.1}) m, {:.1} m inside the fence (margin {} m): the swarm {verb}",
-            self.setup.links[i].system_id, stop.x, stop.y, stop.z, margin, setup.margin_m
+            "fence: vehicle {} would stop at ({:.1}, {:.1}, {:.1}) m, {:.1} m inside the fence (margin {} m): the swarm {}",
+            self.setup.links[i].system_id,
+            stop.x,
+            stop.y,
+            stop.z,
+            margin,
+            setup.margin_m,
+            if land { "lands" } else { "holds" }
         );
         self.safety_stats.fence_actions += 1;
-        self.stop = Some(StopReason::Fence);
-        match action {
-            LossPolicy::Hold => {
-                self.log.push(now, true, text);
-                self.hold_points.iter_mut().for_each(|p| *p = None);
-                self.phase = SwarmPhase::Stopped(now);
-            }
-            LossPolicy::Land => {
-                self.log.push(now, true, text);
-                self.land_because(now, StopReason::Fence);
-            }
-        }
+        self.stop_law(now, StopReason::Fence, land, text);
     }
 }

@@ -468,6 +468,20 @@ impl Swarm {
 
     /// Tells every vehicle to land and disarm; `reason` is kept unless the flight was
     /// already stopping for another.
+    /// Ends the law for `reason` with the warning `text`: every vehicle brakes and hovers
+    /// where it is (`land` false: the swarm is Stopped), or every vehicle lands. What the
+    /// divergence guard, the fence and the safety action do.
+    pub(super) fn stop_law(&mut self, now: SimTime, reason: StopReason, land: bool, text: String) {
+        self.stop = Some(reason);
+        self.log.push(now, true, text);
+        if land {
+            self.land_because(now, reason);
+        } else {
+            self.hold_points.iter_mut().for_each(|p| *p = None);
+            self.phase = SwarmPhase::Stopped(now);
+        }
+    }
+
     pub(crate) fn land_because(&mut self, now: SimTime, reason: StopReason) {
         self.stop.get_or_insert(reason);
         if !matches!(self.phase, SwarmPhase::Landing(_)) {

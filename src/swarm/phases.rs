@@ -264,19 +264,13 @@ impl Swarm {
         let Some(trip) = guard.observe(now, mean, predicted, (formation, spread)) else {
             return;
         };
-        self.stop = Some(StopReason::Guard(trip));
-        match self.setup.loss_policy {
-            LossPolicy::Hold => {
-                self.log
-                    .push(now, true, format!("{trip}: the swarm brakes and holds"));
-                self.hold_points.iter_mut().for_each(|p| *p = None);
-                self.phase = SwarmPhase::Stopped(now);
-            }
-            LossPolicy::Land => {
-                self.log.push(now, true, format!("{trip}: landing"));
-                self.land_because(now, StopReason::Guard(trip));
-            }
-        }
+        let land = self.setup.loss_policy == LossPolicy::Land;
+        let text = if land {
+            format!("{trip}: landing")
+        } else {
+            format!("{trip}: the swarm brakes and holds")
+        };
+        self.stop_law(now, StopReason::Guard(trip), land, text);
     }
 
     fn end(&mut self, now: SimTime) {

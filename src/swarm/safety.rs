@@ -197,19 +197,12 @@ impl Swarm {
                     );
                 }
             }
-            BreachAction::Hold => {
+            BreachAction::Hold | BreachAction::Land => {
+                let land = setup.action == BreachAction::Land;
+                let verb = if land { "lands" } else { "holds" };
                 self.safety_stats.separation_actions += 1;
-                self.stop = Some(StopReason::Separation);
-                self.log
-                    .push(now, true, format!("safety: {what}: the swarm holds"));
-                self.hold_points.iter_mut().for_each(|p| *p = None);
-                self.phase = SwarmPhase::Stopped(now);
-            }
-            BreachAction::Land => {
-                self.safety_stats.separation_actions += 1;
-                self.log
-                    .push(now, true, format!("safety: {what}: the swarm lands"));
-                self.land_because(now, StopReason::Separation);
+                let text = format!("safety: {what}: the swarm {verb}");
+                self.stop_law(now, StopReason::Separation, land, text);
             }
         }
     }
