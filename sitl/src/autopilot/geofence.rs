@@ -24,7 +24,6 @@
 use std::time::Duration;
 
 use mavlink::dialects::common::{MavMissionResult, MavSeverity};
-use nalgebra::Vector3;
 use ringswarm_wire::geo::{Geodetic, MapProjection};
 
 use super::mission::{MissionItem, cmd};
@@ -250,16 +249,8 @@ impl Vehicle {
         self.params.value("GF_ACTION") as i32
     }
 
-    /// Home (lat, lon, alt AMSL): the start point on the ground.
-    fn home_geodetic(&self) -> Geodetic {
-        let home_local = Vector3::new(0.0, 0.0, self.env.ground_z_ned_m);
-        self.world
-            .to_geodetic(&(self.cfg.start.pos_world_ned_m + home_local))
-    }
-
     fn position_geodetic(&self) -> Geodetic {
-        self.world
-            .to_geodetic(&(self.cfg.start.pos_world_ned_m + self.state.pos_ned_m))
+        self.world.to_geodetic(&self.world_position())
     }
 
     /// Stores an uploaded (or cleared) fence plan and loads its shapes, dropping those

@@ -406,7 +406,7 @@ impl Vehicle {
         })
     }
 
-    fn world_position(&self) -> Vector3<f64> {
+    pub(super) fn world_position(&self) -> Vector3<f64> {
         self.cfg.start.pos_world_ned_m + self.state.pos_ned_m
     }
 
@@ -451,12 +451,20 @@ impl Vehicle {
         })
     }
 
+    /// Home: the start point projected on the ground, in local coordinates.
+    pub(super) fn home_local_ned_m(&self) -> Vector3<f64> {
+        Vector3::new(0.0, 0.0, self.env.ground_z_ned_m)
+    }
+
+    /// Home as latitude, longitude and altitude.
+    pub(super) fn home_geodetic(&self) -> ringswarm_wire::geo::Geodetic {
+        self.world
+            .to_geodetic(&(self.cfg.start.pos_world_ned_m + self.home_local_ned_m()))
+    }
+
     fn home_position(&self, now: SimTime) -> MavMessage {
-        // Home is the start point projected on the ground, in local coordinates.
-        let home_local = Vector3::new(0.0, 0.0, self.env.ground_z_ned_m);
-        let geo = self
-            .world
-            .to_geodetic(&(self.cfg.start.pos_world_ned_m + home_local));
+        let home_local = self.home_local_ned_m();
+        let geo = self.home_geodetic();
         MavMessage::HOME_POSITION(HOME_POSITION_DATA {
             latitude: geo.lat_e7(),
             longitude: geo.lon_e7(),
