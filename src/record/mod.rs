@@ -351,7 +351,7 @@ impl Recorder {
                 heard_age_ms: link
                     .state()
                     .last_heard
-                    .map_or(f64::NAN, |t| (now - t).as_secs_f64() * 1e3),
+                    .map_or(f64::NAN, |t| now.saturating_since(t).as_secs_f64() * 1e3),
             };
             match self.text {
                 RowText::Writer => rows::push_row(sinks.buffer(FIRST_CSV + i), &row),

@@ -250,7 +250,7 @@ impl FlownModel {
         let usable = ours;
         if let Some((t0, _)) = self.last
             && usable
-            && (at - t0).as_secs_f64() < WINDOW_S
+            && at.saturating_since(t0).as_secs_f64() < WINDOW_S
         {
             return; // the window goes on
         }
@@ -258,7 +258,7 @@ impl FlownModel {
             && usable
             && self.thrust_ticks > 0
         {
-            let dt = (at - t0).as_secs_f64();
+            let dt = at.saturating_since(t0).as_secs_f64();
             if dt > 0.0 && dt <= MAX_GAP_S {
                 let ticks = f64::from(self.thrust_ticks);
                 let mean_v = 0.5 * (vel_enu_mps + v0);

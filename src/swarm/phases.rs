@@ -68,7 +68,7 @@ impl Swarm {
                 let wait = self.setup.target.is_some_and(|t| t.wait_for_altitude);
                 if !wait || self.level_at_altitude() {
                     self.plan_target(now);
-                } else if now - since >= PLAN_ALTITUDE_WAIT {
+                } else if now.saturating_since(since) >= PLAN_ALTITUDE_WAIT {
                     self.log.push(
                         now,
                         true,
@@ -117,7 +117,7 @@ impl Swarm {
                     {
                         self.start_consensus(now)
                     }
-                    Some((_, (agent, v))) if now - since >= timeout => {
+                    Some((_, (agent, v))) if now.saturating_since(since) >= timeout => {
                         let at =
                             self.states[agent].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
                         let m = mean.unwrap_or_default();
@@ -204,7 +204,7 @@ impl Swarm {
             .collect();
         let failure = SwarmFailure::Handshake {
             not_flying,
-            after: now - SimTime::ZERO,
+            after: now.saturating_since(SimTime::ZERO),
         };
         self.log.push(now, true, failure.to_string());
         self.failure = Some(failure);

@@ -217,7 +217,7 @@ impl Swarm {
         let state = self.links[i]
             .state()
             .last_position
-            .map_or(0.0, |at| (now - at).as_secs_f64());
+            .map_or(0.0, |at| now.saturating_since(at).as_secs_f64());
         let round_trip = self.links[i]
             .round_trip()
             .map_or(0.0, |rtt| rtt.as_secs_f64());

@@ -175,7 +175,7 @@ impl VehicleLink {
             && self
                 .state
                 .last_position
-                .is_some_and(|t| now - t <= self.cfg.state_timeout)
+                .is_some_and(|t| now.saturating_since(t) <= self.cfg.state_timeout)
     }
 
     /// Hands a flying vehicle to its own Hold mode (AUTO.LOITER) for good: the swarm could
@@ -648,7 +648,7 @@ impl VehicleLink {
             });
         }
         if let Some(last) = self.state.last_heard
-            && now - last > self.cfg.link_timeout
+            && now.saturating_since(last) > self.cfg.link_timeout
             && !matches!(
                 self.phase,
                 Phase::Lost | Phase::Failed | Phase::Discovering | Phase::Done | Phase::Overridden
@@ -660,7 +660,7 @@ impl VehicleLink {
         }
         if self.phase == Phase::Flying && !self.state_fresh(now) {
             let age = self.state.last_position.map_or("none".to_owned(), |t| {
-                format!("{} ms old", (now - t).as_millis())
+                format!("{} ms old", now.saturating_since(t).as_millis())
             });
             let reason = format!(
                 "no usable position within the {} ms state timeout (last {age})",
@@ -676,7 +676,7 @@ impl VehicleLink {
             self.on_fence_answer(answer);
         }
         if let Phase::Streaming(since) = self.phase
-            && now - since >= self.cfg.pre_stream
+            && now.saturating_since(since) >= self.cfg.pre_stream
             && self.state.origin.is_some()
             && self.fence_ready()
         {

@@ -155,7 +155,7 @@ impl TelemetryGate {
             }
             _ => now,
         };
-        if now - since >= confirm {
+        if now.saturating_since(since) >= confirm {
             self.last = Some(sample);
             self.candidate = None;
             return PositionVerdict::Reset { jump_m };
@@ -169,12 +169,12 @@ impl TelemetryGate {
 
 /// How far `next` is from where `prev`'s velocity put it (m).
 fn deviation_m(prev: &Sample, next: &Sample) -> f64 {
-    let dt = (next.t - prev.t).as_secs_f64();
+    let dt = next.t.saturating_since(prev.t).as_secs_f64();
     (next.pos_anchor_ned_m - (prev.pos_anchor_ned_m + prev.vel_ned_mps * dt)).norm()
 }
 
 fn allowed_m(prev: &Sample, next: &Sample) -> f64 {
-    let dt = (next.t - prev.t).as_secs_f64();
+    let dt = next.t.saturating_since(prev.t).as_secs_f64();
     JUMP_SLACK_M + 0.5 * JUMP_ACCEL_MPS2 * dt * dt
 }
 

@@ -194,7 +194,9 @@ impl ViewState {
                     link_phase: link.phase().name().to_owned(),
                     mode: heard.then(|| crate::vehicle::px4_mode_name(state.custom_mode)),
                     armed: heard.then_some(state.armed),
-                    telemetry_age_ms: state.last_heard.map(|t| (now - t).as_secs_f64() * 1e3),
+                    telemetry_age_ms: state
+                        .last_heard
+                        .map(|t| now.saturating_since(t).as_secs_f64() * 1e3),
                     speed_mps: states[i].map(|s| s.vel_enu_mps.xy().norm()),
                     saturated: Some(swarm.command_limited(i)),
                     constrained: Some(active.iter().any(|&(a, b)| a == i || b == i)),

@@ -3,7 +3,7 @@
 //! Every machine and integrator takes `now` as an argument and never reads a clock, so the
 //! same inputs give the same outputs and lockstep drivers can run faster than real time.
 
-use std::ops::{Add, Sub};
+use std::ops::Add;
 use std::time::Duration;
 
 /// Time since the start of the simulation, in whole microseconds.
@@ -48,8 +48,22 @@ impl SimTime {
     }
 
     /// `self − earlier`, or zero if `earlier` is later.
+    ///
+    /// There is no `SimTime - SimTime`: an operator that quietly gave zero for a time
+    /// running backwards hid exactly the bugs it should show. A caller says which it means,
+    /// this or [`SimTime::checked_since`].
+    ///
+    /// ```compile_fail
+    /// use ringswarm_wire::time::SimTime;
+    /// let _ = SimTime::from_millis(2) - SimTime::from_millis(1);
+    /// ```
     pub fn saturating_since(self, earlier: Self) -> Duration {
         Duration::from_micros(self.0.saturating_sub(earlier.0))
+    }
+
+    /// `self − earlier`, or `None` if `earlier` is later.
+    pub fn checked_since(self, earlier: Self) -> Option<Duration> {
+        self.0.checked_sub(earlier.0).map(Duration::from_micros)
     }
 }
 
@@ -60,9 +74,17 @@ impl Add<Duration> for SimTime {
     }
 }
 
-impl Sub for SimTime {
-    type Output = Duration;
-    fn sub(self, rhs: Self) -> Duration {
-        self.saturating_since(rhs)
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn differences_say_what_a_backwards_time_gives() {
+        let (a, b) = (SimTime::from_millis(1500), SimTime::from_micros(250));
+        assert_eq!(a.saturating_since(b), Duration::from_micros(1_499_750));
+        assert_eq!(a.checked_since(b), Some(Duration::from_micros(1_499_750)));
+        assert_eq!(b.saturating_since(a), Duration::ZERO);
+        assert_eq!(b.checked_since(a), None);
+        assert_eq!(a.checked_since(a), Some(Duration::ZERO));
     }
 }

@@ -38,7 +38,7 @@ impl Vehicle {
     pub(super) fn gcs_connected(&self, now: SimTime) -> bool {
         self.datalink
             .last_gcs_heartbeat
-            .is_some_and(|t| now - t <= HEARTBEAT_STALE)
+            .is_some_and(|t| now.saturating_since(t) <= HEARTBEAT_STALE)
     }
 
     /// The data-link-loss check of one step.
@@ -49,13 +49,13 @@ impl Vehicle {
         if self.datalink.lost {
             return;
         }
-        if now - last <= HEARTBEAT_STALE + self.tuning.datalink_loss {
+        if now.saturating_since(last) <= HEARTBEAT_STALE + self.tuning.datalink_loss {
             return;
         }
         self.datalink.lost = true;
         tracing::warn!(
             sysid = self.cfg.system_id,
-            silent_ms = (now - last).as_millis() as u64,
+            silent_ms = now.saturating_since(last).as_millis() as u64,
             "connection to ground station lost"
         );
         let action = self.tuning.datalink_loss_action;

@@ -179,7 +179,7 @@ impl Estimator {
             while self
                 .history
                 .get(1)
-                .is_some_and(|&(t, _, _)| now - t >= self.cfg.latency)
+                .is_some_and(|&(t, _, _)| now.saturating_since(t) >= self.cfg.latency)
             {
                 self.history.pop_front();
             }
@@ -240,7 +240,7 @@ impl Estimator {
             Some(FaultKind::PositionLost) => {
                 let since_s = self
                     .active(now)
-                    .map_or(0.0, |f| (now - f.from).as_secs_f64());
+                    .map_or(0.0, |f| now.saturating_since(f.from).as_secs_f64());
                 let error = Vector3::new(DEAD_RECKONING_ERROR_MPS, 0.0, 0.0);
                 Some((p + error * since_s, v + error))
             }

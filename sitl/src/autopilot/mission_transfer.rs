@@ -543,10 +543,10 @@ impl Vehicle {
                 mission_type,
                 ..
             } => {
-                if now - *last_heard > TRANSFER_TIMEOUT {
+                if now.saturating_since(*last_heard) > TRANSFER_TIMEOUT {
                     tracing::warn!(sysid = self.cfg.system_id, "mission sync timeout");
                     self.mission.transfer = Transfer::Idle;
-                } else if now - *last_request >= RETRY {
+                } else if now.saturating_since(*last_request) >= RETRY {
                     *last_request = now;
                     let (link, partner, seq, legacy, kind) =
                         (*link, *partner, items.len(), *legacy, *mission_type);
@@ -561,9 +561,9 @@ impl Vehicle {
                 requested,
                 mission_type,
             } => {
-                if now - *last_heard > TRANSFER_TIMEOUT {
+                if now.saturating_since(*last_heard) > TRANSFER_TIMEOUT {
                     self.mission.transfer = Transfer::Idle;
-                } else if !*requested && now - *last_sent >= RETRY {
+                } else if !*requested && now.saturating_since(*last_sent) >= RETRY {
                     *last_sent = now;
                     let (link, partner, kind) = (*link, *partner, *mission_type);
                     let n = self.plan_len(kind);

@@ -366,7 +366,7 @@ impl Vehicle {
 
     /// Milliseconds since boot at `now` (MAVLink's `time_boot_ms`).
     fn boot_ms(&self, now: SimTime) -> u32 {
-        (now - self.boot_at).as_millis() as u32
+        now.saturating_since(self.boot_at).as_millis() as u32
     }
 
     /// System id.
@@ -558,7 +558,7 @@ impl Vehicle {
             if after >= 0.0
                 && self
                     .landed_since
-                    .is_some_and(|since| t - since >= tuning::seconds(after))
+                    .is_some_and(|since| t.saturating_since(since) >= tuning::seconds(after))
             {
                 self.disarm("landed");
                 // PX4 goes back to Hold after a landing disarm.
@@ -566,7 +566,7 @@ impl Vehicle {
             }
         } else if self.landed && !self.took_off {
             let after = self.tuning.disarm_preflight_s;
-            if after > 0.0 && t - self.armed_at >= tuning::seconds(after) {
+            if after > 0.0 && t.saturating_since(self.armed_at) >= tuning::seconds(after) {
                 self.disarm("no takeoff after arming");
             }
         }

@@ -105,7 +105,7 @@ impl Vehicle {
         }
         let timeout = self.tuning.offboard_loss;
         let last = self.offboard_signal.unwrap_or(SimTime::ZERO);
-        if t - last <= timeout {
+        if t.saturating_since(last) <= timeout {
             return;
         }
         self.failsafe = true;
@@ -115,7 +115,7 @@ impl Vehicle {
         });
         tracing::warn!(
             sysid = self.cfg.system_id,
-            silent_ms = (t - last).as_millis() as u64,
+            silent_ms = t.saturating_since(last).as_millis() as u64,
             "offboard setpoints lost"
         );
         match self.tuning.offboard_loss_action {
@@ -130,7 +130,8 @@ impl Vehicle {
     /// PX4's `offboardCheck`: an offboard setpoint arrived within COM_OF_LOSS_T.
     pub(super) fn offboard_available(&self, t: SimTime) -> bool {
         let timeout = self.tuning.offboard_loss;
-        self.offboard_signal.is_some_and(|last| t - last <= timeout)
+        self.offboard_signal
+            .is_some_and(|last| t.saturating_since(last) <= timeout)
     }
 
     /// Whether `mode` can run now (PX4's `canRun`).

@@ -210,7 +210,7 @@ fn failsafe_enters_between_loss_timeout_and_200_ms_later() {
                 _ => None,
             })
             .expect("failsafe event");
-        let delay = lost_at.0 - lost_at.1;
+        let delay = lost_at.0.saturating_since(lost_at.1);
         assert!(lost_at.1 >= last);
         assert!(
             delay > Duration::from_secs(1) && delay <= Duration::from_millis(1200),

@@ -324,7 +324,7 @@ fn gf_action_land_holds_com_fail_act_t_first() {
             .contains(&"Failsafe activated: entering Hold for 2 seconds\t".to_owned())
     );
     let (landing, _) = rig.when_mode(FlightMode::Land, 4.0, Duration::from_secs(5));
-    let delay = (landing - held).as_secs_f64();
+    let delay = landing.saturating_since(held).as_secs_f64();
     assert!(
         (2.0..2.0 + 0.011).contains(&delay),
         "landed after {delay} s"

@@ -425,7 +425,7 @@ fn data_link_loss_lands_when_nav_dll_act_says_land() {
     for _ in 0..200 {
         rig.advance(Duration::from_millis(100));
         if rig.vehicle.status().mode == FlightMode::Land {
-            lost_at = Some(rig.now - last);
+            lost_at = Some(rig.now.saturating_since(last));
             break;
         }
     }
