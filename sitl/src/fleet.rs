@@ -19,7 +19,6 @@
 //! Sends never wait: a datagram the socket cannot take at once is dropped and counted,
 //! as a full UDP buffer drops it anyway.
 
-use std::collections::VecDeque;
 use std::io;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -33,6 +32,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::time::MissedTickBehavior;
 
 use crate::autopilot::{LinkId, Vehicle, VehicleEvent, VehicleStatus};
+use crate::delay_line::DelayLine;
 use crate::keystore::{self, StoredKey};
 use crate::link_faults::LinkFaults;
 use crate::time::SimTime;
@@ -77,7 +77,6 @@ pub struct FleetVehicle {
 
 /// A datagram held back by the latency fault.
 struct Delayed {
-    due: SimTime,
     link: usize,
     /// The sender of an inbound datagram; `None` for an outbound one.
     from: Option<SocketAddr>,
@@ -93,7 +92,9 @@ struct Slot {
     partners: Vec<Partner>,
     faults: Vec<LinkFaults>,
     rng: ChaCha8Rng,
-    delayed: VecDeque<Delayed>,
+    delayed: DelayLine<Delayed>,
+    /// Buffers of delivered delayed datagrams, for the next ones.
+    spare: Vec<Vec<u8>>,
     key_file: Option<PathBuf>,
     status: watch::Sender<VehicleStatus>,
     alive: bool,
@@ -107,6 +108,14 @@ struct Slot {
 
 /// Largest datagram read.
 const MAX_DATAGRAM: usize = 2048;
+
+/// Datagrams read from one socket per tick: a flood on one socket delays only its own
+/// vehicle, never the shard's other vehicles (what is left is read at the next tick).
+const READS_PER_TICK: usize = 64;
+
+/// Datagrams one vehicle holds back under a latency fault, both ways together: 10 s (the
+/// longest latency) of a busy link's traffic. A full line drops, as a router's queue does.
+const DELAYED_PER_VEHICLE: usize = 4096;
 
 /// Runs a shard of vehicles, each with its boot offset, until `shutdown` turns true.
 /// `controls` carries `(index in vehicles, request)`.
@@ -152,7 +161,8 @@ async fn run_fleet(
             default_peers: defaults,
             faults,
             rng: ChaCha8Rng::seed_from_u64(v.seed),
-            delayed: VecDeque::new(),
+            delayed: DelayLine::new(DELAYED_PER_VEHICLE),
+            spare: Vec::new(),
             key_file: v.key_file,
             status: v.status,
             alive: true,
@@ -161,9 +171,9 @@ async fn run_fleet(
         });
     }
     let mut buf = vec![0u8; MAX_DATAGRAM];
-    // Sockets to read this tick, and those an error left with something to read: read
-    // again at the next tick (the poller reports a socket again only when a new datagram
-    // arrives). Both kept: no allocation per tick.
+    // Sockets to read this tick, and those the read cap or an error left with something
+    // to read: read again at the next tick (the poller reports a socket again only when a
+    // new datagram arrives). Both kept: no allocation per tick.
     let mut ready: Vec<(usize, usize)> = Vec::new();
     let mut retry: Vec<(usize, usize)> = Vec::new();
     let mut tick = tokio::time::interval(Duration::from_millis(1));
@@ -210,6 +220,13 @@ async fn run_fleet(
         if slot.alive {
             store_key(slot.key_file.as_deref(), &slot.vehicle);
         }
+        if slot.delayed.refused() > 0 {
+            tracing::info!(
+                sysid = slot.vehicle.system_id(),
+                dropped = slot.delayed.refused(),
+                "datagrams dropped: the latency fault's line was full"
+            );
+        }
         if slot.dropped_sends > 0 {
             tracing::info!(
                 sysid = slot.vehicle.system_id(),
@@ -247,9 +264,9 @@ fn polled_sockets(
     Ok(polled)
 }
 
-/// Reads the sockets in `ready` (those an error left unread) and every socket the poller
+/// Reads the sockets in `ready` (those the read cap or an error left unread) and every socket the poller
 /// reports readable (without waiting); `ready` is left empty, and `retry` holds the
-/// sockets an error left unread this time.
+/// sockets left unread this time.
 fn receive_ready(
     poll: &mut Poll,
     events: &mut Events,
@@ -277,10 +294,18 @@ fn receive_ready(
             continue;
         };
         let at = slot.time(now);
-        if !slot.receive(at, link, buf) {
+        if let Read::More(_) = slot.receive(at, link, buf) {
             retry.push((s, link));
         }
     }
+}
+
+/// What one [`Slot::receive`] read: the datagrams taken, and whether the socket is left
+/// empty or is to be read again at the next tick.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Read {
+    Drained(usize),
+    More(usize),
 }
 
 /// Running shards: their tasks and, per vehicle in the order given, how to reach it.
@@ -370,7 +395,8 @@ impl Slot {
             VehicleControl::Kill => {
                 self.alive = false;
                 store_key(self.key_file.as_deref(), &self.vehicle);
-                self.delayed.clear();
+                let spare = &mut self.spare;
+                spare.extend(self.delayed.drain().map(|d| d.bytes));
                 while self.vehicle.poll_transmit().is_some() {}
                 tracing::info!(sysid, "vehicle killed");
             }
@@ -388,28 +414,32 @@ impl Slot {
         }
     }
 
-    /// Reads everything that has arrived on link `link`'s socket and hands it to the
-    /// vehicle; a powered-off vehicle's datagrams are read and dropped. `false` when a
-    /// socket error (logged) left it unread: one vehicle's socket never stops the shard.
-    fn receive(&mut self, now: SimTime, link: usize, buf: &mut [u8]) -> bool {
+    /// Reads what has arrived on link `link`'s socket, up to [`READS_PER_TICK`]
+    /// datagrams, and hands it to the vehicle; a powered-off vehicle's datagrams are read
+    /// and dropped. [`Read::More`] when the cap or a socket error (logged) left some
+    /// unread: one vehicle's socket never stops the shard.
+    fn receive(&mut self, now: SimTime, link: usize, buf: &mut [u8]) -> Read {
         if link >= self.sockets.len() {
-            return true;
+            return Read::Drained(0);
         }
-        loop {
+        let mut taken = 0;
+        while taken < READS_PER_TICK {
             let (n, from) = match self.sockets[link].recv_from(buf) {
                 Ok(got) => got,
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => return true,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => return Read::Drained(taken),
                 // ICMP port unreachable from an earlier send (nobody listening at the
                 // default peer yet) surfaces here on some systems.
                 Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
                 Err(e) => {
                     tracing::warn!(sysid = self.vehicle.system_id(), error = %e, "receive failed");
-                    return false;
+                    return Read::More(taken);
                 }
             };
+            taken += 1;
             self.inbound(now, link, from, &buf[..n]);
             self.flush(now);
         }
+        Read::More(taken)
     }
 
     /// Hands a datagram to the vehicle (or holds its copies back, under a latency
@@ -424,26 +454,29 @@ impl Slot {
                     self.partners[link].on_datagram(from);
                 }
             } else {
-                self.delayed.push_back(Delayed {
-                    due: now + delay,
-                    link,
-                    from: Some(from),
-                    bytes: bytes.to_vec(),
-                });
+                let copy = self.copy_of(bytes);
+                self.hold(now + delay, link, Some(from), copy);
             }
         }
     }
 
+    /// `bytes` in a spare buffer.
+    fn copy_of(&mut self, bytes: &[u8]) -> Vec<u8> {
+        let mut copy = self.spare.pop().unwrap_or_default();
+        copy.clear();
+        copy.extend_from_slice(bytes);
+        copy
+    }
+
+    /// Holds a datagram back until `due`; a full line drops it.
+    fn hold(&mut self, due: SimTime, link: usize, from: Option<SocketAddr>, bytes: Vec<u8>) {
+        if let Err(dropped) = self.delayed.push(due, Delayed { link, from, bytes }) {
+            self.spare.push(dropped.bytes);
+        }
+    }
+
     fn deliver_delayed(&mut self, now: SimTime) {
-        let mut i = 0;
-        while i < self.delayed.len() {
-            if self.delayed[i].due > now {
-                i += 1;
-                continue;
-            }
-            let Some(d) = self.delayed.remove(i) else {
-                break;
-            };
+        while let Some(d) = self.delayed.pop_due(now) {
             match d.from {
                 Some(from) => {
                     if self
@@ -455,6 +488,7 @@ impl Slot {
                 }
                 None => self.send(d.link, &d.bytes),
             }
+            self.spare.push(d.bytes);
         }
     }
 
@@ -476,12 +510,8 @@ impl Slot {
                     if copy.is_zero() {
                         self.send(link, &tx.bytes);
                     } else {
-                        self.delayed.push_back(Delayed {
-                            due: now + copy,
-                            link,
-                            from: None,
-                            bytes: tx.bytes.clone(),
-                        });
+                        let held = self.copy_of(&tx.bytes);
+                        self.hold(now + copy, link, None, held);
                     }
                 }
             }
@@ -514,5 +544,58 @@ fn save_key(key_file: Option<&std::path::Path>, sysid: u8, stored: Option<&Store
     match keystore::save(path, stored) {
         Ok(()) => tracing::info!(sysid, path = %path.display(), "signing key stored"),
         Err(err) => tracing::error!(sysid, %err, "signing key not stored"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::autopilot::VehicleConfig;
+    use crate::profile::Profile;
+    use crate::world::World;
+
+    /// A slot on one loopback socket, and a socket to flood it from.
+    fn flooded_slot(datagrams: usize) -> (Slot, std::net::UdpSocket) {
+        let socket = mio::net::UdpSocket::bind("127.0.0.1:0".parse().unwrap()).unwrap();
+        let at = socket.local_addr().unwrap();
+        let vehicle =
+            Vehicle::new(VehicleConfig::new(1, Profile::x500()), World::default()).unwrap();
+        let (status, _) = watch::channel(vehicle.status());
+        let peer: SocketAddr = "127.0.0.1:9".parse().unwrap();
+        let slot = Slot {
+            vehicle,
+            sockets: vec![socket],
+            ids: vec![LinkId::Offboard],
+            default_peers: vec![peer],
+            partners: vec![Partner::new(peer)],
+            faults: vec![LinkFaults::default()],
+            rng: ChaCha8Rng::seed_from_u64(1),
+            delayed: DelayLine::new(DELAYED_PER_VEHICLE),
+            spare: Vec::new(),
+            key_file: None,
+            status,
+            alive: true,
+            dropped_sends: 0,
+            boot_offset: Duration::ZERO,
+        };
+        let flood = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        for i in 0..datagrams {
+            flood.send_to(&[0xAB, i as u8], at).unwrap();
+        }
+        (slot, flood)
+    }
+
+    #[test]
+    fn a_flooded_socket_is_read_at_most_the_cap_per_tick() {
+        let (mut slot, _flood) = flooded_slot(150);
+        let mut buf = vec![0u8; MAX_DATAGRAM];
+        let now = SimTime::from_millis(10);
+        assert_eq!(slot.receive(now, 0, &mut buf), Read::More(READS_PER_TICK));
+        assert_eq!(slot.receive(now, 0, &mut buf), Read::More(READS_PER_TICK));
+        assert_eq!(
+            slot.receive(now, 0, &mut buf),
+            Read::Drained(150 - 2 * READS_PER_TICK)
+        );
+        assert_eq!(slot.receive(now, 0, &mut buf), Read::Drained(0));
     }
 }

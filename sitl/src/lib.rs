@@ -16,7 +16,7 @@
 //! - [`autopilot`]: the sans-IO vehicle machine with PX4's wire behaviour.
 //! - [`config_file`]: the TOML configuration of `ringswarm sitl --config`.
 //! - [`udp`]: the tokio driver, one socket per link on PX4's ports, with fault injection
-//!   ([`link_faults`], also used by the coordinator's lockstep driver).
+//!   ([`link_faults`] and [`delay_line`], also used by the coordinator's lockstep driver).
 //! - [`params`], [`world`]: parameter table, geodetic world.
 //!
 //! It never depends on `ringswarm`.
@@ -26,6 +26,7 @@
 pub mod autopilot;
 pub mod config_file;
 pub mod control;
+pub mod delay_line;
 pub mod fleet;
 pub mod keystore;
 pub mod link_faults;

@@ -8,12 +8,12 @@
 //! 10.0.0.0/8), a network's vehicles are told apart by system id and found from their
 //! frames, and what the router cannot deliver is dropped.
 
-use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use ringswarm_sitl::autopilot::{LinkId, PHYSICS_STEP, Vehicle};
+use ringswarm_sitl::delay_line::DelayLine;
 use ringswarm_sitl::link_faults::LinkFaults;
 use ringswarm_wire::time::SimTime;
 
@@ -44,10 +44,13 @@ impl Default for LinkConditions {
     }
 }
 
+/// Datagrams in flight at once, both ways, over all links: a full line drops (and
+/// counts) what comes next rather than growing without limit.
+const IN_FLIGHT_CAPACITY: usize = 1 << 20;
+
 /// A datagram in flight.
 #[derive(Debug, Clone)]
 struct InFlight {
-    due: SimTime,
     to_vehicle: bool,
     index: usize,
     bytes: Vec<u8>,
@@ -93,7 +96,7 @@ pub struct Lockstep {
     swarm: Swarm,
     vehicles: Vec<Vehicle>,
     now: SimTime,
-    in_flight: VecDeque<InFlight>,
+    in_flight: DelayLine<InFlight>,
     conditions: LinkConditions,
     rng: ChaCha8Rng,
     silenced: Vec<Vec<(SimTime, SimTime)>>,
@@ -121,7 +124,7 @@ impl Lockstep {
             swarm,
             vehicles,
             now: SimTime::ZERO,
-            in_flight: VecDeque::new(),
+            in_flight: DelayLine::new(IN_FLIGHT_CAPACITY),
             rng: ChaCha8Rng::seed_from_u64(conditions.seed),
             conditions,
             silenced: vec![Vec::new(); n],
@@ -310,6 +313,11 @@ impl Lockstep {
         self.in_flight.len()
     }
 
+    /// Datagrams dropped because [`IN_FLIGHT_CAPACITY`] were already in flight.
+    pub fn in_flight_refused(&self) -> u64 {
+        self.in_flight.refused()
+    }
+
     /// Runs until virtual time `end`, calling `observe` after every step.
     pub fn run_until(&mut self, end: SimTime, mut observe: impl FnMut(&Self)) {
         while self.now < end {
@@ -370,12 +378,15 @@ impl Lockstep {
                 bytes.clone()
             };
             if let Some(bytes) = copy {
-                self.in_flight.push_back(InFlight {
-                    due: self.now + delay,
+                let held = InFlight {
                     to_vehicle,
                     index,
                     bytes,
-                });
+                };
+                // A full line drops the datagram, as a router's full queue does.
+                if let Err(dropped) = self.in_flight.push(self.now + delay, held) {
+                    self.recycle(to_vehicle, index, dropped.bytes);
+                }
             }
         }
         // Lost on the way: back to where it came from.
@@ -394,15 +405,7 @@ impl Lockstep {
     }
 
     fn deliver(&mut self, now: SimTime, observer: &mut impl Observer) {
-        let mut i = 0;
-        while i < self.in_flight.len() {
-            if self.in_flight[i].due > now {
-                i += 1;
-                continue;
-            }
-            let Some(d) = self.in_flight.remove(i) else {
-                break;
-            };
+        while let Some(d) = self.in_flight.pop_due(now) {
             if d.to_vehicle {
                 self.vehicles[d.index].handle_datagram(now, LinkId::Offboard, &d.bytes);
             } else {
