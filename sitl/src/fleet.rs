@@ -33,7 +33,8 @@ use tokio::time::MissedTickBehavior;
 
 use crate::autopilot::{LinkId, Vehicle, VehicleEvent, VehicleStatus};
 use crate::delay_line::DelayLine;
-use crate::keystore::{self, StoredKey};
+use crate::key_writer::{KeyStore, KeyWriter};
+use crate::keystore::StoredKey;
 use crate::link_faults::LinkFaults;
 use crate::time::SimTime;
 use crate::udp::{Partner, SimClock};
@@ -96,6 +97,8 @@ struct Slot {
     /// Buffers of delivered delayed datagrams, for the next ones.
     spare: Vec<Vec<u8>>,
     key_file: Option<PathBuf>,
+    /// Where changed keys go to be written, off the shard's thread.
+    keys: KeyStore,
     status: watch::Sender<VehicleStatus>,
     alive: bool,
     /// Datagrams the socket could not take at once.
@@ -124,6 +127,7 @@ async fn run_fleet(
     clock: SimClock,
     mut controls: mpsc::Receiver<(usize, VehicleControl)>,
     mut shutdown: watch::Receiver<bool>,
+    keys: KeyStore,
 ) {
     let (mut poll, mut events) = match Poll::new() {
         Ok(poll) => (poll, Events::with_capacity(EVENTS_PER_POLL)),
@@ -164,6 +168,7 @@ async fn run_fleet(
             delayed: DelayLine::new(DELAYED_PER_VEHICLE),
             spare: Vec::new(),
             key_file: v.key_file,
+            keys: keys.clone(),
             status: v.status,
             alive: true,
             dropped_sends: 0,
@@ -218,7 +223,7 @@ async fn run_fleet(
     }
     for slot in &slots {
         if slot.alive {
-            store_key(slot.key_file.as_deref(), &slot.vehicle);
+            slot.store_key();
         }
         if slot.delayed.refused() > 0 {
             tracing::info!(
@@ -314,6 +319,8 @@ pub struct Shards {
     tasks: Vec<tokio::task::JoinHandle<()>>,
     /// Per vehicle: its shard's control channel and its index there.
     controls: Vec<(mpsc::Sender<(usize, VehicleControl)>, usize)>,
+    /// Writes the vehicles' keys.
+    keys: KeyWriter,
 }
 
 impl Shards {
@@ -336,10 +343,18 @@ impl Shards {
     /// # Errors
     /// A shard that panicked.
     pub async fn join(self) -> io::Result<()> {
+        let mut result = Ok(());
         for task in self.tasks {
-            task.await.map_err(io::Error::other)?;
+            if let Err(e) = task.await {
+                result = Err(io::Error::other(e));
+            }
         }
-        Ok(())
+        // The shards stored their keys as they stopped; wait until they are on disk.
+        let keys = self.keys;
+        tokio::task::spawn_blocking(move || keys.finish())
+            .await
+            .map_err(io::Error::other)?;
+        result
     }
 }
 
@@ -360,14 +375,17 @@ pub fn spawn_shards(
         placed.push((shard, fleets[shard].len()));
         fleets[shard].push((spread(i), v));
     }
+    let keys = KeyWriter::spawn();
     let mut senders = Vec::new();
     let mut tasks = Vec::new();
     for fleet in fleets {
         let (tx, rx) = mpsc::channel(16);
         senders.push(tx);
-        tasks.push(tokio::spawn(run_fleet(fleet, clock, rx, shutdown.clone())));
+        let run = run_fleet(fleet, clock, rx, shutdown.clone(), keys.store());
+        tasks.push(tokio::spawn(run));
     }
     Shards {
+        keys,
         tasks,
         controls: placed
             .into_iter()
@@ -394,7 +412,7 @@ impl Slot {
         match request {
             VehicleControl::Kill => {
                 self.alive = false;
-                store_key(self.key_file.as_deref(), &self.vehicle);
+                self.store_key();
                 let spare = &mut self.spare;
                 spare.extend(self.delayed.drain().map(|d| d.bytes));
                 while self.vehicle.poll_transmit().is_some() {}
@@ -496,11 +514,7 @@ impl Slot {
     fn flush(&mut self, now: SimTime) {
         while let Some(event) = self.vehicle.poll_event() {
             if let VehicleEvent::SigningChanged(stored) = event {
-                save_key(
-                    self.key_file.as_deref(),
-                    self.vehicle.system_id(),
-                    stored.as_ref(),
-                );
+                self.save_key(stored);
             }
         }
         while let Some(tx) = self.vehicle.poll_transmit() {
@@ -519,6 +533,22 @@ impl Slot {
         }
     }
 
+    /// Stores the vehicle's key with its clock as it is now, so that a restart goes on
+    /// with newer timestamps (PX4 stores the clock only when a key is set).
+    fn store_key(&self) {
+        if let Some(stored) = self.vehicle.signing_key() {
+            self.save_key(Some(stored));
+        }
+    }
+
+    /// Hands a key (or "no key") to the writer, when the vehicle keeps one in a file.
+    fn save_key(&self, stored: Option<StoredKey>) {
+        if let Some(path) = &self.key_file {
+            self.keys
+                .save(path.clone(), self.vehicle.system_id(), stored);
+        }
+    }
+
     fn send(&mut self, link: usize, bytes: &[u8]) {
         let to = self.partners[link].addr();
         match self.sockets[link].send_to(bytes, to) {
@@ -528,22 +558,6 @@ impl Slot {
                 tracing::debug!(sysid = self.vehicle.system_id(), %to, error = %e, "send failed")
             }
         }
-    }
-}
-
-/// Stores the vehicle's key with its clock as it is now, so that a restart goes on with
-/// newer timestamps (PX4 stores the clock only when a key is set).
-fn store_key(key_file: Option<&std::path::Path>, vehicle: &Vehicle) {
-    if let Some(stored) = vehicle.signing_key() {
-        save_key(key_file, vehicle.system_id(), Some(&stored));
-    }
-}
-
-fn save_key(key_file: Option<&std::path::Path>, sysid: u8, stored: Option<&StoredKey>) {
-    let Some(path) = key_file else { return };
-    match keystore::save(path, stored) {
-        Ok(()) => tracing::info!(sysid, path = %path.display(), "signing key stored"),
-        Err(err) => tracing::error!(sysid, %err, "signing key not stored"),
     }
 }
 
@@ -573,6 +587,7 @@ mod tests {
             delayed: DelayLine::new(DELAYED_PER_VEHICLE),
             spare: Vec::new(),
             key_file: None,
+            keys: KeyWriter::spawn().store(),
             status,
             alive: true,
             dropped_sends: 0,

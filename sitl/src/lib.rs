@@ -28,6 +28,7 @@ pub mod config_file;
 pub mod control;
 pub mod delay_line;
 pub mod fleet;
+pub mod key_writer;
 pub mod keystore;
 pub mod link_faults;
 pub mod params;
