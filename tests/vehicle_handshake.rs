@@ -784,3 +784,52 @@ fn two_foreign_systems_interleaved_on_one_link_are_reported_once_each() {
     assert_eq!(link.ignored_frames(), 1000);
     assert_eq!(link.phase(), Phase::Discovering);
 }
+
+#[test]
+fn a_stall_of_the_coordinator_is_not_taken_for_the_vehicle_going_silent() {
+    let mut h = Harness::new(1, 1);
+    h.run(Duration::from_secs(2), &mut deliver_all);
+    assert_eq!(h.link.phase(), Phase::Flying);
+    // The coordinator's host stalls for 0.8 s: beyond the 0.3 s state timeout, within the
+    // vehicle's own 1 s offboard-loss timeout. The vehicle goes on sending; nothing is read.
+    let stalled_at = h.now;
+    let mut unread = Vec::new();
+    for _ in 0..800 {
+        h.now = h.now + Duration::from_millis(1);
+        h.vehicle.handle_timeout(h.now);
+        while let Some(tx) = h.vehicle.poll_transmit() {
+            if tx.link == LinkId::Offboard {
+                unread.push(tx.bytes.clone());
+            }
+        }
+    }
+    // It wakes: its timers run first, before the frames waiting for it are read.
+    let mut unaware = h.link.clone();
+    unaware.handle_timeout(h.now);
+    let mut told = Vec::new();
+    while let Some(e) = unaware.poll_event() {
+        told.push(e);
+    }
+    assert!(
+        told.iter().any(|e| matches!(e, LinkEvent::HandedToHold(_))),
+        "{told:?}"
+    );
+    // With the lag its driver measured, the same wake-up judges nothing.
+    h.link.set_listen_lag(h.now.saturating_since(stalled_at));
+    h.link.handle_timeout(h.now);
+    for bytes in &unread {
+        h.link.handle_datagram(h.now, bytes);
+    }
+    h.link.set_listen_lag(Duration::ZERO);
+    let woke = h.now;
+    h.run(Duration::from_secs(2), &mut deliver_all);
+    let after: Vec<_> = h.events.iter().filter(|(t, _)| *t >= woke).collect();
+    assert!(
+        !after.iter().any(|(_, e)| matches!(
+            e,
+            LinkEvent::Lost | LinkEvent::HandedToHold(_) | LinkEvent::Recovered
+        )),
+        "{after:?}"
+    );
+    assert_eq!(h.link.phase(), Phase::Flying);
+}

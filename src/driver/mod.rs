@@ -5,10 +5,13 @@
 //! - [`udp`]: tokio, a socket per vehicle or per MAVLink network, for real PX4 or
 //!   `ringswarm sitl` vehicles.
 //! - [`mirror`]: every datagram of a UDP flight copied to extra addresses, read-only.
+//! - [`listening`]: how far behind its sockets the UDP driver is, so that its own stall
+//!   is not taken for vehicles going silent.
 //!
 //! Both hand received datagrams to the swarm through one `Inbound` (router, links,
 //! address learning) when they route.
 
+pub mod listening;
 #[cfg(feature = "emulator")]
 pub mod lockstep;
 pub mod mirror;

@@ -18,6 +18,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 use tokio::time::Instant;
 
+use super::listening::Listening;
 use super::{Inbound, Observer};
 use crate::link::router::Router;
 use crate::swarm::Swarm;
@@ -50,6 +51,8 @@ const SEND_BUDGET: usize = 500;
 /// [`BATCH`] of them, instead of one each.
 struct Batch {
     socket: usize,
+    /// The read stopped at [`BATCH`]: more was waiting.
+    full: bool,
     datagrams: Vec<(SocketAddr, Range<usize>)>,
     bytes: Vec<u8>,
 }
@@ -63,6 +66,7 @@ async fn receive_batch(socket_index: usize, socket: &UdpSocket) -> io::Result<Ba
     let mut buf = [0u8; MAX_DATAGRAM];
     let mut batch = Batch {
         socket: socket_index,
+        full: false,
         datagrams: Vec::new(),
         bytes: Vec::new(),
     };
@@ -88,6 +92,7 @@ async fn receive_batch(socket_index: usize, socket: &UdpSocket) -> io::Result<Ba
             Err(_) => break, // WouldBlock: nothing more for now
         }
     }
+    batch.full = batch.datagrams.len() == BATCH;
     Ok(batch)
 }
 
@@ -116,7 +121,7 @@ pub async fn run_swarm<O: Observer>(
         receivers.spawn(async move {
             loop {
                 let batch = receive_batch(s, &socket).await?;
-                let full = batch.datagrams.len() == BATCH;
+                let full = batch.full;
                 if tx.send(batch).await.is_err() {
                     return Ok::<(), io::Error>(());
                 }
@@ -131,6 +136,7 @@ pub async fn run_swarm<O: Observer>(
     }
     let mut pieces = Vec::new();
     let mut unsent = vec![0u64; swarm.links().len()];
+    let mut listening = Listening::new(sockets.len());
     drop(tx);
     loop {
         // Timers to the next whole millisecond (as the lockstep driver steps): a thousand
@@ -144,6 +150,7 @@ pub async fn run_swarm<O: Observer>(
         } else {
             start + std::time::Duration::from_micros(due_us)
         };
+        let mut late = std::time::Duration::ZERO;
         tokio::select! {
             // The control schedule first: a burst of datagrams (a thousand vehicles'
             // default streams at start) must not hold a tick back.
@@ -156,7 +163,14 @@ pub async fn run_swarm<O: Observer>(
                     DriverCommand::Stop => break,
                 }
             }
-            _ = tokio::time::sleep_until(deadline) => swarm.handle_timeout(now()),
+            _ = tokio::time::sleep_until(deadline) => {
+                late = Instant::now().saturating_duration_since(deadline);
+                // Judged with the lag as it stands: after a stall, the frames that came
+                // meanwhile are still unread.
+                let t = now();
+                swarm.set_listen_lag(t, listening.lag(t));
+                swarm.handle_timeout(t);
+            }
             received = rx.recv() => match received {
                 Some(first) => {
                     // What has arrived, then one round of sends; no further than the next
@@ -169,6 +183,7 @@ pub async fn run_swarm<O: Observer>(
                             let bytes = &batch.bytes[datagram.clone()];
                             inbound.deliver(batch.socket, *from, bytes, t, &mut observer);
                         }
+                        listening.batch(batch.socket, batch.full);
                         if Instant::now() >= deadline {
                             break;
                         }
@@ -178,6 +193,16 @@ pub async fn run_swarm<O: Observer>(
                 None => break,
             },
         }
+        // How far behind its sockets the loop is: silence is judged up to there.
+        let t = now();
+        if let Some(ended) = listening.settle(t, rx.is_empty(), late) {
+            tracing::warn!(
+                behind_ms = ended.max_lag.as_millis() as u64,
+                "the coordinator fell behind its sockets (its host stalled or was overloaded); \
+                 vehicles' silence during it was not counted against them"
+            );
+        }
+        swarm.set_listen_lag(t, listening.lag(t));
         // At most SEND_BUDGET datagrams a round: a thousand vehicles discovered together
         // queue some twenty thousand (heartbeats, stream settings), tens of milliseconds
         // of system calls that must not hold the next control tick back.

@@ -69,6 +69,10 @@ pub use setup::{
     SAFETY_GAMMA, SafetySetup, SetpointKind, SwarmSetup, TargetVelocity,
 };
 
+/// A listen lag shorter than this is none: the link and state timeouts are hundreds of
+/// milliseconds, and a lag that comes and goes every loop would reschedule every link.
+pub const LISTEN_LAG_FLOOR: Duration = Duration::from_millis(20);
+
 /// Where the swarm is.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum SwarmPhase {
@@ -246,6 +250,8 @@ pub struct Swarm {
     control_ticks: u64,
     plan: Option<PlanDecision>,
     timing: timing::TickTiming,
+    /// How far behind its sockets the coordinator is ([`Swarm::set_listen_lag`]).
+    listen_lag: Duration,
     /// Each vehicle's horizontal box in the saturation, kept between ticks.
     boxes: Vec<Vector2<f64>>,
     /// The divergence guard, if on.
@@ -352,6 +358,7 @@ impl Swarm {
             control_ticks: 0,
             plan: None,
             timing: timing::TickTiming::new(setup_interval),
+            listen_lag: Duration::ZERO,
             boxes: Vec::with_capacity(n),
             guard: setup_guard.map(DivergenceGuard::new),
             stop: None,
@@ -605,6 +612,29 @@ impl Swarm {
                 self.queued[i] = false;
             }
             return Some((i, bytes));
+        }
+    }
+
+    /// Tells every link that the coordinator had read everything received only up to
+    /// `now − lag` (see [`crate::driver::listening`]): a stall of its own is not taken for
+    /// its vehicles going silent. Lags under [`LISTEN_LAG_FLOOR`] count as none.
+    pub fn set_listen_lag(&mut self, now: SimTime, lag: Duration) {
+        let lag = if lag < LISTEN_LAG_FLOOR {
+            Duration::ZERO
+        } else {
+            lag
+        };
+        if lag == self.listen_lag {
+            return;
+        }
+        let shrank = lag < self.listen_lag;
+        self.listen_lag = lag;
+        for link in &mut self.links {
+            link.set_listen_lag(lag);
+        }
+        if shrank {
+            // Deadlines moved earlier: the timers must know.
+            self.after_all_links(now);
         }
     }
 

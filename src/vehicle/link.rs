@@ -80,6 +80,8 @@ pub struct VehicleLink {
     /// The round trip to the vehicle: the newest TIMESYNC sample when it is longer, else
     /// decaying toward the new one by a tenth (a rise is believed at once).
     round_trip: Option<Duration>,
+    /// How far behind its sockets the coordinator is ([`VehicleLink::set_listen_lag`]).
+    listen_lag: Duration,
 }
 
 impl VehicleLink {
@@ -92,6 +94,7 @@ impl VehicleLink {
             .clone()
             .map(|plan| FenceUpload::new(plan, FENCE_RETRY, cfg.max_attempts));
         Self {
+            listen_lag: Duration::ZERO,
             timesync_sent_ns: None,
             round_trip: None,
             fence,
@@ -178,6 +181,14 @@ impl VehicleLink {
                 .is_some_and(|t| now.saturating_since(t) <= self.cfg.state_timeout)
     }
 
+    /// Tells the link that the coordinator has read everything received only up to
+    /// `now − lag` ([`crate::driver::listening`]): the vehicle's silence and its state's
+    /// age are judged at that instant, not at `now`, when the link decides that the
+    /// vehicle is lost or must be handed to its own Hold.
+    pub fn set_listen_lag(&mut self, lag: Duration) {
+        self.listen_lag = lag;
+    }
+
     /// Hands a flying vehicle to its own Hold mode (AUTO.LOITER) for good: the swarm could
     /// not compute its command. Nothing more is streamed to it; it can still be landed.
     pub fn hold_on_own(&mut self, now: SimTime, reason: &str) {
@@ -254,7 +265,7 @@ impl VehicleLink {
             Phase::Lost | Phase::Failed | Phase::Discovering | Phase::Done | Phase::Overridden
         );
         let mut next = match self.state.last_heard {
-            Some(t) if watched => t + self.cfg.link_timeout,
+            Some(t) if watched => t + self.cfg.link_timeout + self.listen_lag,
             _ => SimTime::MAX,
         }
         .min(self.next_heartbeat);
@@ -647,8 +658,14 @@ impl VehicleLink {
                 after: self.cfg.discovery_warning,
             });
         }
+        // Silence counts only up to the last instant the coordinator had read everything
+        // received: its own stall is not the vehicle's.
+        let listened = SimTime::from_micros(
+            now.as_micros()
+                .saturating_sub(self.listen_lag.as_micros() as u64),
+        );
         if let Some(last) = self.state.last_heard
-            && now.saturating_since(last) > self.cfg.link_timeout
+            && listened.saturating_since(last) > self.cfg.link_timeout
             && !matches!(
                 self.phase,
                 Phase::Lost | Phase::Failed | Phase::Discovering | Phase::Done | Phase::Overridden
@@ -658,7 +675,7 @@ impl VehicleLink {
             self.pending = None;
             self.events.push_back(LinkEvent::Lost);
         }
-        if self.phase == Phase::Flying && !self.state_fresh(now) {
+        if self.phase == Phase::Flying && !self.state_fresh(listened) {
             let age = self.state.last_position.map_or("none".to_owned(), |t| {
                 format!("{} ms old", now.saturating_since(t).as_millis())
             });
