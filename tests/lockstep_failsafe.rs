@@ -288,3 +288,25 @@ fn a_vehicle_never_heard_is_named_after_the_handshake_timeout_and_the_others_lan
         assert!(s.landed && !s.armed, "vehicle {}: {s:?}", i + 1);
     }
 }
+
+#[test]
+fn a_stall_of_the_coordinator_is_not_taken_for_its_vehicles_going_silent() {
+    // The coordinator's host stops scheduling it for 0.8 s mid-consensus: more than the
+    // 300 ms state timeout, less than the vehicles' own 1 s offboard-loss timeout. The
+    // vehicles fly on their last setpoints; their reports wait unread.
+    let mut run = build("", "");
+    run.stall_coordinator(secs(10.0), secs(10.8));
+    let w = watch(&mut run, 30.0, 2);
+    assert_eq!(w.held_at, None, "the swarm held");
+    for id in 1..=6u8 {
+        let told = warnings(&run, id);
+        assert!(told.is_empty(), "vehicle {id}: {told:?}");
+        assert_eq!(
+            run.swarm().links()[usize::from(id) - 1].phase(),
+            Phase::Flying
+        );
+    }
+    assert!(matches!(run.swarm().phase(), SwarmPhase::Consensus(_)));
+    // 0.8 s on its last setpoint costs 0.091 m of height, and nothing else.
+    assert!(w.max_height_loss_m < 0.1, "fell {} m", w.max_height_loss_m);
+}

@@ -10,14 +10,15 @@
 //! ([`crate::swarm::Swarm::set_listen_lag`]).
 //!
 //! The driver has read everything when its receive queue is empty, no socket's last read
-//! stopped at the batch size (more was waiting), and the loop woke on time (a loop that
-//! wakes late has not let its receivers run either).
+//! stopped at the batch size (more was waiting), and, when the loop woke late (its
+//! receivers may not have run either), no socket has a datagram waiting.
 
 use std::time::Duration;
 
 use ringswarm_wire::time::SimTime;
 
-/// A wake-up later than this after its deadline is a stall of the coordinator's own.
+/// A wake-up later than this after its deadline may have kept the receivers from running:
+/// the sockets are looked at before the lag is reset.
 pub const STALL: Duration = Duration::from_millis(20);
 
 /// A lag at which the driver warns (once per stall).
@@ -69,16 +70,17 @@ impl Listening {
         }
     }
 
-    /// The loop has done its work at `now`; `queue_empty`: nothing received is waiting;
-    /// `late`: how long after its deadline a timer woke it (zero when data woke it).
-    /// Returns the stall that just ended, if any.
+    /// The loop has done its work at `now`; `queue_empty`: nothing received is waiting
+    /// to be handled; `sockets_waiting`: some socket has a datagram not read yet (looked
+    /// at when the loop woke more than [`STALL`] late; `false` otherwise). Returns the
+    /// stall that just ended, if any.
     pub fn settle(
         &mut self,
         now: SimTime,
         queue_empty: bool,
-        late: Duration,
+        sockets_waiting: bool,
     ) -> Option<StallEnded> {
-        let caught_up = queue_empty && self.full_count == 0 && late <= STALL;
+        let caught_up = queue_empty && self.full_count == 0 && !sockets_waiting;
         if caught_up {
             self.heard_through = self.heard_through.max(now);
         }
@@ -117,29 +119,30 @@ mod tests {
     #[test]
     fn on_time_and_caught_up_means_no_lag() {
         let mut l = Listening::new(2);
-        assert_eq!(l.settle(ms(10), true, Duration::ZERO), None);
+        assert_eq!(l.settle(ms(10), true, false), None);
         assert_eq!(l.lag(ms(10)), Duration::ZERO);
-        assert_eq!(l.settle(ms(30), true, STALL), None);
+        assert_eq!(l.settle(ms(30), true, false), None);
         assert_eq!(l.lag(ms(30)), Duration::ZERO);
     }
 
     #[test]
     fn a_late_wake_a_waiting_queue_or_a_full_read_hold_the_clock_back() {
         let mut l = Listening::new(2);
-        l.settle(ms(100), true, Duration::ZERO);
-        // The host stalled 600 ms: the timer wakes late, the receivers have not run.
-        l.settle(ms(700), true, Duration::from_millis(590));
+        l.settle(ms(100), true, false);
+        // The host stalled 600 ms: the timer wakes late, the receivers have not run and
+        // the sockets hold what came meanwhile.
+        l.settle(ms(700), true, true);
         assert_eq!(l.lag(ms(700)), Duration::from_millis(600));
         // They run: a full batch from socket 1, the queue still holding more.
         l.batch(1, true);
-        l.settle(ms(705), false, Duration::ZERO);
+        l.settle(ms(705), false, false);
         assert_eq!(l.lag(ms(705)), Duration::from_millis(605));
         // The queue is empty but socket 1 was left with more to read.
-        l.settle(ms(706), true, Duration::ZERO);
+        l.settle(ms(706), true, false);
         assert_eq!(l.lag(ms(706)), Duration::from_millis(606));
         // Its next read is short: everything is read.
         l.batch(1, false);
-        let ended = l.settle(ms(707), true, Duration::ZERO);
+        let ended = l.settle(ms(707), true, false);
         assert_eq!(l.lag(ms(707)), Duration::ZERO);
         assert_eq!(
             ended,

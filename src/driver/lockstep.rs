@@ -100,6 +100,10 @@ pub struct Lockstep {
     conditions: LinkConditions,
     rng: ChaCha8Rng,
     silenced: Vec<Vec<(SimTime, SimTime)>>,
+    /// The coordinator's own stall ([`Lockstep::stall_coordinator`]), and what arrived
+    /// for it meanwhile, unread.
+    stall: Option<(SimTime, SimTime)>,
+    unread: Vec<(usize, Vec<u8>)>,
     routing: Option<Routing>,
     /// Datagrams from the swarm the router had no address for.
     unsent: u64,
@@ -128,6 +132,8 @@ impl Lockstep {
             rng: ChaCha8Rng::seed_from_u64(conditions.seed),
             conditions,
             silenced: vec![Vec::new(); n],
+            stall: None,
+            unread: Vec::new(),
             routing: None,
             unsent: 0,
             parallel: n >= PARALLEL_FROM,
@@ -240,6 +246,37 @@ impl Lockstep {
         }
     }
 
+    /// Stalls the coordinator over `[from, until)`, as a host that stops scheduling it
+    /// would: the vehicles fly on and send, nothing is read or sent by the swarm. At
+    /// `until` it wakes as the UDP driver does: its timers first, told how far behind its
+    /// sockets it is, then what waited for it.
+    pub fn stall_coordinator(&mut self, from: SimTime, until: SimTime) {
+        self.stall = Some((from, until));
+    }
+
+    fn coordinator_stalled(&self) -> bool {
+        self.stall
+            .is_some_and(|(from, until)| self.now >= from && self.now < until)
+    }
+
+    /// The first step after a stall: timers with the lag, then the unread datagrams.
+    fn wake_from_stall(&mut self, now: SimTime, observer: &mut impl Observer) {
+        let Some((from, until)) = self.stall else {
+            return;
+        };
+        if now < until {
+            return;
+        }
+        self.swarm.set_listen_lag(now, now.saturating_since(from));
+        self.swarm.handle_timeout(now);
+        for (j, bytes) in std::mem::take(&mut self.unread) {
+            self.deliver_to_swarm(now, j, &bytes, observer);
+            self.recycle(false, j, bytes);
+        }
+        self.swarm.set_listen_lag(now, Duration::ZERO);
+        self.stall = None;
+    }
+
     /// Advances by one physics step.
     pub fn step(&mut self) {
         self.step_observed(&mut ());
@@ -283,6 +320,10 @@ impl Lockstep {
         }
         self.deliver(now, observer);
         self.lap(|t| &mut t.delivery);
+        if self.coordinator_stalled() {
+            return;
+        }
+        self.wake_from_stall(now, observer);
         if now >= self.swarm.poll_timeout() {
             self.swarm.handle_timeout(now);
         }
@@ -408,6 +449,9 @@ impl Lockstep {
         while let Some(d) = self.in_flight.pop_due(now) {
             if d.to_vehicle {
                 self.vehicles[d.index].handle_datagram(now, LinkId::Offboard, &d.bytes);
+            } else if self.coordinator_stalled() {
+                self.unread.push((d.index, d.bytes));
+                continue;
             } else {
                 self.deliver_to_swarm(now, d.index, &d.bytes, observer);
             }

@@ -18,7 +18,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 use tokio::time::Instant;
 
-use super::listening::Listening;
+use super::listening::{Listening, STALL};
 use super::{Inbound, Observer};
 use crate::link::router::Router;
 use crate::swarm::Swarm;
@@ -94,6 +94,15 @@ async fn receive_batch(socket_index: usize, socket: &UdpSocket) -> io::Result<Ba
     }
     batch.full = batch.datagrams.len() == BATCH;
     Ok(batch)
+}
+
+/// Whether a datagram waits on `socket`, asked of the kernel (tokio's own readiness may not
+/// know yet after a stall of the runtime).
+fn has_waiting(socket: &UdpSocket) -> bool {
+    let mut byte = [std::mem::MaybeUninit::<u8>::uninit(); 1];
+    // Non-blocking (tokio's sockets are): an empty socket answers WouldBlock; a longer
+    // datagram answers its truncated peek, which is enough.
+    socket2::SockRef::from(socket).peek(&mut byte).is_ok()
 }
 
 /// Runs `swarm` over `sockets` (bound as `router`'s plan says) until the swarm has
@@ -195,7 +204,8 @@ pub async fn run_swarm<O: Observer>(
         }
         // How far behind its sockets the loop is: silence is judged up to there.
         let t = now();
-        if let Some(ended) = listening.settle(t, rx.is_empty(), late) {
+        let sockets_waiting = late > STALL && sockets.iter().any(|s| has_waiting(s));
+        if let Some(ended) = listening.settle(t, rx.is_empty(), sockets_waiting) {
             tracing::warn!(
                 behind_ms = ended.max_lag.as_millis() as u64,
                 "the coordinator fell behind its sockets (its host stalled or was overloaded); \

@@ -194,6 +194,8 @@ pub enum Inbound {
     },
     /// LOCAL_POSITION_NED (m, m/s, the vehicle's own origin).
     LocalPosition {
+        /// When the vehicle took it: its boot clock (ms, `time_boot_ms`).
+        sampled_ms: u32,
         /// Position.
         pos_ned_m: Vector3<f64>,
         /// Velocity.
@@ -270,6 +272,7 @@ pub fn inbound(msg: &MavMessage) -> Option<Inbound> {
             let vel = Vector3::new(p.vx, p.vy, p.vz).map(f64::from);
             // Checked by the vehicle's telemetry gate, which names a bad field.
             Some(Inbound::LocalPosition {
+                sampled_ms: p.time_boot_ms,
                 pos_ned_m: pos,
                 vel_ned_mps: vel,
             })

@@ -73,6 +73,10 @@ pub use setup::{
 /// milliseconds, and a lag that comes and goes every loop would reschedule every link.
 pub const LISTEN_LAG_FLOOR: Duration = Duration::from_millis(20);
 
+/// The longest a control tick waits for the unread datagrams of the coordinator's own
+/// stall ([`Swarm::set_listen_lag`]).
+pub const MAX_TICK_DEFER: Duration = Duration::from_millis(100);
+
 /// Where the swarm is.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum SwarmPhase {
@@ -252,6 +256,8 @@ pub struct Swarm {
     timing: timing::TickTiming,
     /// How far behind its sockets the coordinator is ([`Swarm::set_listen_lag`]).
     listen_lag: Duration,
+    /// Since when a control tick has waited for a stall's unread datagrams.
+    tick_due_since: Option<SimTime>,
     /// Each vehicle's horizontal box in the saturation, kept between ticks.
     boxes: Vec<Vector2<f64>>,
     /// The divergence guard, if on.
@@ -359,6 +365,7 @@ impl Swarm {
             plan: None,
             timing: timing::TickTiming::new(setup_interval),
             listen_lag: Duration::ZERO,
+            tick_due_since: None,
             boxes: Vec::with_capacity(n),
             guard: setup_guard.map(DivergenceGuard::new),
             stop: None,
@@ -638,9 +645,26 @@ impl Swarm {
         }
     }
 
+    /// Whether a tick due now waits for the unread datagrams of a stall: while there is a
+    /// listen lag, for at most [`MAX_TICK_DEFER`]; an overload that lasts longer is flown
+    /// through (its old states then hold the swarm as one).
+    fn defer_tick(&mut self, now: SimTime) -> bool {
+        if self.listen_lag.is_zero() {
+            return false;
+        }
+        let since = *self.tick_due_since.get_or_insert(now);
+        now.saturating_since(since) < MAX_TICK_DEFER
+    }
+
     /// Runs the control tick and the links' timers due at `now`.
     pub fn handle_timeout(&mut self, now: SimTime) {
-        if now >= self.next_control {
+        if now >= self.next_control && self.defer_tick(now) {
+            // The coordinator's own stall: what its vehicles sent meanwhile is still
+            // unread. The tick waits for it, a millisecond at a time, rather than fly on
+            // states it knows to be old (and hold the swarm for them).
+            self.next_control = now + Duration::from_millis(1);
+        } else if now >= self.next_control {
+            self.tick_due_since = None;
             self.timing.tick(self.next_control, now);
             self.control(now);
             // A fixed schedule: lateness of one wake-up does not slow the rate down, and

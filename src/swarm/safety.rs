@@ -208,7 +208,9 @@ impl Swarm {
     }
 
     /// How old what is known of vehicle `i` is by the time a command sent now acts (s):
-    /// its state's age since it arrived, a control period, and the time from a command
+    /// its state's age since it arrived, how far behind its sockets the coordinator is
+    /// (what arrived may have waited that long unread), a control period, and the time
+    /// from a command
     /// sent to a state that shows it: the measured attitude response (which holds the
     /// uplink and the downlink), but never less than the link's round trip (TIMESYNC);
     /// a fit beyond [`MAX_RESPONSE_S`] is not trusted, and then the round trip plus
@@ -228,7 +230,7 @@ impl Swarm {
             .map(|r| r.response_s)
             .filter(|r| (0.0..=MAX_RESPONSE_S).contains(r))
             .map_or(round_trip + UNMEASURED_RESPONSE_S, |r| r.max(round_trip));
-        state + self.setup.control_interval.as_secs_f64() + response
+        state + self.listen_lag.as_secs_f64() + self.setup.control_interval.as_secs_f64() + response
     }
 
     /// Logs every pair that came within the separation (once per entry).

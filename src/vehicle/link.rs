@@ -448,12 +448,17 @@ impl VehicleLink {
                 }
             }
             Inbound::LocalPosition {
+                sampled_ms,
                 pos_ned_m,
                 vel_ned_mps,
             } => {
-                let verdict =
-                    self.gate
-                        .position_report(now, pos_ned_m, vel_ned_mps, self.cfg.state_timeout);
+                let verdict = self.gate.position_report(
+                    now,
+                    Some(sampled_ms),
+                    pos_ned_m,
+                    vel_ned_mps,
+                    self.cfg.state_timeout,
+                );
                 match verdict {
                     PositionVerdict::Refused(why) => self.refuse_report(why),
                     accepted => {

@@ -33,6 +33,9 @@ pub const MAX_ORIGIN_DISTANCE_M: f64 = 1.0e5;
 pub const JUMP_SLACK_M: f64 = 5.0;
 /// Acceleration allowed between two reports in the jump check (m/s²): 3 g.
 pub const JUMP_ACCEL_MPS2: f64 = 30.0;
+/// The longest gap between two reports measured on the vehicle's own clock (s); a longer
+/// one (or one that runs backwards: a reboot) is measured by their arrival.
+pub const MAX_SAMPLE_GAP_S: f64 = 60.0;
 
 /// What became of a position report.
 #[derive(Debug, Clone, PartialEq)]
@@ -67,6 +70,8 @@ pub enum OriginVerdict {
 #[derive(Debug, Clone, Copy)]
 struct Sample {
     t: SimTime,
+    /// When the vehicle took it, by its own boot clock (ms), if it said.
+    sampled_ms: Option<u32>,
     pos_anchor_ned_m: Vector3<f64>,
     vel_ned_mps: Vector3<f64>,
 }
@@ -122,11 +127,13 @@ impl TelemetryGate {
         OriginVerdict::Changed { shift_m }
     }
 
-    /// Checks a LOCAL_POSITION_NED received at `now`; a jump is taken once the new track
-    /// has been followed consistently for `confirm`.
+    /// Checks a LOCAL_POSITION_NED received at `now` (taken at `sampled_ms` of the
+    /// vehicle's boot clock, its `time_boot_ms`, when known); a jump is taken once the new
+    /// track has been followed consistently for `confirm`.
     pub fn position_report(
         &mut self,
         now: SimTime,
+        sampled_ms: Option<u32>,
         pos_local_ned_m: Vector3<f64>,
         vel_ned_mps: Vector3<f64>,
         confirm: Duration,
@@ -136,6 +143,7 @@ impl TelemetryGate {
         }
         let sample = Sample {
             t: now,
+            sampled_ms,
             pos_anchor_ned_m: pos_local_ned_m + self.origin_in_anchor_ned_m,
             vel_ned_mps,
         };
@@ -167,14 +175,28 @@ impl TelemetryGate {
     }
 }
 
+/// The time between two samples (s): by the vehicle's own clock when both carry it and
+/// it ran forward by less than [`MAX_SAMPLE_GAP_S`] (not a reboot or a wrap), else by
+/// their arrival. Arrival alone is wrong for a burst: reports that waited unread (a
+/// stall of the coordinator, a radio's buffer) arrive together but were taken apart.
+fn dt_s(prev: &Sample, next: &Sample) -> f64 {
+    if let (Some(a), Some(b)) = (prev.sampled_ms, next.sampled_ms) {
+        let dt = f64::from(b.wrapping_sub(a)) * 1e-3;
+        if dt <= MAX_SAMPLE_GAP_S {
+            return dt;
+        }
+    }
+    next.t.saturating_since(prev.t).as_secs_f64()
+}
+
 /// How far `next` is from where `prev`'s velocity put it (m).
 fn deviation_m(prev: &Sample, next: &Sample) -> f64 {
-    let dt = next.t.saturating_since(prev.t).as_secs_f64();
+    let dt = dt_s(prev, next);
     (next.pos_anchor_ned_m - (prev.pos_anchor_ned_m + prev.vel_ned_mps * dt)).norm()
 }
 
 fn allowed_m(prev: &Sample, next: &Sample) -> f64 {
-    let dt = next.t.saturating_since(prev.t).as_secs_f64();
+    let dt = dt_s(prev, next);
     JUMP_SLACK_M + 0.5 * JUMP_ACCEL_MPS2 * dt * dt
 }
 
@@ -225,24 +247,28 @@ mod tests {
         let mut g = TelemetryGate::default();
         let v = Vector3::zeros();
         let nan = Vector3::new(0.0, f64::NAN, 0.0);
-        let PositionVerdict::Refused(why) = g.position_report(ms(0), nan, v, CONFIRM) else {
+        let PositionVerdict::Refused(why) = g.position_report(ms(0), None, nan, v, CONFIRM) else {
             panic!("NaN taken")
         };
         assert_eq!(why, "LOCAL_POSITION_NED.y is NaN");
-        let PositionVerdict::Refused(why) =
-            g.position_report(ms(0), v, Vector3::new(0.0, 0.0, f64::INFINITY), CONFIRM)
-        else {
+        let PositionVerdict::Refused(why) = g.position_report(
+            ms(0),
+            None,
+            v,
+            Vector3::new(0.0, 0.0, f64::INFINITY),
+            CONFIRM,
+        ) else {
             panic!("inf taken")
         };
         assert_eq!(why, "LOCAL_POSITION_NED.vz is inf");
         let fast = Vector3::new(80.0, 80.0, 0.0); // 113.1 m/s
         assert!(matches!(
-            g.position_report(ms(0), v, fast, CONFIRM),
+            g.position_report(ms(0), None, v, fast, CONFIRM),
             PositionVerdict::Refused(w) if w.contains("113.1 m/s")
         ));
         let far = Vector3::new(2.0e5, 0.0, 0.0);
         assert!(matches!(
-            g.position_report(ms(0), far, v, CONFIRM),
+            g.position_report(ms(0), None, far, v, CONFIRM),
             PositionVerdict::Refused(w) if w.contains("200000 m")
         ));
     }
@@ -254,12 +280,12 @@ mod tests {
         for k in 0..50 {
             let p = v * (k as f64 * 0.02);
             assert_eq!(
-                g.position_report(ms(20 * k), p, v, CONFIRM),
+                g.position_report(ms(20 * k), None, p, v, CONFIRM),
                 PositionVerdict::Accepted
             );
         }
         // At 1.0 s the vehicle is at 20 m; a report at 30 m is 10 m off (allowed 5.006 m).
-        let verdict = g.position_report(ms(1000), Vector3::new(30.0, 0.0, 0.0), v, CONFIRM);
+        let verdict = g.position_report(ms(1000), None, Vector3::new(30.0, 0.0, 0.0), v, CONFIRM);
         assert_eq!(
             verdict,
             PositionVerdict::Refused(
@@ -269,27 +295,66 @@ mod tests {
     }
 
     #[test]
+    fn a_burst_of_reports_that_waited_unread_is_measured_by_the_vehicles_clock() {
+        // At 20 m/s, a report every 4 ms up to 10.000 s; then the coordinator reads nothing
+        // for 0.8 s and takes the 200 reports of that time together, at 10.8 s.
+        let v = Vector3::new(20.0, 0.0, 0.0);
+        let at = |k: u32| v * (f64::from(k) * 0.004);
+        let mut by_clock = TelemetryGate::default();
+        let mut by_arrival = TelemetryGate::default();
+        for g in [&mut by_clock, &mut by_arrival] {
+            assert_eq!(
+                g.position_report(ms(10_000), Some(10_000), at(0), v, CONFIRM),
+                PositionVerdict::Accepted
+            );
+        }
+        // By the vehicle's clock the next report is 4 ms later, where its velocity put it;
+        // by arrival it is 0.8 s later, 20 · 0.8 − 0.08 = 15.92 m short of that (allowed
+        // 5 + ½ · 30 · 0.8² = 14.6 m).
+        for k in 1..=200 {
+            assert_eq!(
+                by_clock.position_report(ms(10_800), Some(10_000 + 4 * k), at(k), v, CONFIRM),
+                PositionVerdict::Accepted,
+                "report {k}"
+            );
+        }
+        assert_eq!(
+            by_arrival.position_report(ms(10_800), None, at(1), v, CONFIRM),
+            PositionVerdict::Refused(
+                "LOCAL_POSITION_NED jumped 15.9 m from where its velocity put it".to_owned()
+            )
+        );
+        // A clock that ran backwards (a reboot) is not believed: arrival again.
+        let mut rebooted = TelemetryGate::default();
+        rebooted.position_report(ms(10_000), Some(10_000), at(0), v, CONFIRM);
+        assert!(matches!(
+            rebooted.position_report(ms(10_800), Some(5), at(1), v, CONFIRM),
+            PositionVerdict::Refused(_)
+        ));
+    }
+
+    #[test]
     fn a_new_track_is_taken_after_the_confirm_time_and_not_before() {
         let mut g = TelemetryGate::default();
         let v = Vector3::zeros();
         assert_eq!(
-            g.position_report(ms(0), v, v, CONFIRM),
+            g.position_report(ms(0), None, v, v, CONFIRM),
             PositionVerdict::Accepted
         );
         let moved = Vector3::new(0.0, 50.0, 0.0);
         // Consistent on the new track from 20 ms: refused until 320 ms, taken at 320 ms.
         for t in (20..320).step_by(20) {
             assert!(matches!(
-                g.position_report(ms(t), moved, v, CONFIRM),
+                g.position_report(ms(t), None, moved, v, CONFIRM),
                 PositionVerdict::Refused(_)
             ));
         }
         assert_eq!(
-            g.position_report(ms(320), moved, v, CONFIRM),
+            g.position_report(ms(320), None, moved, v, CONFIRM),
             PositionVerdict::Reset { jump_m: 50.0 }
         );
         assert_eq!(
-            g.position_report(ms(340), moved, v, CONFIRM),
+            g.position_report(ms(340), None, moved, v, CONFIRM),
             PositionVerdict::Accepted
         );
     }
@@ -301,7 +366,7 @@ mod tests {
         assert_eq!(g.origin_report(origin(0.0)), OriginVerdict::First);
         assert_eq!(g.origin_report(origin(0.0)), OriginVerdict::Same);
         assert_eq!(
-            g.position_report(ms(0), Vector3::new(100.0, 0.0, -50.0), v, CONFIRM),
+            g.position_report(ms(0), None, Vector3::new(100.0, 0.0, -50.0), v, CONFIRM),
             PositionVerdict::Accepted
         );
         // The estimator moves its origin 100 m north and its local x by −100 m.
@@ -310,7 +375,7 @@ mod tests {
         };
         assert!((shift_m - 100.0).abs() < 0.01, "shift {shift_m}");
         assert_eq!(
-            g.position_report(ms(20), Vector3::new(0.0, 0.0, -50.0), v, CONFIRM),
+            g.position_report(ms(20), None, Vector3::new(0.0, 0.0, -50.0), v, CONFIRM),
             PositionVerdict::Accepted
         );
         // Then the origin moves another 100 m north but the positions do not follow.
@@ -318,7 +383,7 @@ mod tests {
             g.origin_report(origin(200.0)),
             OriginVerdict::Changed { .. }
         ));
-        let verdict = g.position_report(ms(40), Vector3::new(0.0, 0.0, -50.0), v, CONFIRM);
+        let verdict = g.position_report(ms(40), None, Vector3::new(0.0, 0.0, -50.0), v, CONFIRM);
         assert!(
             matches!(&verdict, PositionVerdict::Refused(w) if w.contains("jumped 100.0 m")),
             "{verdict:?}"
