@@ -6,23 +6,21 @@
 //! a PD altitude loop, and attitude + thrust setpoints for each vehicle.
 //!
 //! ## Layout
-//! - [`consensus`]: the paper's maths, pure: ring digraph, stability bound on `k`, Yu's
-//!   bound, gain design, final velocity, achievable-velocity planner, per-agent law.
-//! - [`control`]: pure: altitude loop, actuator envelope and saturation, acceleration →
-//!   attitude quaternion and normalised thrust, frame conversions.
-//! - [`safety`]: pure: the pairwise barrier rows, the neighbour sweep, the fence and the
-//!   weighted QP that keeps vehicles apart and inside the fence.
-//! - [`frame`]: the common frame built from each vehicle's geodetic origin (pure).
-//! - [`link`]: the MAVLink edge: framing and message ↔ domain conversions.
-//! - [`vehicle`]: sans-IO machine for one vehicle: PX4 offboard handshake, link health.
-//! - [`swarm`]: sans-IO swarm machine: the laws at the control rate over every link.
-//! - [`driver`]: lockstep (virtual time, in-memory) driver of the swarm and the emulator.
-//! - [`report`]: what the `analyze` and `plan` commands compute and print.
-//! - [`sitl_cmd`]: `ringswarm sitl`, the emulator on real UDP sockets (I/O edge).
+//! The sans-IO core lives in the `ringswarm-core` crate (`core/`) and is re-exported here:
+//! [`consensus`], [`control`], [`safety`], [`frame`], [`link`] (MAVLink ↔ domain, the
+//! router), [`vehicle`] (one vehicle link's machine), [`swarm`] (the swarm machine).
+//! This crate is the application around it:
+//! - [`driver`]: what moves bytes and time: the UDP driver (tokio), the lockstep driver
+//!   with the emulator (virtual time), the mirror, signals, how far behind its sockets
+//!   the coordinator is.
 //! - [`config`]: the coordinator's TOML configuration and its validation.
+//! - [`record`]: the run directory (CSV, `.tlog`, `events.csv`, `summary.json`) and the
+//!   bounded in-memory trace for the plots; [`plot`] draws them.
 //! - [`view`]: the live view and the replay in a browser (state, web server).
-//! - [`cli`]: the command line (clap).
-//! - [`error`]: one error enum per layer.
+//! - [`report`]: what the `analyze` and `plan` commands compute and print.
+//! - [`security`]: the signing key file and the signing clock kept across restarts.
+//! - [`cmd`]: one file per subcommand (the I/O edges); [`cli`]: the command line (clap).
+//! - [`error`]: one error enum per layer, and the flight outcomes' exit codes.
 //!
 //! ```
 //! use ringswarm::consensus::{RingDigraph, CouplingGains, analyze};
@@ -35,28 +33,17 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub use ringswarm_core::{consensus, control, frame, link, safety, swarm, vehicle};
+
 pub mod cli;
+pub mod cmd;
 pub mod config;
-pub mod consensus;
-pub mod control;
-#[cfg(feature = "emulator")]
-pub mod demo_cmd;
 pub mod driver;
 pub mod error;
-pub mod fly_cmd;
-pub mod frame;
 #[cfg(feature = "emulator")]
 pub mod fuzzing;
-pub mod link;
 pub mod plot;
 pub mod record;
 pub mod report;
-pub mod safety;
 pub mod security;
-pub mod sign_setup_cmd;
-#[cfg(feature = "emulator")]
-pub mod sitl_cmd;
-pub mod swarm;
-pub mod vehicle;
 pub mod view;
-pub mod view_cmd;

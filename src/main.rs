@@ -13,10 +13,9 @@
 use std::process::ExitCode;
 
 use clap::Parser;
-use ringswarm::cli::{AnalyzeArgs, Cli, Command, PlanArgs};
-use ringswarm::consensus::PlanRequest;
+use ringswarm::cli::{Cli, Command};
+use ringswarm::cmd;
 use ringswarm::error::{FenceStopped, GaveUp, GuardStopped, SeparationStopped};
-use ringswarm::report::{AnalyzeRequest, emit, run_analyze, run_plan_everyone};
 use tracing_subscriber::EnvFilter;
 use tracing_subscriber::filter::LevelFilter;
 
@@ -31,16 +30,16 @@ fn main() -> ExitCode {
         .init();
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Analyze(args) => analyze(&args),
-        Command::Plan(args) => plan(&args),
+        Command::Analyze(args) => cmd::analyze::run(&args),
+        Command::Plan(args) => cmd::plan::run(&args),
         #[cfg(feature = "emulator")]
-        Command::Sitl(args) => ringswarm::sitl_cmd::run(&args).map(|()| true),
-        Command::Fly(args) => ringswarm::fly_cmd::run(&args).map(|()| true),
+        Command::Sitl(args) => cmd::sitl::run(&args).map(|()| true),
+        Command::Fly(args) => cmd::fly::run(&args).map(|()| true),
         #[cfg(feature = "emulator")]
-        Command::Demo(args) => ringswarm::demo_cmd::run(&args).map(|()| true),
-        Command::Keygen(args) => keygen(&args.file).map(|()| true),
-        Command::SignSetup(args) => ringswarm::sign_setup_cmd::run(&args).map(|()| true),
-        Command::View(args) => ringswarm::view_cmd::run(&args).map(|()| true),
+        Command::Demo(args) => cmd::demo::run(&args).map(|()| true),
+        Command::Keygen(args) => cmd::keygen::run(&args.file).map(|()| true),
+        Command::SignSetup(args) => cmd::sign_setup::run(&args).map(|()| true),
+        Command::View(args) => cmd::view::run(&args).map(|()| true),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,
@@ -60,54 +59,4 @@ fn main() -> ExitCode {
             }
         }
     }
-}
-
-/// Writes a new signing key and says where.
-fn keygen(path: &std::path::Path) -> anyhow::Result<()> {
-    let key = ringswarm_wire::signing::SigningKey::generate().map_err(anyhow::Error::msg)?;
-    key.write_new(path).map_err(anyhow::Error::msg)?;
-    eprintln!(
-        "signing key written to {} (mode 0600); keep it secret",
-        path.display()
-    );
-    Ok(())
-}
-
-/// Prints the analysis; `Ok(stable)`.
-fn analyze(args: &AnalyzeArgs) -> anyhow::Result<bool> {
-    let output = run_analyze(&AnalyzeRequest {
-        macro_vertices: args.macro_vertices,
-        k: args.k,
-        gains: args.alpha.zip(args.beta),
-        design_k: args.design_k,
-        gain_margin: args.gain_margin,
-        airframe: args.attitude_bandwidth.map(|a| (a, args.control_rate)),
-        list_eigenvalues: args.eigenvalues,
-    })?;
-    if args.json {
-        emit(&serde_json::to_string_pretty(&output)?)?;
-    } else {
-        emit(&output.to_string())?;
-    }
-    Ok(output.stable)
-}
-
-/// Prints the plan; `Ok(feasible)`.
-fn plan(args: &PlanArgs) -> anyhow::Result<bool> {
-    let output = run_plan_everyone(
-        &PlanRequest {
-            velocities_mps: args.initial_velocities.0.clone(),
-            target_mps: args.target,
-            k_margin: args.margin,
-            k_max: args.k_max,
-            max_speed_mps: args.max_speed,
-        },
-        args.k,
-    )?;
-    if args.json {
-        emit(&serde_json::to_string_pretty(&output)?)?;
-    } else {
-        emit(&output.to_string())?;
-    }
-    Ok(output.feasible)
 }

@@ -22,7 +22,7 @@ pub const MAX_DURATION_S: f64 = 1.0e6;
 /// beyond any formation flown over one radio link.
 pub const MAX_DISTANCE_M: f64 = 1.0e4;
 /// Largest speed (m/s) a start velocity or target velocity may have.
-pub const MAX_SPEED_MPS: f64 = 100.0;
+pub use crate::swarm::MAX_SPEED_MPS;
 /// Largest gain any coupling (`k`, `alpha`, `beta`, `k_pz`, `k_vz`) may have.
 pub const MAX_GAIN: f64 = 1.0e4;
 

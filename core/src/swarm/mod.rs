@@ -69,6 +69,10 @@ pub use setup::{
     SAFETY_GAMMA, SafetySetup, SetpointKind, SwarmSetup, TargetVelocity,
 };
 
+/// Largest speed (m/s) a start velocity or target velocity may have, and the speed
+/// limit the planner assumes for a vehicle that states none.
+pub const MAX_SPEED_MPS: f64 = 100.0;
+
 /// A listen lag shorter than this is none: the link and state timeouts are hundreds of
 /// milliseconds, and a lag that comes and goes every loop would reschedule every link.
 pub const LISTEN_LAG_FLOOR: Duration = Duration::from_millis(20);
@@ -623,7 +627,7 @@ impl Swarm {
     }
 
     /// Tells every link that the coordinator had read everything received only up to
-    /// `now − lag` (see [`crate::driver::listening`]): a stall of its own is not taken for
+    /// `now − lag` (the UDP driver measures it: `ringswarm::driver::listening`): a stall of its own is not taken for
     /// its vehicles going silent. Lags under [`LISTEN_LAG_FLOOR`] count as none.
     pub fn set_listen_lag(&mut self, now: SimTime, lag: Duration) {
         let lag = if lag < LISTEN_LAG_FLOOR {

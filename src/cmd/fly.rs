@@ -126,7 +126,7 @@ pub(crate) async fn fly(
                 states,
             };
             let server = WebServer::start(addr, content).map_err(anyhow::Error::msg)?;
-            crate::view_cmd::announce(server.addr());
+            crate::cmd::view::announce(server.addr());
             (Some(feed), Some(server))
         }
         None => (None, None),

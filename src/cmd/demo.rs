@@ -35,47 +35,47 @@ pub const SCENARIOS: &[Scenario] = &[
     Scenario {
         name: "paper-sim1",
         about: "the paper's first simulation: six ideal quadrotors, k = 5, hexagon at 50 m",
-        toml: include_str!("../config/paper-sim1.toml"),
+        toml: include_str!("../../config/paper-sim1.toml"),
     },
     Scenario {
         name: "paper-sim2",
         about: "the paper's second simulation: the planner re-targets one agent in flight for v_f = (20, 30)",
-        toml: include_str!("../config/paper-sim2.toml"),
+        toml: include_str!("../../config/paper-sim2.toml"),
     },
     Scenario {
         name: "hexagon-x500",
         about: "the first simulation's start and gains flown by x500 vehicles, 35° tilt, 0.3x speed",
-        toml: include_str!("../config/hexagon-x500.toml"),
+        toml: include_str!("../../config/hexagon-x500.toml"),
     },
     Scenario {
         name: "hexagon-x500-wrong-model",
         about: "hexagon-x500 with hover throttles 10 % off and drag 0.05-0.2 1/s: estimated and corrected",
-        toml: include_str!("../config/hexagon-x500-wrong-model.toml"),
+        toml: include_str!("../../config/hexagon-x500-wrong-model.toml"),
     },
     Scenario {
         name: "hexagon-x500-noisy",
         about: "hexagon-x500 with telemetry noise, GPS drift, 40 ms estimate delay and battery sag",
-        toml: include_str!("../config/hexagon-x500-noisy.toml"),
+        toml: include_str!("../../config/hexagon-x500-noisy.toml"),
     },
     Scenario {
         name: "ground-start",
         about: "six x500 on the ground: arm, climb, hexagon, cruise at a planned (3, 2) m/s",
-        toml: include_str!("../config/ground-start.toml"),
+        toml: include_str!("../../config/ground-start.toml"),
     },
     Scenario {
         name: "link-loss",
         about: "paper-sim1 with quadrotor 3 silent from 20 s to 23 s: failsafe, hold, resume",
-        toml: include_str!("../config/link-loss.toml"),
+        toml: include_str!("../../config/link-loss.toml"),
     },
     Scenario {
         name: "lossy",
         about: "paper-sim1 with 20 % loss and 20 ± 10 ms latency on every link, half speed",
-        toml: include_str!("../config/lossy.toml"),
+        toml: include_str!("../../config/lossy.toml"),
     },
     Scenario {
         name: "big-ring",
         about: "64 ideal quadrotors in a circle, velocities mismatched, k = 1",
-        toml: include_str!("../config/big-ring.toml"),
+        toml: include_str!("../../config/big-ring.toml"),
     },
 ];
 
@@ -293,9 +293,9 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
                 status,
             });
         }
-        let shards = spawn_shards(fleet, crate::sitl_cmd::cores(), clock, &stop_rx);
+        let shards = spawn_shards(fleet, crate::cmd::sitl::cores(), clock, &stop_rx);
         let summary =
-            crate::fly_cmd::fly(Swarm::new(setup), &transport, &out, None, &args.live).await;
+            crate::cmd::fly::fly(Swarm::new(setup), &transport, &out, None, &args.live).await;
         stop_tx.send_replace(true);
         shards.join().await.context("emulated vehicles")?;
         summary

@@ -5,7 +5,7 @@ use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
 use super::model::FlownModel;
-use super::{PlanDecision, Retargeted, Swarm, SwarmPhase, TargetVelocity};
+use super::{MAX_SPEED_MPS, PlanDecision, Retargeted, Swarm, SwarmPhase, TargetVelocity};
 use crate::consensus::{
     LeastChange, PlanOutcome, PlanRequest, RingDigraph, RingModes, analyze, fastest_mode_per_s,
     k_lower_bound, least_change_velocities,
@@ -109,7 +109,7 @@ impl Swarm {
                     .map_err(|e| e.to_string())?;
                 let w: Vec<f64> = (0..velocities.len()).map(|i| ring.w(i)).collect();
                 let limits: Vec<f64> = if limits.is_empty() {
-                    vec![crate::config::MAX_SPEED_MPS; velocities.len()]
+                    vec![MAX_SPEED_MPS; velocities.len()]
                 } else {
                     limits
                 };
@@ -161,7 +161,7 @@ impl Swarm {
         }
         limits
             .into_iter()
-            .map(|l| l.unwrap_or(crate::config::MAX_SPEED_MPS))
+            .map(|l| l.unwrap_or(MAX_SPEED_MPS))
             .collect()
     }
 

@@ -182,7 +182,7 @@ impl VehicleLink {
     }
 
     /// Tells the link that the coordinator has read everything received only up to
-    /// `now − lag` ([`crate::driver::listening`]): the vehicle's silence and its state's
+    /// `now − lag` (as the driver measured it): the vehicle's silence and its state's
     /// age are judged at that instant, not at `now`, when the link decides that the
     /// vehicle is lost or must be handed to its own Hold.
     pub fn set_listen_lag(&mut self, lag: Duration) {

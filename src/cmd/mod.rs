@@ -1,0 +1,13 @@
+//! The subcommands, one file each: the I/O edges that read files and flags, run a driver
+//! and print or write what came of it.
+
+pub mod analyze;
+#[cfg(feature = "emulator")]
+pub mod demo;
+pub mod fly;
+pub mod keygen;
+pub mod plan;
+pub mod sign_setup;
+#[cfg(feature = "emulator")]
+pub mod sitl;
+pub mod view;
