@@ -435,9 +435,7 @@ pub fn run_plan_everyone(
     let n = request.velocities_mps.len();
     let ring = RingDigraph::for_agents(n, k)?;
     let w: Vec<f64> = (0..n).map(|i| ring.w(i)).collect();
-    let limit = request
-        .max_speed_mps
-        .unwrap_or(crate::config::MAX_SPEED_MPS);
+    let limit = request.max_speed_mps.unwrap_or(crate::swarm::MAX_SPEED_MPS);
     let answer = least_change_velocities(
         &request.velocities_mps,
         &w,

@@ -37,7 +37,7 @@ use crate::key_writer::{KeyStore, KeyWriter};
 use crate::keystore::StoredKey;
 use crate::link_faults::LinkFaults;
 use crate::time::SimTime;
-use crate::udp::{Partner, SimClock};
+use crate::udp::{LinkSocket, Partner, SimClock};
 
 /// What a test (or an operator) can do to a running vehicle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,19 +46,6 @@ pub enum VehicleControl {
     Kill,
     /// Power on again: a fresh boot from the configured start state.
     Restart,
-}
-
-/// One link of a vehicle: its socket, where it sends until a peer talks to it, and its
-/// faults.
-pub struct LinkSocket {
-    /// Which of the vehicle's MAVLink instances this is.
-    pub id: LinkId,
-    /// The socket, already bound.
-    pub socket: UdpSocket,
-    /// Where the link sends until a peer talks to it.
-    pub default_peer: SocketAddr,
-    /// Faults on this link, both directions.
-    pub faults: LinkFaults,
 }
 
 /// One vehicle of a shard.

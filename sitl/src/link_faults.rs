@@ -19,6 +19,25 @@ pub struct LinkFaults {
     pub duplicate: f64,
 }
 
+/// Link conditions between the coordinator and every vehicle (both directions): the
+/// emulator's fault model, and the seed of its draws.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkConditions {
+    /// Loss, latency, jitter and duplication.
+    pub faults: LinkFaults,
+    /// Seed of the draws.
+    pub seed: u64,
+}
+
+impl Default for LinkConditions {
+    fn default() -> Self {
+        Self {
+            faults: LinkFaults::default(),
+            seed: 1,
+        }
+    }
+}
+
 /// The longest latency or jitter a link takes (ms).
 pub const MAX_DELAY_MS: f64 = 10_000.0;
 

@@ -1,5 +1,5 @@
 //! Where emulated vehicles sit on UDP: PX4 SITL's port scheme, a MAVLink network, whom
-//! a link answers ([`Partner`]), and the simulated clock. [`crate::fleet`] runs them.
+//! a link answers ([`Partner`]), and the simulated clock. `crate::fleet` runs them.
 //!
 //! PX4's layout: vehicle `i` (0-based, system id `i+1`) binds its offboard link on
 //! `14580+i` and sends to `14540+i`, and binds its GCS link on `18570+i` and sends to
@@ -13,11 +13,23 @@ use std::net::{IpAddr, SocketAddr};
 use tokio::net::UdpSocket;
 use tokio::time::Instant;
 
-pub use crate::fleet::{FleetVehicle, LinkSocket, Shards, VehicleControl, spawn_shards};
 pub use crate::link_faults::LinkFaults;
 
 use crate::autopilot::LinkId;
 use crate::time::SimTime;
+
+/// One link of a vehicle: its socket, where it sends until a peer talks to it, and its
+/// faults.
+pub struct LinkSocket {
+    /// Which of the vehicle's MAVLink instances this is.
+    pub id: LinkId,
+    /// The socket, already bound.
+    pub socket: UdpSocket,
+    /// Where the link sends until a peer talks to it.
+    pub default_peer: SocketAddr,
+    /// Faults on this link, both directions.
+    pub faults: LinkFaults,
+}
 
 /// The four addresses of one vehicle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

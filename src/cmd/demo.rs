@@ -237,7 +237,8 @@ impl Observer for DemoObserver {
 /// `--realtime`: the emulated vehicles on PX4's SITL ports in this process, the
 /// coordinator flying them over real UDP sockets (like `sitl` + `fly` in two terminals).
 fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> {
-    use ringswarm_sitl::udp::{FleetVehicle, LinkFaults, SimClock, spawn_shards};
+    use ringswarm_sitl::fleet::{FleetVehicle, spawn_shards};
+    use ringswarm_sitl::udp::{LinkFaults, SimClock};
     use tokio::sync::watch;
 
     let setup = config

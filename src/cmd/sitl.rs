@@ -11,12 +11,10 @@ use nalgebra::Vector3;
 use ringswarm_sitl::autopilot::LinkId;
 use ringswarm_sitl::autopilot::{Vehicle, VehicleConfig, VehicleStatus};
 use ringswarm_sitl::config_file::SitlConfig;
+use ringswarm_sitl::fleet::{FleetVehicle, Shards, VehicleControl, spawn_shards};
 use ringswarm_sitl::keystore::{self, StoredKey};
 use ringswarm_sitl::profile::Profile;
-use ringswarm_sitl::udp::{
-    FleetVehicle, LinkFaults, LinkSocket, Placement, Shards, SimClock, VehicleControl, px4_ports,
-    spawn_shards,
-};
+use ringswarm_sitl::udp::{LinkFaults, LinkSocket, Placement, SimClock, px4_ports};
 use ringswarm_sitl::world::World;
 use ringswarm_wire::signing::{SigningKey, timestamp_now};
 use tokio::io::AsyncBufReadExt;

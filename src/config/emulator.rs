@@ -72,7 +72,7 @@ impl Config {
             return Err(problems.join("\n"));
         }
         Ok(LockstepFaults {
-            conditions: crate::driver::lockstep::LinkConditions {
+            conditions: ringswarm_sitl::link_faults::LinkConditions {
                 faults,
                 seed: e.seed,
             },

@@ -544,7 +544,7 @@ pub struct SilenceSection {
 #[derive(Debug, Clone, PartialEq)]
 pub struct LockstepFaults {
     /// Latency, jitter, loss and seed on every link.
-    pub conditions: crate::driver::lockstep::LinkConditions,
+    pub conditions: ringswarm_sitl::link_faults::LinkConditions,
     /// `(vehicle index, from, until)`.
     pub silences: Vec<(
         usize,

@@ -14,7 +14,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use ringswarm_sitl::autopilot::{LinkId, PHYSICS_STEP, Vehicle};
 use ringswarm_sitl::delay_line::DelayLine;
-use ringswarm_sitl::link_faults::LinkFaults;
+pub use ringswarm_sitl::link_faults::LinkConditions;
 use ringswarm_wire::time::SimTime;
 
 use std::collections::HashMap;
@@ -24,25 +24,6 @@ use std::ops::Range;
 use super::{Inbound, Observer};
 use crate::link::router::{Router, TransportPlan};
 use crate::swarm::Swarm;
-
-/// Link conditions between the coordinator and every vehicle (both directions): the
-/// emulator's fault model, and the seed of its draws.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LinkConditions {
-    /// Loss, latency, jitter and duplication.
-    pub faults: LinkFaults,
-    /// Seed of the draws.
-    pub seed: u64,
-}
-
-impl Default for LinkConditions {
-    fn default() -> Self {
-        Self {
-            faults: LinkFaults::default(),
-            seed: 1,
-        }
-    }
-}
 
 /// Datagrams in flight at once, both ways, over all links: a full line drops (and
 /// counts) what comes next rather than growing without limit.

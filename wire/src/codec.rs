@@ -12,7 +12,7 @@ use mavlink::dialects::common::MavMessage;
 use mavlink::error::ParserError;
 use mavlink::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message};
 
-use crate::signing::{Signing, SigningKey, Trailer};
+use crate::signing::{FrameStamp, Signing, SigningKey, Trailer};
 
 /// MAVLink 1 start byte.
 const STX_V1: u8 = 0xFE;
@@ -55,6 +55,24 @@ pub struct Frame {
     pub version: MavlinkVersion,
     /// The signature trailer of a signed MAVLink 2 frame.
     pub signature: Option<Trailer>,
+}
+
+impl Frame {
+    /// The sender's system id. A decoded frame's always fits in a byte (it is one on the
+    /// wire); a frame built by hand with a larger one reads as 0, no system.
+    pub fn system_id(&self) -> u8 {
+        u8::try_from(self.header.system_id).unwrap_or(0)
+    }
+
+    /// What signing reads of this frame ([`Signing::accept`]).
+    pub fn stamp(&self) -> FrameStamp {
+        FrameStamp {
+            msgid: mavlink::Message::message_id(&self.msg),
+            system_id: self.system_id(),
+            component_id: self.header.component_id,
+            signature: self.signature,
+        }
+    }
 }
 
 /// Why a frame could not be decoded.

@@ -12,7 +12,7 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
 use crate::control::AttitudeThrust;
 use crate::frame::Geodetic;
-use crate::vehicle::{FenceItem, FenceItemKind};
+use crate::safety::{FenceItem, FenceItemKind};
 
 /// SET_ATTITUDE_TARGET with attitude and thrust, body rates ignored (type_mask 7).
 pub fn set_attitude_target(

@@ -113,7 +113,7 @@ impl Provision {
             .into_iter()
             .flatten()
         {
-            if frame.header.system_id != u32::from(self.system_id) {
+            if frame.system_id() != self.system_id {
                 continue;
             }
             if frame.signature.is_some_and(|t| t.authentic) {

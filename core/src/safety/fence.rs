@@ -196,6 +196,32 @@ pub fn polygon_self_intersects(vertices_m: &[Vector2<f64>]) -> bool {
     false
 }
 
+/// What one fence item says.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FenceItemKind {
+    /// One vertex of an inclusion polygon of `vertex_count` vertices.
+    PolygonVertex {
+        /// Vertices of its polygon.
+        vertex_count: u16,
+    },
+    /// The centre of an inclusion circle.
+    Circle {
+        /// Radius (m).
+        radius_m: f64,
+    },
+}
+
+/// One fence item: a point and what it is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FenceItem {
+    /// Vertex or circle.
+    pub kind: FenceItemKind,
+    /// Latitude (deg).
+    pub lat_deg: f64,
+    /// Longitude (deg).
+    pub lon_deg: f64,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

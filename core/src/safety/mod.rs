@@ -37,7 +37,7 @@ use clarabel::solver::{
 use nalgebra::{Vector2, Vector3};
 
 pub use barrier::{PairRow, Separation, Side, pair_row};
-pub use fence::{Fence, FenceShape, fence_row, stop_point_m};
+pub use fence::{Fence, FenceItem, FenceItemKind, FenceShape, fence_row, stop_point_m};
 pub use neighbours::Sweep;
 
 /// How far ahead a pair is looked at (s): pairs that cannot meet within this time at

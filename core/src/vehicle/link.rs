@@ -361,7 +361,7 @@ impl VehicleLink {
                 }
                 continue;
             }
-            let system_id = frame.header.system_id as u8;
+            let system_id = frame.system_id();
             if system_id != self.cfg.system_id {
                 self.ignored_frames += 1;
                 let (word, bit) = (usize::from(system_id / 64), 1u64 << (system_id % 64));

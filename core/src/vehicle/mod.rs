@@ -49,9 +49,8 @@ mod fence_upload;
 mod link;
 pub mod telemetry;
 
-pub use fence_upload::{
-    FenceItem, FenceItemKind, FencePlan, FenceUpload, UploadAnswer, UploadSend, UploadState,
-};
+pub use crate::safety::{FenceItem, FenceItemKind};
+pub use fence_upload::{FencePlan, FenceUpload, UploadAnswer, UploadSend, UploadState};
 pub use link::VehicleLink;
 
 use std::fmt;

@@ -36,7 +36,7 @@ impl Vehicle {
                         continue;
                     }
                     vouched |= self.signing.is_none() || frame.signature.is_some();
-                    let sender = (frame.header.system_id as u8, frame.header.component_id);
+                    let sender = (frame.system_id(), frame.header.component_id);
                     if let MavMessage::SETUP_SIGNING(m) = &frame.msg {
                         self.on_setup_signing(m, frame.signature.is_some());
                         continue;

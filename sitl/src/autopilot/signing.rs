@@ -35,7 +35,7 @@ impl Vehicle {
         let Some(signing) = self.signing.as_mut() else {
             return true;
         };
-        match signing.accept(frame, &PX4_UNSIGNED_ALLOWED) {
+        match signing.accept(&frame.stamp(), &PX4_UNSIGNED_ALLOWED) {
             Ok(()) => true,
             Err(why) => {
                 if frame.signature.is_some() {

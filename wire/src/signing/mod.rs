@@ -20,8 +20,6 @@ use std::time::Duration;
 
 pub use key::SigningKey;
 
-use crate::codec::Frame;
-
 /// Messages PX4 accepts unsigned once a key is set (`mavlink_sign_control.cpp`):
 /// HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION.
 pub const PX4_UNSIGNED_ALLOWED: [u32; 4] = [0, 109, 246, 247];
@@ -132,6 +130,20 @@ struct Stream {
     timestamp: u64,
 }
 
+/// What signing reads of a decoded frame: who sent it, which message, and its signature
+/// trailer (none for an unsigned frame).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameStamp {
+    /// The message id.
+    pub msgid: u32,
+    /// The sender's system id.
+    pub system_id: u8,
+    /// The sender's component id.
+    pub component_id: u8,
+    /// The signature, checked against the key it was decoded with.
+    pub signature: Option<Trailer>,
+}
+
 /// One side's signing state: the key, the timestamp it signs with next, and the newest
 /// timestamp of every stream it has accepted.
 #[derive(Debug, Clone)]
@@ -173,15 +185,20 @@ impl Signing {
         t
     }
 
-    /// Whether `frame` (decoded with this key) is accepted: authentic, newer than its
-    /// stream's last frame, and a new stream not over a minute stale. Unsigned frames are
-    /// accepted when `unsigned_allowed` holds their message id. Accepting moves the
-    /// stream's and this side's timestamps forward; a refusal changes nothing.
+    /// Whether a frame (decoded with this key; `frame` is what signing reads of it, from
+    /// `codec::Frame::stamp`) is accepted: authentic, newer than its stream's last frame,
+    /// and a new stream not over a minute stale. Unsigned frames are accepted when
+    /// `unsigned_allowed` holds their message id. Accepting moves the stream's and this
+    /// side's timestamps forward; a refusal changes nothing.
     ///
     /// # Errors
     /// The reason for refusing.
-    pub fn accept(&mut self, frame: &Frame, unsigned_allowed: &[u32]) -> Result<(), Rejection> {
-        let msgid = mavlink::Message::message_id(&frame.msg);
+    pub fn accept(
+        &mut self,
+        frame: &FrameStamp,
+        unsigned_allowed: &[u32],
+    ) -> Result<(), Rejection> {
+        let msgid = frame.msgid;
         let Some(trailer) = frame.signature else {
             return if unsigned_allowed.contains(&msgid) {
                 Ok(())
@@ -192,7 +209,7 @@ impl Signing {
         if !trailer.authentic {
             return Err(Rejection::BadSignature { msgid });
         }
-        let (system_id, component_id) = (frame.header.system_id as u8, frame.header.component_id);
+        let (system_id, component_id) = (frame.system_id, frame.component_id);
         let known = self.streams.iter().position(|s| {
             s.link_id == trailer.link_id
                 && s.system_id == system_id

@@ -1,6 +1,6 @@
 use super::*;
 use crate::codec::tests::heartbeat;
-use crate::codec::{Encoder, decode_datagram, decode_datagram_with};
+use crate::codec::{Encoder, Frame, decode_datagram, decode_datagram_with};
 use mavlink::dialects::common::{MavMessage, TIMESYNC_DATA};
 
 fn key(first: u8) -> SigningKey {
@@ -82,12 +82,12 @@ fn unsigned_frames_pass_only_when_allowed() {
     let unsigned = decode_datagram(&Encoder::new(1, 1).encode(&heartbeat()))
         .remove(0)
         .unwrap();
-    assert_eq!(s.accept(&unsigned, &PX4_UNSIGNED_ALLOWED), Ok(()));
+    assert_eq!(s.accept(&unsigned.stamp(), &PX4_UNSIGNED_ALLOWED), Ok(()));
     let ping = decode_datagram(&Encoder::new(1, 1).encode(&ping(2)))
         .remove(0)
         .unwrap();
     assert_eq!(
-        s.accept(&ping, &PX4_UNSIGNED_ALLOWED),
+        s.accept(&ping.stamp(), &PX4_UNSIGNED_ALLOWED),
         Err(Rejection::Unsigned { msgid: 111 })
     );
     assert_eq!(s.timestamp(), 0, "a refusal changes nothing");
@@ -98,14 +98,14 @@ fn replays_and_stale_streams_are_refused_and_fresh_ones_move_the_clock() {
     let k = key(9);
     let mut s = Signing::new(k.clone(), 10_000_000);
     let first = signed_frame(&k, 1, 0, 10_000_005);
-    assert_eq!(s.accept(&first, &[]), Ok(()));
+    assert_eq!(s.accept(&first.stamp(), &[]), Ok(()));
     assert_eq!(
         s.timestamp(),
         10_000_005,
         "the clock follows the newest accepted"
     );
     assert_eq!(
-        s.accept(&first, &[]),
+        s.accept(&first.stamp(), &[]),
         Err(Rejection::Replayed {
             timestamp: 10_000_005,
             last: 10_000_005
@@ -113,16 +113,16 @@ fn replays_and_stale_streams_are_refused_and_fresh_ones_move_the_clock() {
     );
     let older = signed_frame(&k, 1, 0, 10_000_004);
     assert!(matches!(
-        s.accept(&older, &[]),
+        s.accept(&older.stamp(), &[]),
         Err(Rejection::Replayed { .. })
     ));
     // The same timestamp on another link id is another stream, inside the minute.
     let other_link = signed_frame(&k, 1, 1, 10_000_005 - NEW_STREAM_WINDOW);
-    assert_eq!(s.accept(&other_link, &[]), Ok(()));
+    assert_eq!(s.accept(&other_link.stamp(), &[]), Ok(()));
     // A new stream one unit beyond the minute is stale.
     let stale = signed_frame(&k, 2, 0, 10_000_005 - NEW_STREAM_WINDOW - 1);
     assert_eq!(
-        s.accept(&stale, &[]),
+        s.accept(&stale.stamp(), &[]),
         Err(Rejection::Stale {
             timestamp: 10_000_005 - NEW_STREAM_WINDOW - 1,
             newest: 10_000_005
@@ -133,7 +133,7 @@ fn replays_and_stale_streams_are_refused_and_fresh_ones_move_the_clock() {
     let bytes = Encoder::new(1, 1).encode_signed(&ping(1), &mut theirs, 0);
     let forged = decode_datagram_with(&bytes, Some(&k)).remove(0).unwrap();
     assert_eq!(
-        s.accept(&forged, &[]),
+        s.accept(&forged.stamp(), &[]),
         Err(Rejection::BadSignature { msgid: 111 })
     );
     assert_eq!(s.timestamp(), 10_000_005, "refusals leave the clock alone");
@@ -144,14 +144,17 @@ fn the_stream_table_is_bounded() {
     let k = key(1);
     let mut s = Signing::new(k.clone(), 0);
     for sys in 1..=MAX_STREAMS as u8 {
-        assert_eq!(s.accept(&signed_frame(&k, sys, 0, 100), &[]), Ok(()));
+        assert_eq!(
+            s.accept(&signed_frame(&k, sys, 0, 100).stamp(), &[]),
+            Ok(())
+        );
     }
     assert_eq!(
-        s.accept(&signed_frame(&k, 200, 0, 100), &[]),
+        s.accept(&signed_frame(&k, 200, 0, 100).stamp(), &[]),
         Err(Rejection::TooManyStreams)
     );
     assert_eq!(
-        s.accept(&signed_frame(&k, 1, 0, 101), &[]),
+        s.accept(&signed_frame(&k, 1, 0, 101).stamp(), &[]),
         Ok(()),
         "known streams still pass"
     );

@@ -65,7 +65,7 @@ impl Signer {
     /// link id of its first authentic frame (the MAVLink instance it talks to us on; its
     /// frames to another station, replayed to us, are refused).
     pub(super) fn check(&mut self, frame: &Frame, system_id: u8) -> Result<(), String> {
-        let ours = frame.header.system_id == u32::from(system_id);
+        let ours = frame.system_id() == system_id;
         if let (Some(t), Some(expected), true) = (frame.signature, self.vehicle_link_id, ours)
             && t.authentic
             && t.link_id != expected
@@ -76,7 +76,7 @@ impl Signer {
             ));
         }
         self.signing
-            .accept(frame, &[])
+            .accept(&frame.stamp(), &[])
             .map_err(|why| why.to_string())?;
         if let (Some(t), true) = (frame.signature, ours) {
             self.vehicle_link_id.get_or_insert(t.link_id);
