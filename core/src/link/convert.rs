@@ -10,9 +10,116 @@ use mavlink::dialects::common::{
 };
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
+use super::command::{Command, command_long};
+use super::signer::Signer;
 use crate::control::AttitudeThrust;
 use crate::frame::Geodetic;
 use crate::safety::{FenceItem, FenceItemKind};
+use ringswarm_wire::codec::Encoder;
+
+/// What a vehicle link sends, in domain terms: [`encode`] makes its MAVLink frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Outgoing<'a> {
+    /// Our ground station's heartbeat.
+    Heartbeat,
+    /// A TIMESYNC request stamped `ts1_ns`.
+    Timesync {
+        /// The stamp (ns of the link's clock).
+        ts1_ns: i64,
+    },
+    /// An attitude and thrust setpoint.
+    Attitude {
+        /// The setpoint.
+        setpoint: &'a AttitudeThrust,
+        /// The vehicle.
+        target_system: u8,
+        /// Our clock (ms).
+        time_boot_ms: u32,
+    },
+    /// An acceleration setpoint (m/s², NED).
+    Acceleration {
+        /// The acceleration.
+        accel_ned_mps2: &'a Vector3<f64>,
+        /// The vehicle.
+        target_system: u8,
+        /// Our clock (ms).
+        time_boot_ms: u32,
+    },
+    /// A command; `confirmation` counts its resends before this one.
+    Command {
+        /// The command.
+        command: Command,
+        /// The vehicle.
+        target_system: u8,
+        /// Resends before this one.
+        confirmation: u8,
+    },
+    /// The fence's item count (MISSION_COUNT, mission type FENCE).
+    FenceCount {
+        /// The vehicle.
+        target_system: u8,
+        /// Items.
+        count: u16,
+    },
+    /// Fence item number `seq`.
+    FenceItem {
+        /// The vehicle.
+        target_system: u8,
+        /// Its number.
+        seq: u16,
+        /// The item.
+        item: &'a FenceItem,
+    },
+}
+
+impl Outgoing<'_> {
+    /// The MAVLink message.
+    pub fn message(&self) -> MavMessage {
+        match *self {
+            Self::Heartbeat => gcs_heartbeat(),
+            Self::Timesync { ts1_ns } => timesync_request(ts1_ns),
+            Self::Attitude {
+                setpoint,
+                target_system,
+                time_boot_ms,
+            } => set_attitude_target(setpoint, target_system, time_boot_ms),
+            Self::Acceleration {
+                accel_ned_mps2,
+                target_system,
+                time_boot_ms,
+            } => set_position_target_acceleration(accel_ned_mps2, target_system, time_boot_ms),
+            Self::Command {
+                command,
+                target_system,
+                confirmation,
+            } => command_long(&command, target_system, confirmation),
+            Self::FenceCount {
+                target_system,
+                count,
+            } => fence_count(target_system, count),
+            Self::FenceItem {
+                target_system,
+                seq,
+                item,
+            } => fence_item(target_system, seq, item),
+        }
+    }
+}
+
+/// Appends `out`'s frame to `bytes`: from `encoder`'s ids and sequence, signed by `signer`
+/// when the link signs.
+pub fn encode(
+    encoder: &mut Encoder,
+    signer: Option<&mut Signer>,
+    out: &Outgoing<'_>,
+    bytes: &mut Vec<u8>,
+) {
+    let msg = out.message();
+    match signer {
+        Some(signer) => signer.encode_into(encoder, &msg, bytes),
+        None => encoder.encode_into(&msg, None, bytes),
+    }
+}
 
 /// SET_ATTITUDE_TARGET with attitude and thrust, body rates ignored (type_mask 7).
 pub fn set_attitude_target(
@@ -127,30 +234,6 @@ pub fn timesync_request(ts1_ns: i64) -> MavMessage {
     })
 }
 
-/// MAV_MISSION_RESULT's name.
-pub fn mission_result_name(result: u8) -> String {
-    let name = match result {
-        0 => "MAV_MISSION_ACCEPTED",
-        1 => "MAV_MISSION_ERROR",
-        2 => "MAV_MISSION_UNSUPPORTED_FRAME",
-        3 => "MAV_MISSION_UNSUPPORTED",
-        4 => "MAV_MISSION_NO_SPACE",
-        5 => "MAV_MISSION_INVALID",
-        6 => "MAV_MISSION_INVALID_PARAM1",
-        7 => "MAV_MISSION_INVALID_PARAM2",
-        8 => "MAV_MISSION_INVALID_PARAM3",
-        9 => "MAV_MISSION_INVALID_PARAM4",
-        10 => "MAV_MISSION_INVALID_PARAM5_X",
-        11 => "MAV_MISSION_INVALID_PARAM6_Y",
-        12 => "MAV_MISSION_INVALID_PARAM7",
-        13 => "MAV_MISSION_INVALID_SEQUENCE",
-        14 => "MAV_MISSION_DENIED",
-        15 => "MAV_MISSION_OPERATION_CANCELLED",
-        other => return format!("MAV_MISSION_RESULT {other}"),
-    };
-    name.to_owned()
-}
-
 /// The ground station's HEARTBEAT: type GCS, autopilot INVALID, no mode, state ACTIVE
 /// (what QGroundControl and MAVSDK send at 1 Hz; PX4 watches it for data-link loss).
 pub fn gcs_heartbeat() -> MavMessage {
@@ -242,6 +325,8 @@ pub enum Inbound {
         command: u16,
         /// MAV_RESULT value.
         result: u8,
+        /// The system it is addressed to (0: all).
+        target_system: u8,
     },
 }
 
@@ -332,6 +417,7 @@ pub fn inbound(msg: &MavMessage) -> Option<Inbound> {
         MavMessage::COMMAND_ACK(a) => Some(Inbound::Ack {
             command: a.command as u16,
             result: a.result as u8,
+            target_system: a.target_system,
         }),
         _ => None,
     }

@@ -3,15 +3,20 @@
 //! domain types.
 //! MAVLink identifiers appear only here and in the emulator.
 
+mod command;
 mod convert;
 pub mod provision;
 pub mod router;
+mod signer;
 
+pub use command::{Command, command_long, command_name, mission_result_name, result_name};
 pub use convert::{
-    AUTOPILOT_PX4, Inbound, autopilot_name, fence_count, fence_item, gcs_heartbeat, inbound,
-    mission_result_name, set_attitude_target, set_position_target_acceleration, timesync_request,
+    AUTOPILOT_PX4, Inbound, Outgoing, autopilot_name, encode, fence_count, fence_item,
+    gcs_heartbeat, inbound, set_attitude_target, set_position_target_acceleration,
+    timesync_request,
 };
 pub use ringswarm_wire::codec::{
     Encoder, Frame, FrameError, decode_datagram, decode_datagram_with, frame_system_id, frames,
     raw_frames,
 };
+pub use signer::{LinkSigning, Signer};

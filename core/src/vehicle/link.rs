@@ -5,7 +5,6 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use mavlink::dialects::common::{MavCmd, MavMessage};
 use ringswarm_wire::codec::FramePool;
 use ringswarm_wire::time::SimTime;
 
@@ -14,9 +13,8 @@ use super::telemetry::{OriginVerdict, PositionVerdict, TelemetryGate};
 use super::{LinkConfig, LinkEvent, Phase, Setpoint, VehicleState};
 
 use crate::link::{
-    AUTOPILOT_PX4, Encoder, Inbound, autopilot_name, fence_count, fence_item, frames,
-    gcs_heartbeat, inbound, mission_result_name, set_attitude_target,
-    set_position_target_acceleration, timesync_request,
+    AUTOPILOT_PX4, Command, Encoder, Inbound, Outgoing, Signer, autopilot_name, command_name,
+    encode, frames, inbound, mission_result_name,
 };
 
 /// How long the fence upload waits for the vehicle before it sends its last message
@@ -24,15 +22,11 @@ use crate::link::{
 const FENCE_RETRY: Duration = Duration::from_secs(1);
 
 mod commands;
-mod signer;
-
-use signer::Signer;
 
 /// A command waiting for its acknowledgement.
 #[derive(Debug, Clone, Copy)]
 struct Pending {
-    command: MavCmd,
-    params: [f32; 7],
+    command: Command,
     attempt: u8,
     deadline: SimTime,
     /// An ACCEPTED that may still be followed by the real answer.
@@ -143,13 +137,10 @@ impl VehicleLink {
         }
     }
 
-    /// Encodes `msg` (signed when the link signs) and queues it.
-    fn queue(&mut self, msg: &MavMessage) {
+    /// Encodes `out` (signed when the link signs) and queues it.
+    fn queue(&mut self, out: Outgoing<'_>) {
         let mut bytes = self.spare.take();
-        match self.signer.as_mut() {
-            Some(signer) => signer.encode_into(&mut self.encoder, msg, &mut bytes),
-            None => self.encoder.encode_into(msg, None, &mut bytes),
-        }
+        encode(&mut self.encoder, self.signer.as_mut(), &out, &mut bytes);
         self.outbox.push_back(bytes);
     }
 
@@ -234,12 +225,21 @@ impl VehicleLink {
     }
 
     fn send_setpoint(&mut self, now: SimTime) {
-        let (id, boot_ms) = (self.cfg.system_id, now.boot_ms());
-        let msg = match &self.setpoint {
-            Setpoint::Attitude(sp) => set_attitude_target(sp, id, boot_ms),
-            Setpoint::Acceleration(a) => set_position_target_acceleration(a, id, boot_ms),
+        let (target_system, time_boot_ms) = (self.cfg.system_id, now.boot_ms());
+        let setpoint = self.setpoint;
+        let out = match &setpoint {
+            Setpoint::Attitude(setpoint) => Outgoing::Attitude {
+                setpoint,
+                target_system,
+                time_boot_ms,
+            },
+            Setpoint::Acceleration(accel_ned_mps2) => Outgoing::Acceleration {
+                accel_ned_mps2,
+                target_system,
+                time_boot_ms,
+            },
         };
-        self.queue(&msg);
+        self.queue(out);
     }
 
     /// Whether a datagram is waiting in [`VehicleLink::poll_transmit`].
@@ -377,13 +377,15 @@ impl VehicleLink {
                 continue;
             }
             taken = true;
-            if let MavMessage::COMMAND_ACK(ack) = &frame.msg
-                && (ack.target_system != 0 && ack.target_system != self.cfg.own_ids.0)
+            let update = inbound(&frame.msg);
+            if let Some(Inbound::Ack { target_system, .. }) = update
+                && target_system != 0
+                && target_system != self.cfg.own_ids.0
             {
                 continue; // an acknowledgement meant for another ground station
             }
             self.state.last_heard = Some(now);
-            if let Some(update) = inbound(&frame.msg) {
+            if let Some(update) = update {
                 self.apply(now, update);
             }
         }
@@ -508,7 +510,9 @@ impl VehicleLink {
                     self.take_back_if_usable(now);
                 }
             }
-            Inbound::Ack { command, result } => self.on_ack(now, command, result),
+            Inbound::Ack {
+                command, result, ..
+            } => self.on_ack(now, command, result),
             Inbound::TimesyncReply {
                 ts1_ns,
                 target_system,
@@ -558,12 +562,18 @@ impl VehicleLink {
     }
 
     fn send_fence(&mut self, send: UploadSend) {
-        let target = self.cfg.system_id;
-        let msg = match send {
-            UploadSend::Count(n) => fence_count(target, n),
-            UploadSend::Item { seq, item } => fence_item(target, seq, &item),
-        };
-        self.queue(&msg);
+        let target_system = self.cfg.system_id;
+        match send {
+            UploadSend::Count(count) => self.queue(Outgoing::FenceCount {
+                target_system,
+                count,
+            }),
+            UploadSend::Item { seq, item } => self.queue(Outgoing::FenceItem {
+                target_system,
+                seq,
+                item: &item,
+            }),
+        }
     }
 
     fn on_fence_answer(&mut self, answer: Option<UploadAnswer>) {
@@ -624,7 +634,7 @@ impl VehicleLink {
     pub fn handle_timeout(&mut self, now: SimTime) {
         self.clock(now);
         if now >= self.next_heartbeat {
-            self.queue(&gcs_heartbeat());
+            self.queue(Outgoing::Heartbeat);
             // The round trip of the vehicles we command (none to one someone else flies).
             let commanded = !matches!(
                 self.phase,
@@ -634,7 +644,7 @@ impl VehicleLink {
                 // Stamps are the link's clock + 1 ns: never 0, which means "no stamp".
                 let stamp = (now.as_micros() * 1000 + 1) as i64;
                 self.timesync_sent_ns = Some(stamp);
-                self.queue(&timesync_request(stamp));
+                self.queue(Outgoing::Timesync { ts1_ns: stamp });
             }
             let streaming = matches!(
                 self.phase,
@@ -725,16 +735,16 @@ impl VehicleLink {
                 let reason = format!(
                     "vehicle {}: {} not accepted after {} attempts",
                     self.cfg.system_id,
-                    super::command_name(p.command as u16),
+                    command_name(p.command.id()),
                     p.attempt
                 );
                 self.events.push_back(LinkEvent::Failed(reason));
             } else {
                 self.events.push_back(LinkEvent::Retrying {
-                    command: p.command as u16,
+                    command: p.command.id(),
                     attempt: p.attempt + 1,
                 });
-                self.send_pending(now, p.command, p.params, p.attempt + 1);
+                self.send_pending(now, p.command, p.attempt + 1);
             }
         }
         if self.streams() && now >= self.next_setpoint {

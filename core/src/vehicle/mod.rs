@@ -49,6 +49,8 @@ mod fence_upload;
 mod link;
 pub mod telemetry;
 
+pub use crate::link::LinkSigning;
+use crate::link::{command_name, result_name};
 pub use crate::safety::{FenceItem, FenceItemKind};
 pub use fence_upload::{FencePlan, FenceUpload, UploadAnswer, UploadSend, UploadState};
 pub use link::VehicleLink;
@@ -132,19 +134,6 @@ impl LinkConfig {
             None => self.system_id.to_string(),
         }
     }
-}
-
-/// How one link signs: every frame it sends is signed, and only authentic, fresh signed
-/// frames from the vehicle are taken.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LinkSigning {
-    /// The key.
-    pub key: ringswarm_wire::signing::SigningKey,
-    /// Our link id in the signatures.
-    pub link_id: u8,
-    /// The signing timestamp at time zero of the link's clock (10 µs units since 2015):
-    /// frames are stamped with this plus the time since, and never the same stamp twice.
-    pub timestamp_at_zero: u64,
 }
 
 impl LinkConfig {
@@ -391,33 +380,6 @@ impl fmt::Display for LinkEvent {
                 "frames refused by signing ({why}); is the vehicle provisioned with this key?"
             ),
         }
-    }
-}
-
-/// The MAVLink name of the commands the coordinator sends.
-pub fn command_name(command: u16) -> String {
-    match command {
-        16 => "MAV_CMD_NAV_WAYPOINT".to_owned(),
-        21 => "MAV_CMD_NAV_LAND".to_owned(),
-        176 => "MAV_CMD_DO_SET_MODE".to_owned(),
-        400 => "MAV_CMD_COMPONENT_ARM_DISARM".to_owned(),
-        511 => "MAV_CMD_SET_MESSAGE_INTERVAL".to_owned(),
-        512 => "MAV_CMD_REQUEST_MESSAGE".to_owned(),
-        other => format!("MAV_CMD {other}"),
-    }
-}
-
-/// MAV_RESULT's name.
-pub fn result_name(result: u8) -> String {
-    match result {
-        0 => "ACCEPTED".to_owned(),
-        1 => "TEMPORARILY_REJECTED".to_owned(),
-        2 => "DENIED".to_owned(),
-        3 => "UNSUPPORTED".to_owned(),
-        4 => "FAILED".to_owned(),
-        5 => "IN_PROGRESS".to_owned(),
-        6 => "CANCELLED".to_owned(),
-        other => format!("MAV_RESULT {other}"),
     }
 }
 

@@ -4,11 +4,11 @@
 
 use std::time::Duration;
 
-use mavlink::dialects::common::{COMMAND_LONG_DATA, MavCmd, MavMessage};
 use ringswarm_wire::time::SimTime;
 
 use super::super::{LinkEvent, PX4_MAIN_AUTO, PX4_MAIN_OFFBOARD, PX4_SUB_AUTO_LOITER, Phase};
 use super::{Pending, VehicleLink};
+use crate::link::{Command, Outgoing};
 
 /// MAV_RESULT_ACCEPTED.
 const ACCEPTED: u8 = 0;
@@ -17,9 +17,9 @@ const ACCEPTED: u8 = 0;
 pub(super) const MODE_ACK_SETTLE: Duration = Duration::from_millis(100);
 /// Message ids the coordinator asks to be streamed, and GPS_GLOBAL_ORIGIN asked for (at
 /// the start of streaming, then with every heartbeat until it has come).
-const LOCAL_POSITION_NED: f32 = 32.0;
-const ATTITUDE_QUATERNION: f32 = 31.0;
-const GPS_GLOBAL_ORIGIN: f32 = 49.0;
+const LOCAL_POSITION_NED: u32 = 32;
+const ATTITUDE_QUATERNION: u32 = 31;
+const GPS_GLOBAL_ORIGIN: u32 = 49;
 /// Streams of PX4's onboard link (`mavlink_main.cpp`, MAVLINK_MODE_ONBOARD) the
 /// coordinator does not read, turned off on its link (interval −1): every one of them is
 /// a datagram the vehicle sends and the coordinator parses for nothing, and together they
@@ -29,12 +29,9 @@ const GPS_GLOBAL_ORIGIN: f32 = 49.0;
 /// VFR_HUD, POSITION_TARGET_LOCAL_NED and _GLOBAL_INT, NAV_CONTROLLER_OUTPUT), and
 /// SYS_STATUS, GPS_RAW_INT, BATTERY_STATUS, HOME_POSITION. A stream the autopilot does
 /// not have is refused harmlessly; a ground station on another link keeps its own.
-const UNREAD_STREAMS: [f32; 17] = [
-    30.0, 33.0, 105.0, 331.0, 65.0, 141.0, 132.0, 83.0, 36.0, 74.0, 85.0, 87.0, 62.0, 1.0, 24.0,
-    147.0, 242.0,
+const UNREAD_STREAMS: [u32; 17] = [
+    30, 33, 105, 331, 65, 141, 132, 83, 36, 74, 85, 87, 62, 1, 24, 147, 242,
 ];
-/// SET_MESSAGE_INTERVAL's "stop this stream".
-const STREAM_OFF: f32 = -1.0;
 
 impl VehicleLink {
     pub(super) fn hand_to_hold(&mut self, now: SimTime, reason: String, resume_when_fresh: bool) {
@@ -43,30 +40,22 @@ impl VehicleLink {
         self.hold_confirmed = false;
         self.heartbeats_out_of_offboard = 0;
         self.events.push_back(LinkEvent::HandedToHold(reason));
-        let params = [
-            1.0,
-            PX4_MAIN_AUTO as f32,
-            PX4_SUB_AUTO_LOITER as f32,
-            0.0,
-            0.0,
-            0.0,
-            0.0,
-        ];
-        self.send_pending(now, MavCmd::MAV_CMD_DO_SET_MODE, params, 1);
+        let hold = Command::SetMode {
+            main: PX4_MAIN_AUTO,
+            sub: PX4_SUB_AUTO_LOITER,
+        };
+        self.send_pending(now, hold, 1);
     }
 
     pub(super) fn request_land(&mut self, now: SimTime) {
         self.phase = Phase::Landing;
-        let nan = f32::NAN; // PX4: NaN lat/lon/alt/yaw = here, current heading
-        let params = [0.0, 0.0, 0.0, nan, nan, nan, nan];
-        self.send_pending(now, MavCmd::MAV_CMD_NAV_LAND, params, 1);
+        self.send_pending(now, Command::Land, 1);
     }
 
     pub(super) fn request_disarm(&mut self, now: SimTime) {
         self.phase = Phase::Disarming;
         self.events.push_back(LinkEvent::Landed);
-        let params = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-        self.send_pending(now, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, params, 1);
+        self.send_pending(now, Command::Disarm, 1);
     }
 
     pub(super) fn finish(&mut self) {
@@ -121,18 +110,18 @@ impl VehicleLink {
         self.phase = Phase::Streaming(now);
         self.pending = None;
         self.next_setpoint = now;
-        let us = |d: std::time::Duration| d.as_micros() as f32;
+        let us = |d: std::time::Duration| Some(d.as_micros() as f32);
         let streams = [
             (LOCAL_POSITION_NED, us(self.cfg.telemetry_interval)),
             (ATTITUDE_QUATERNION, us(self.cfg.attitude_interval)),
         ];
-        let off = UNREAD_STREAMS.map(|id| (id, STREAM_OFF));
-        for (id, interval) in streams.into_iter().chain(off) {
-            self.send_command(
-                MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
-                [id, interval, 0.0, 0.0, 0.0, 0.0, 0.0],
-                0,
-            );
+        let off = UNREAD_STREAMS.map(|id| (id, None));
+        for (message_id, interval_us) in streams.into_iter().chain(off) {
+            let stream = Command::StreamInterval {
+                message_id,
+                interval_us,
+            };
+            self.send_command(stream, 0);
         }
         self.request_origin();
         self.start_fence_upload(now);
@@ -142,11 +131,10 @@ impl VehicleLink {
     /// while it has not come, so a lost request or answer costs a second, not the 5 s
     /// of PX4's slow origin stream).
     pub(super) fn request_origin(&mut self) {
-        self.send_command(
-            MavCmd::MAV_CMD_REQUEST_MESSAGE,
-            [GPS_GLOBAL_ORIGIN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            0,
-        );
+        let origin = Command::RequestMessage {
+            message_id: GPS_GLOBAL_ORIGIN,
+        };
+        self.send_command(origin, 0);
     }
 
     /// A heartbeat may show that a command took effect even if its ack was lost.
@@ -158,11 +146,7 @@ impl VehicleLink {
             self.enter_flying();
         }
         if self.phase == Phase::Landing {
-            if self
-                .pending
-                .is_some_and(|p| p.command == MavCmd::MAV_CMD_NAV_LAND)
-                && self.state.in_land()
-            {
+            if self.pending.is_some_and(|p| p.command == Command::Land) && self.state.in_land() {
                 self.pending = None;
                 self.events.push_back(LinkEvent::Landing);
             }
@@ -191,7 +175,7 @@ impl VehicleLink {
 
     pub(super) fn on_ack(&mut self, now: SimTime, command: u16, result: u8) {
         let Some(pending) = self.pending else { return };
-        if pending.command as u16 != command {
+        if pending.command.id() != command {
             return;
         }
         if result != ACCEPTED {
@@ -229,51 +213,35 @@ impl VehicleLink {
 
     pub(super) fn request_arm(&mut self, now: SimTime) {
         self.phase = Phase::Arming;
-        self.send_pending(
-            now,
-            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            1,
-        );
+        self.send_pending(now, Command::Arm, 1);
     }
 
     pub(super) fn request_offboard(&mut self, now: SimTime) {
         self.phase = Phase::Offboarding;
-        let params = [1.0, PX4_MAIN_OFFBOARD as f32, 0.0, 0.0, 0.0, 0.0, 0.0];
-        self.send_pending(now, MavCmd::MAV_CMD_DO_SET_MODE, params, 1);
+        let offboard = Command::SetMode {
+            main: PX4_MAIN_OFFBOARD,
+            sub: 0,
+        };
+        self.send_pending(now, offboard, 1);
     }
 
-    pub(super) fn send_pending(
-        &mut self,
-        now: SimTime,
-        command: MavCmd,
-        params: [f32; 7],
-        attempt: u8,
-    ) {
-        self.send_command(command, params, attempt - 1);
+    pub(super) fn send_pending(&mut self, now: SimTime, command: Command, attempt: u8) {
+        self.send_command(command, attempt - 1);
         self.pending = Some(Pending {
             command,
-            params,
             attempt,
             deadline: now + self.cfg.ack_timeout,
             accepted: false,
         });
     }
 
-    pub(super) fn send_command(&mut self, command: MavCmd, params: [f32; 7], confirmation: u8) {
-        let msg = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-            target_system: self.cfg.system_id,
-            target_component: 1,
+    /// Sends `command`; `confirmation` counts its resends before this one.
+    pub(super) fn send_command(&mut self, command: Command, confirmation: u8) {
+        let target_system = self.cfg.system_id;
+        self.queue(Outgoing::Command {
             command,
+            target_system,
             confirmation,
-            param1: params[0],
-            param2: params[1],
-            param3: params[2],
-            param4: params[3],
-            param5: params[4],
-            param6: params[5],
-            param7: params[6],
         });
-        self.queue(&msg);
     }
 }

@@ -5,25 +5,37 @@ use mavlink::dialects::common::MavMessage;
 use ringswarm_wire::signing::{Signing, SigningKey};
 use ringswarm_wire::time::SimTime;
 
-use crate::link::{Encoder, Frame};
-use crate::vehicle::LinkSigning;
+use super::{Encoder, Frame};
+
+/// How one link signs: every frame it sends is signed, and only authentic, fresh signed
+/// frames from the vehicle are taken.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkSigning {
+    /// The key.
+    pub key: SigningKey,
+    /// Our link id in the signatures.
+    pub link_id: u8,
+    /// The signing timestamp at time zero of the link's clock (10 µs units since 2015):
+    /// frames are stamped with this plus the time since, and never the same stamp twice.
+    pub timestamp_at_zero: u64,
+}
 
 /// The signing state of one link.
 #[derive(Debug, Clone)]
-pub(super) struct Signer {
+pub struct Signer {
     signing: Signing,
     link_id: u8,
     timestamp_at_zero: u64,
     /// The link id the vehicle signs its frames to us with (its first authentic one).
     vehicle_link_id: Option<u8>,
     /// Frames from the vehicle refused.
-    pub(super) refused: u64,
+    pub(crate) refused: u64,
     /// A refusal was reported (once per link).
-    pub(super) reported: bool,
+    pub(crate) reported: bool,
 }
 
 impl Signer {
-    pub(super) fn new(cfg: &LinkSigning) -> Self {
+    pub(crate) fn new(cfg: &LinkSigning) -> Self {
         Self {
             signing: Signing::new(cfg.key.clone(), cfg.timestamp_at_zero),
             link_id: cfg.link_id,
@@ -35,23 +47,23 @@ impl Signer {
     }
 
     /// The key frames are checked against.
-    pub(super) fn key(&self) -> &SigningKey {
+    pub(crate) fn key(&self) -> &SigningKey {
         self.signing.key()
     }
 
     /// The timestamp the next frame gets.
-    pub(super) fn timestamp(&self) -> u64 {
+    pub(crate) fn timestamp(&self) -> u64 {
         self.signing.timestamp()
     }
 
     /// Moves the clock to `now` (10 µs units past the stamp at time zero).
-    pub(super) fn clock(&mut self, now: SimTime) {
+    pub(crate) fn clock(&mut self, now: SimTime) {
         self.signing
             .advance_to(self.timestamp_at_zero + now.as_micros() / 10);
     }
 
     /// `msg`, signed, appended to `out`.
-    pub(super) fn encode_into(
+    pub(crate) fn encode_into(
         &mut self,
         encoder: &mut Encoder,
         msg: &MavMessage,
@@ -64,7 +76,7 @@ impl Signer {
     /// unsigned frame; an authentic, fresh one, and from vehicle `system_id` only on the
     /// link id of its first authentic frame (the MAVLink instance it talks to us on; its
     /// frames to another station, replayed to us, are refused).
-    pub(super) fn check(&mut self, frame: &Frame, system_id: u8) -> Result<(), String> {
+    pub(crate) fn check(&mut self, frame: &Frame, system_id: u8) -> Result<(), String> {
         let ours = frame.system_id() == system_id;
         if let (Some(t), Some(expected), true) = (frame.signature, self.vehicle_link_id, ours)
             && t.authentic
