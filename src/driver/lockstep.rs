@@ -21,7 +21,7 @@ use std::collections::HashMap;
 use std::net::{IpAddr, SocketAddr};
 use std::ops::Range;
 
-use super::{Inbound, Observer};
+use super::{Intake, Observer};
 use crate::link::router::{Router, TransportPlan};
 use crate::swarm::Swarm;
 
@@ -371,12 +371,12 @@ impl Lockstep {
             return;
         };
         let (socket, from) = (r.socket_of[j], r.addresses[j]);
-        let mut inbound = Inbound {
+        let mut intake = Intake {
             swarm: &mut self.swarm,
             router: &mut r.router,
             pieces: &mut r.pieces,
         };
-        inbound.deliver(socket, from, bytes, now, observer);
+        intake.deliver(socket, from, bytes, now, observer);
     }
 
     fn is_silenced(&self, i: usize) -> bool {

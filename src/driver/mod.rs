@@ -8,7 +8,7 @@
 //! - [`listening`]: how far behind its sockets the UDP driver is, so that its own stall
 //!   is not taken for vehicles going silent.
 //!
-//! Both hand received datagrams to the swarm through one `Inbound` (router, links,
+//! Both hand received datagrams to the swarm through one `Intake` (router, links,
 //! address learning) when they route.
 
 pub mod listening;
@@ -29,14 +29,14 @@ use crate::swarm::Swarm;
 /// The way in for a received datagram, the same in every driver that routes: the router
 /// splits it, each piece goes to its vehicle's link, and a frame a link takes may teach
 /// the router the vehicle's address.
-pub(crate) struct Inbound<'a> {
+pub(crate) struct Intake<'a> {
     pub(crate) swarm: &'a mut Swarm,
     pub(crate) router: &'a mut Router,
     /// Reused: the pieces of one datagram (no allocation per datagram).
     pub(crate) pieces: &'a mut Vec<(usize, Range<usize>)>,
 }
 
-impl Inbound<'_> {
+impl Intake<'_> {
     /// Hands `bytes`, received on `socket` from `from` at `t`, to the swarm.
     pub(crate) fn deliver<O: Observer>(
         &mut self,

@@ -19,7 +19,7 @@ use tokio::task::JoinSet;
 use tokio::time::Instant;
 
 use super::listening::{Listening, STALL};
-use super::{Inbound, Observer};
+use super::{Intake, Observer};
 use crate::link::router::Router;
 use crate::swarm::Swarm;
 
@@ -187,10 +187,10 @@ pub async fn run_swarm<O: Observer>(
                     let t = now();
                     let mut next = Some(first);
                     while let Some(batch) = next.take() {
-                        let mut inbound = Inbound { swarm: &mut swarm, router: &mut router, pieces: &mut pieces };
+                        let mut intake = Intake { swarm: &mut swarm, router: &mut router, pieces: &mut pieces };
                         for (from, datagram) in &batch.datagrams {
                             let bytes = &batch.bytes[datagram.clone()];
-                            inbound.deliver(batch.socket, *from, bytes, t, &mut observer);
+                            intake.deliver(batch.socket, *from, bytes, t, &mut observer);
                         }
                         listening.batch(batch.socket, batch.full);
                         if Instant::now() >= deadline {
