@@ -31,13 +31,14 @@ use tokio::net::UdpSocket;
 use tokio::sync::{mpsc, watch};
 use tokio::time::MissedTickBehavior;
 
-use crate::autopilot::{LinkId, Vehicle, VehicleEvent, VehicleStatus};
+use crate::autopilot::{LinkId, Vehicle, VehicleConfig, VehicleEvent, VehicleStatus};
 use crate::delay_line::DelayLine;
 use crate::key_writer::{KeyStore, KeyWriter};
 use crate::keystore::StoredKey;
 use crate::link_faults::LinkFaults;
 use crate::time::SimTime;
-use crate::udp::{LinkSocket, Partner, SimClock};
+use crate::udp::{LinkSocket, Partner, Placement, SimClock};
+use crate::world::World;
 
 /// What a test (or an operator) can do to a running vehicle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -61,6 +62,55 @@ pub struct FleetVehicle {
     pub key_file: Option<PathBuf>,
     /// Where its status is published, about ten times a second.
     pub status: watch::Sender<VehicleStatus>,
+}
+
+/// One emulated vehicle to start: how it is built, where it sits on UDP, and where it
+/// keeps its signing key (`None`: a key set over the wire lasts until the process ends).
+#[derive(Debug, Clone)]
+pub struct VehicleSpec {
+    /// Its configuration.
+    pub config: VehicleConfig,
+    /// Its ports and peers.
+    pub placement: Placement,
+    /// Its key file.
+    pub key_file: Option<PathBuf>,
+}
+
+/// Builds every vehicle of `specs` in `world` and binds its links with `faults` (vehicle
+/// `i`'s fault draws seeded `seed + i`): the one place a fleet is made, for `sitl` and
+/// `demo --realtime`. Returns the fleet for [`spawn_shards`] and each vehicle's status.
+///
+/// # Errors
+/// A configuration the emulator refuses, or a port that cannot be bound, naming the
+/// vehicle (1-based) and its system id.
+pub async fn bind_fleet(
+    specs: Vec<VehicleSpec>,
+    world: World,
+    faults: LinkFaults,
+    seed: u64,
+) -> Result<(Vec<FleetVehicle>, Vec<watch::Receiver<VehicleStatus>>), String> {
+    let mut fleet = Vec::with_capacity(specs.len());
+    let mut statuses = Vec::with_capacity(specs.len());
+    for (i, spec) in specs.into_iter().enumerate() {
+        let system_id = spec.config.system_id;
+        let named = |e: String| format!("vehicle {} (system id {system_id}): {e}", i + 1);
+        let vehicle = Vehicle::new(spec.config, world).map_err(named)?;
+        let links = spec
+            .placement
+            .bind(faults)
+            .await
+            .map_err(|e| named(format!("bind its ports: {e}")))?;
+        let (status, watching) = watch::channel(vehicle.status());
+        statuses.push(watching);
+        fleet.push(FleetVehicle {
+            vehicle,
+            links,
+            seed: seed.wrapping_add(i as u64),
+            key_file: spec.key_file,
+            status,
+        });
+    }
+    Ok((fleet, statuses))
 }
 
 /// A datagram held back by the latency fault.

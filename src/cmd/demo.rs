@@ -18,7 +18,6 @@ use crate::record::metrics::Summary;
 use crate::record::{Recorder, RowText};
 use crate::swarm::{Swarm, SwarmPhase};
 use indicatif::{ProgressBar, ProgressStyle};
-use ringswarm_sitl::autopilot::Vehicle;
 
 /// A built-in scenario: name, one line, the config file's text.
 pub struct Scenario {
@@ -237,7 +236,7 @@ impl Observer for DemoObserver {
 /// `--realtime`: the emulated vehicles on PX4's SITL ports in this process, the
 /// coordinator flying them over real UDP sockets (like `sitl` + `fly` in two terminals).
 fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> {
-    use ringswarm_sitl::fleet::{FleetVehicle, spawn_shards};
+    use ringswarm_sitl::fleet::{VehicleSpec, bind_fleet, spawn_shards};
     use ringswarm_sitl::udp::{LinkFaults, SimClock};
     use tokio::sync::watch;
 
@@ -278,22 +277,18 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
     let summary = runtime.block_on(async {
         let (stop_tx, stop_rx) = watch::channel(false);
         let clock = SimClock::new(1.0);
-        let mut fleet = Vec::new();
-        for (i, (cfg, placement)) in vehicle_configs.into_iter().zip(placements).enumerate() {
-            let vehicle = Vehicle::new(cfg, world).map_err(anyhow::Error::msg)?;
-            let links = placement
-                .bind(faults)
-                .await
-                .with_context(|| format!("emulated vehicle {}: bind its ports", i + 1))?;
-            let (status, _) = watch::channel(vehicle.status());
-            fleet.push(FleetVehicle {
-                vehicle,
-                links,
-                seed: e.seed.wrapping_add(i as u64),
+        let specs = vehicle_configs
+            .into_iter()
+            .zip(placements)
+            .map(|(config, placement)| VehicleSpec {
+                config,
+                placement,
                 key_file: None,
-                status,
-            });
-        }
+            })
+            .collect();
+        let (fleet, _) = bind_fleet(specs, world, faults, e.seed)
+            .await
+            .map_err(|e| anyhow::anyhow!("emulated {e}"))?;
         let shards = spawn_shards(fleet, crate::cmd::sitl::cores(), clock, &stop_rx);
         let summary =
             crate::cmd::fly::fly(Swarm::new(setup), &transport, &out, None, &args.live).await;

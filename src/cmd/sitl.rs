@@ -9,9 +9,11 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use nalgebra::Vector3;
 use ringswarm_sitl::autopilot::LinkId;
-use ringswarm_sitl::autopilot::{Vehicle, VehicleConfig, VehicleStatus};
+use ringswarm_sitl::autopilot::{VehicleConfig, VehicleStatus};
 use ringswarm_sitl::config_file::SitlConfig;
-use ringswarm_sitl::fleet::{FleetVehicle, Shards, VehicleControl, spawn_shards};
+use ringswarm_sitl::fleet::{
+    FleetVehicle, Shards, VehicleControl, VehicleSpec, bind_fleet, spawn_shards,
+};
 use ringswarm_sitl::keystore::{self, StoredKey};
 use ringswarm_sitl::profile::Profile;
 use ringswarm_sitl::udp::{LinkFaults, LinkSocket, Placement, SimClock, px4_ports};
@@ -220,44 +222,46 @@ async fn serve(
 ) -> anyhow::Result<()> {
     let (shutdown_tx, shutdown_rx) = watch::channel(false);
     let clock = SimClock::new(args.speed);
-    let mut statuses = Vec::new();
     let system_ids: Vec<u8> = setup.vehicles.iter().map(|v| v.system_id).collect();
     let n = setup.vehicles.len();
     let verbose = n <= STATUS_LINES_UP_TO;
     println!("ringswarm sitl: {n} vehicle(s), {}x real time", args.speed);
-    let mut fleet = Vec::with_capacity(n);
-    let vehicles = setup.vehicles.into_iter().zip(placements).zip(key_files);
-    for (i, ((cfg, placement), key_file)) in vehicles.enumerate() {
-        let system_id = cfg.system_id;
-        let profile = cfg.profile.name;
-        if cfg.signing.is_some() && verbose {
-            println!(
-                "  vehicle {system_id}: MAVLink 2 signing on (key stored in {}): unsigned frames refused but HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION",
-                key_file.display()
-            );
-        }
-        let vehicle = Vehicle::new(cfg, setup.world).map_err(anyhow::Error::msg)?;
-        let links = placement
-            .bind(setup.faults)
-            .await
-            .with_context(|| format!("vehicle {} (system id {system_id})", i + 1))?;
-        if verbose {
+    let described: Vec<(u8, &str, bool)> = setup
+        .vehicles
+        .iter()
+        .map(|c| (c.system_id, c.profile.name, c.signing.is_some()))
+        .collect();
+    let specs = setup
+        .vehicles
+        .iter()
+        .cloned()
+        .zip(placements)
+        .zip(key_files.iter().cloned())
+        .map(|((config, placement), key_file)| VehicleSpec {
+            config,
+            placement,
+            key_file: Some(key_file),
+        })
+        .collect();
+    let (fleet, statuses) = bind_fleet(specs, setup.world, setup.faults, setup.fault_seed)
+        .await
+        .map_err(anyhow::Error::msg)?;
+    if verbose {
+        for ((system_id, profile, signed), (v, key_file)) in
+            described.iter().zip(fleet.iter().zip(&key_files))
+        {
+            if *signed {
+                println!(
+                    "  vehicle {system_id}: MAVLink 2 signing on (key stored in {}): unsigned frames refused but HEARTBEAT, RADIO_STATUS, ADSB_VEHICLE, COLLISION",
+                    key_file.display()
+                );
+            }
             println!(
                 "  vehicle {system_id} ({profile}): {}",
-                describe_links(&links)
+                describe_links(&v.links)
             );
         }
-        let (status_tx, status_rx) = watch::channel(vehicle.status());
-        statuses.push(status_rx);
-        fleet.push(FleetVehicle {
-            vehicle,
-            links,
-            seed: setup.fault_seed.wrapping_add(i as u64),
-            key_file: Some(key_file),
-            status: status_tx,
-        });
-    }
-    if !verbose {
+    } else {
         println!("  {}", placements_summary(&fleet));
     }
     let shards = spawn_shards(fleet, cores(), clock, &shutdown_rx);
@@ -466,6 +470,7 @@ fn status_line(s: &VehicleStatus, now_s: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ringswarm_sitl::autopilot::Vehicle;
     use ringswarm_wire::time::SimTime;
 
     #[test]
