@@ -283,12 +283,27 @@ fn check_setpoint(msg: &MavMessage) {
     }
 }
 
-/// The coordinator's configuration parser and validation.
+/// The coordinator's configuration parser and every path that takes its numbers: the
+/// validation, the bandwidth gate, the transport plan, the emulator's vehicles, places
+/// and link faults (lockstep and real time), and a lockstep flight's first steps.
 pub fn coordinator_config(bytes: &[u8]) {
-    if let Ok(config) = Config::from_toml(&String::from_utf8_lossy(bytes)) {
-        let _ = config.validate();
-        let _ = config.emulator();
-        let _ = config.lockstep_faults();
+    let Ok(config) = Config::from_toml(&String::from_utf8_lossy(bytes)) else {
+        return;
+    };
+    let _ = config.validate();
+    let _ = config.bandwidth_check();
+    let _ = config.transport_plan();
+    let _ = config.emulator();
+    let _ = config.emulator_placements();
+    let _ = config.link_faults();
+    let _ = config.lockstep_faults();
+    // A flight of up to 16 vehicles (larger rings take too long per input).
+    if config.vehicle.len() <= 16
+        && let Ok(mut run) = crate::driver::lockstep::Lockstep::from_config(&config)
+    {
+        for _ in 0..20 {
+            run.step();
+        }
     }
 }
 

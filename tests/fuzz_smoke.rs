@@ -161,7 +161,24 @@ fn config_parsers_survive_their_seeds_and_mutations() {
         }
         assert!(config.emulator().is_ok(), "{}", path.display());
         assert!(config.lockstep_faults().is_ok(), "{}", path.display());
+        assert!(config.link_faults().is_ok(), "{}", path.display());
+        assert!(config.transport_plan().is_ok(), "{}", path.display());
+        assert!(config.emulator_placements().is_ok(), "{}", path.display());
+        assert!(config.bandwidth_check().is_ok(), "{}", path.display());
     }
+    // The numbers that once reached a panic through `demo --realtime` (a negative or NaN
+    // latency): the fuzz body takes them, and the one constructor names them.
+    let paper = std::fs::read_to_string(shipped.join("paper-sim1.toml")).unwrap();
+    let bad = paper.replace(
+        "[emulator]",
+        "[emulator]\nlatency_ms = -1.0\njitter_ms = nan",
+    );
+    fuzzing::coordinator_config(bad.as_bytes());
+    let config = ringswarm::config::Config::from_toml(&bad).unwrap();
+    assert_eq!(
+        config.link_faults().unwrap_err(),
+        "emulator.latency_ms must be in [0, 10000] ms, got -1\nemulator.jitter_ms must be in [0, 10000] ms, got NaN"
+    );
     for (path, bytes) in corpus("sitl_config") {
         let text = String::from_utf8_lossy(&bytes);
         let parsed = ringswarm_sitl::config_file::SitlConfig::from_toml(&text);

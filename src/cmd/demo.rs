@@ -237,7 +237,7 @@ impl Observer for DemoObserver {
 /// coordinator flying them over real UDP sockets (like `sitl` + `fly` in two terminals).
 fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> {
     use ringswarm_sitl::fleet::{VehicleSpec, bind_fleet, spawn_shards};
-    use ringswarm_sitl::udp::{LinkFaults, SimClock};
+    use ringswarm_sitl::udp::SimClock;
     use tokio::sync::watch;
 
     let setup = config
@@ -251,14 +251,9 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
     if !e.silence.is_empty() {
         eprintln!("note: [[emulator.silence]] applies to lockstep runs only");
     }
-    let faults = LinkFaults::from_percent_and_ms(
-        e.loss_pct,
-        e.latency_ms,
-        e.jitter_ms,
-        0.0,
-        crate::config::EMULATOR_FAULT_NAMES,
-    )
-    .map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
+    let faults = config
+        .link_faults()
+        .map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
     let transport = config.transport_plan().map_err(anyhow::Error::msg)?;
     let placements = config
         .emulator_placements()

@@ -27,6 +27,22 @@ pub const EMULATOR_FAULT_NAMES: [&str; 4] = [
 ];
 
 impl Config {
+    /// The link faults of `[emulator]` (loss, latency, jitter), for every driver of the
+    /// emulator: the lockstep's and `demo --realtime`'s.
+    ///
+    /// # Errors
+    /// Every out-of-range value, one per line, named as in the file.
+    pub fn link_faults(&self) -> Result<ringswarm_sitl::link_faults::LinkFaults, String> {
+        let e = &self.emulator;
+        ringswarm_sitl::link_faults::LinkFaults::from_percent_and_ms(
+            e.loss_pct,
+            e.latency_ms,
+            e.jitter_ms,
+            0.0,
+            EMULATOR_FAULT_NAMES,
+        )
+    }
+
     /// The lockstep link faults of `[emulator]`.
     ///
     /// # Errors
@@ -34,14 +50,7 @@ impl Config {
     pub fn lockstep_faults(&self) -> Result<LockstepFaults, String> {
         let e = &self.emulator;
         let mut problems = Vec::new();
-        let faults = ringswarm_sitl::link_faults::LinkFaults::from_percent_and_ms(
-            e.loss_pct,
-            e.latency_ms,
-            e.jitter_ms,
-            0.0,
-            EMULATOR_FAULT_NAMES,
-        )
-        .unwrap_or_else(|why| {
+        let faults = self.link_faults().unwrap_or_else(|why| {
             problems.push(why);
             Default::default()
         });
