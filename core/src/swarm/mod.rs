@@ -43,6 +43,7 @@ mod model;
 mod phases;
 mod plan;
 mod safety;
+mod scheduler;
 mod setup;
 mod tick;
 pub mod timing;
@@ -51,8 +52,6 @@ use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::geo::Geodetic;
 use ringswarm_wire::time::SimTime;
 
-use std::cmp::Reverse;
-use std::collections::{BinaryHeap, VecDeque};
 use std::fmt;
 use std::time::Duration;
 
@@ -64,6 +63,7 @@ pub use events::{MAX_KEPT_EVENTS, SwarmEvent};
 pub use guard::{DivergenceGuard, GuardLimits, GuardTrip};
 use model::FlownModel;
 pub use safety::SafetyStats;
+use scheduler::LinkScheduler;
 pub use setup::{
     BREACH_SHARE, BreachAction, EndAction, FenceSetup, LossPolicy, PlanDecision, Retargeted,
     SAFETY_GAMMA, SafetySetup, SetpointKind, SwarmSetup, TargetVelocity,
@@ -227,18 +227,8 @@ pub struct Swarm {
     w: Vec<f64>,
     saturated_ticks: u64,
     consensus_ticks: u64,
-    /// Links that may have output queued, each once, served in turn (one datagram a
-    /// turn): a datagram costs O(1), not a scan of every link, and nothing is allocated
-    /// (the queue holds at most every link once).
-    ready: VecDeque<usize>,
-    /// Whether a link is in `ready`.
-    queued: Vec<bool>,
-    /// Link deadlines, earliest first: `(deadline, link)`; an entry whose deadline is not
-    /// `scheduled[link]` any more is stale and skipped. A timer event visits the links
-    /// that are due, not all of them.
-    timers: BinaryHeap<Reverse<(SimTime, usize)>>,
-    /// Each link's deadline as the heap has it.
-    scheduled: Vec<SimTime>,
+    /// Which links have output, and when each is next due.
+    scheduler: LinkScheduler,
     log: EventLog,
     failure: Option<SwarmFailure>,
     isolated: Vec<bool>,
@@ -348,10 +338,7 @@ impl Swarm {
             origin_offsets: vec![None; n],
             saturated_ticks: 0,
             consensus_ticks: 0,
-            ready: VecDeque::with_capacity(n),
-            queued: vec![false; n],
-            timers: (0..n).map(|i| Reverse((SimTime::ZERO, i))).collect(),
-            scheduled: vec![SimTime::ZERO; n],
+            scheduler: LinkScheduler::new(n),
             log: EventLog::default(),
             failure: None,
             isolated: vec![false; n],
@@ -587,17 +574,15 @@ impl Swarm {
     /// When [`Swarm::handle_timeout`] must next be called (never later than needed; a
     /// deadline that moved later may cause one early call).
     pub fn poll_timeout(&self) -> SimTime {
-        self.timers
-            .peek()
-            .map_or(self.next_control, |Reverse((t, _))| {
-                self.next_control.min(*t)
-            })
+        self.scheduler
+            .next_deadline()
+            .map_or(self.next_control, |t| self.next_control.min(t))
     }
 
     /// Whether some link may have a datagram queued ([`Swarm::poll_transmit`] may still
     /// find none).
     pub fn has_output(&self) -> bool {
-        !self.ready.is_empty()
+        self.scheduler.any_output()
     }
 
     /// Gives a sent datagram's buffer back to link `i` (any link will do: the buffer is
@@ -612,15 +597,12 @@ impl Swarm {
     /// The next datagram and the vehicle it is for (round robin over the links).
     pub fn poll_transmit(&mut self) -> Option<(usize, Vec<u8>)> {
         loop {
-            let i = self.ready.pop_front()?;
+            let i = self.scheduler.next_output()?;
             let Some(bytes) = self.links[i].poll_transmit() else {
-                self.queued[i] = false;
                 continue;
             };
             if self.links[i].has_output() {
-                self.ready.push_back(i);
-            } else {
-                self.queued[i] = false;
+                self.scheduler.has_output(i);
             }
             return Some((i, bytes));
         }
@@ -682,27 +664,13 @@ impl Swarm {
             // The law touched every link.
             self.after_all_links(now);
         }
-        while let Some(&Reverse((t, i))) = self.timers.peek() {
-            if t > now {
-                break;
-            }
-            self.timers.pop();
-            if self.scheduled[i] != t {
-                continue; // stale: the link's deadline moved
-            }
-            // Not in the heap any more: scheduled again below.
-            self.scheduled[i] = SimTime::MAX;
+        while let Some(i) = self.scheduler.next_due(now) {
             if now >= self.links[i].poll_timeout() {
                 self.links[i].handle_timeout(now);
             }
+            // Scheduled again here.
             self.after_link(now, i);
-            // A deadline that stays due (nothing for the link to do about it) is looked
-            // at again a millisecond later, not in a loop.
-            if self.scheduled[i] <= now {
-                let later = now + TIMER_GRANULARITY;
-                self.scheduled[i] = later;
-                self.timers.push(Reverse((later, i)));
-            }
+            self.scheduler.defer_if_still_due(i, now, TIMER_GRANULARITY);
         }
     }
 
@@ -723,15 +691,10 @@ impl Swarm {
         {
             self.origin_offsets[i] = Some((origin, self.setup.frame.offset_ned_m(&origin)));
         }
-        if link.has_output() && !self.queued[i] {
-            self.queued[i] = true;
-            self.ready.push_back(i);
+        if link.has_output() {
+            self.scheduler.has_output(i);
         }
-        let t = link.poll_timeout();
-        if t != self.scheduled[i] {
-            self.scheduled[i] = t;
-            self.timers.push(Reverse((t, i)));
-        }
+        self.scheduler.schedule(i, link.poll_timeout());
         self.drain_events_of(now, i);
     }
 
