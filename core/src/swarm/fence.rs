@@ -33,14 +33,13 @@ impl Swarm {
             .map_or(BRAKING_SHARE_WITHOUT_FILTER, |s| s.braking_share);
         let envelope = &self.setup.envelope;
         let mut worst: Option<(usize, f64, nalgebra::Vector3<f64>)> = None;
-        self.fence_band_reached.resize(self.links.len(), false);
         for i in 0..self.links.len() {
             let Some(s) = self.states[i] else { continue };
             if !self.ours_in_air(i) {
                 continue;
             }
             let in_band = setup.fence.vertical_margin_m(s.pos_enu_m.z) >= setup.margin_m;
-            self.fence_band_reached[i] |= in_band;
+            self.slots[i].fence_band_reached |= in_band;
             let model = &self.flown_models[i];
             let braking = share * envelope.horizontal_limit_mps2(0.0, model);
             // Vertically: the smaller of what the thrust limits give up and down.
@@ -57,7 +56,7 @@ impl Swarm {
                 braking,
                 vertical,
             );
-            let margin = if self.fence_band_reached[i] {
+            let margin = if self.slots[i].fence_band_reached {
                 setup.fence.margin_m(stop)
             } else {
                 setup.fence.horizontal_margin_m(stop.xy())
@@ -80,7 +79,7 @@ impl Swarm {
             setup.margin_m,
             if land { "lands" } else { "holds" }
         );
-        self.safety_stats.fence_actions += 1;
+        self.safety.stats.fence_actions += 1;
         self.stop_law(now, StopReason::Fence, land, text);
     }
 }

@@ -196,6 +196,40 @@ pub struct CommonState {
     pub vel_enu_mps: Vector3<f64>,
 }
 
+/// What the swarm keeps of one vehicle between ticks, besides its link and its entries
+/// in the law's arrays (which the pure laws take as slices).
+#[derive(Debug, Clone)]
+struct VehicleSlot {
+    /// Its origin with its NED offset (m) from the common reference, projected once when
+    /// the origin is learnt (not at every use: the projection costs trigonometry).
+    origin_offset: Option<(Geodetic, Vector3<f64>)>,
+    /// Whether it has been inside the fence's altitude band (by its margin): from then on
+    /// the band counts for it (a swarm climbing into the band from the ground is not
+    /// stopped by it).
+    fence_band_reached: bool,
+    /// A non-finite command isolated it (handed to its own Hold).
+    isolated: bool,
+    /// The model flown for it: hover thrust, drag, disturbance and response estimates.
+    flown: FlownModel,
+    /// Its altitude loop's integral.
+    altitude_integral: f64,
+    /// Its vertical command (m/s², up).
+    u_z: f64,
+}
+
+impl VehicleSlot {
+    fn new(flown: FlownModel) -> Self {
+        Self {
+            origin_offset: None,
+            fence_band_reached: false,
+            isolated: false,
+            flown,
+            altitude_integral: 0.0,
+            u_z: 0.0,
+        }
+    }
+}
+
 /// The swarm.
 #[derive(Debug, Clone)]
 pub struct Swarm {
@@ -212,18 +246,9 @@ pub struct Swarm {
     setpoints: Vec<AttitudeThrust>,
     states: Vec<Option<CommonState>>,
     /// The safety filter, its inputs' buffers, what it did, and the closest pair.
-    safety_filter: crate::safety::SafetyFilter,
-    safety_agents: Vec<crate::safety::Agent>,
-    safety_xy: Vec<Vector2<f64>>,
-    safety_stats: SafetyStats,
-    closest_pair: Option<(usize, usize, f64)>,
-    /// Per vehicle: whether it has been inside the fence's altitude band (by its margin):
-    /// from then on the band counts for it (a swarm climbing into the band from the
-    /// ground is not stopped by it).
-    fence_band_reached: Vec<bool>,
-    /// Each link's origin with its NED offset (m) from the common reference, projected
-    /// once when the origin is learnt (not at every use: the projection costs trigonometry).
-    origin_offsets: Vec<Option<(Geodetic, Vector3<f64>)>>,
+    safety: safety::SafetyWork,
+    /// What the swarm keeps of each vehicle besides its link and the law's arrays.
+    slots: Vec<VehicleSlot>,
     w: Vec<f64>,
     saturated_ticks: u64,
     consensus_ticks: u64,
@@ -231,11 +256,7 @@ pub struct Swarm {
     scheduler: LinkScheduler,
     log: EventLog,
     failure: Option<SwarmFailure>,
-    isolated: Vec<bool>,
-    flown: Vec<FlownModel>,
     flown_models: Vec<VehicleModel>,
-    altitude_integral: Vec<f64>,
-    u_z: Vec<f64>,
     keep_velocity: Vec<Option<Vector2<f64>>>,
     mean_velocity_integral: Vector2<f64>,
     all_flying_since: Option<SimTime>,
@@ -292,7 +313,7 @@ impl Swarm {
             setup.envelope.min_thrust_norm().max(0.05),
             setup.envelope.max_thrust_norm().min(0.95),
         );
-        let flown = setup
+        let flown: Vec<FlownModel> = setup
             .models
             .iter()
             .zip(&setup.drag_per_s)
@@ -329,23 +350,14 @@ impl Swarm {
             law_commands: vec![Vector3::zeros(); n],
             setpoints,
             states: vec![None; n],
-            safety_filter: crate::safety::SafetyFilter::default(),
-            safety_agents: Vec::with_capacity(n),
-            safety_xy: Vec::with_capacity(n),
-            safety_stats: SafetyStats::new(),
-            closest_pair: None,
-            fence_band_reached: Vec::new(),
-            origin_offsets: vec![None; n],
+            safety: safety::SafetyWork::new(n),
+            slots: flown.into_iter().map(VehicleSlot::new).collect(),
             saturated_ticks: 0,
             consensus_ticks: 0,
             scheduler: LinkScheduler::new(n),
             log: EventLog::default(),
             failure: None,
-            isolated: vec![false; n],
-            flown,
             flown_models,
-            altitude_integral: vec![0.0; n],
-            u_z: vec![0.0; n],
             keep_velocity: vec![None; n],
             mean_velocity_integral: Vector2::zeros(),
             all_flying_since: None,
@@ -417,13 +429,13 @@ impl Swarm {
     /// Vehicle `i`'s hover thrust estimate and its standard deviation (the configured
     /// hover throttle while the estimator is off).
     pub fn hover_estimate(&self, i: usize) -> Option<(f64, f64)> {
-        self.flown.get(i).map(FlownModel::hover_estimate)
+        self.slots.get(i).map(|s| s.flown.hover_estimate())
     }
 
     /// Vehicle `i`'s drag estimate and its standard deviation (1/s), and the drag fed
     /// forward now (1/s).
     pub fn drag_estimate(&self, i: usize) -> Option<(f64, f64, f64)> {
-        self.flown.get(i).map(|f| {
+        self.slots.get(i).map(|s| &s.flown).map(|f| {
             let (d, std) = f.drag_estimate();
             (d, std, f.drag_fed_forward_per_s())
         })
@@ -433,7 +445,7 @@ impl Swarm {
     /// estimated it last while the vehicle flew on our commands in the air (m/s², ENU;
     /// zero while the observer is off).
     pub fn disturbance_estimate_mps2(&self, i: usize) -> Option<Vector2<f64>> {
-        self.flown.get(i).map(FlownModel::disturbance_seen_mps2)
+        self.slots.get(i).map(|s| s.flown.disturbance_seen_mps2())
     }
 
     /// The model vehicle `i` is flown with now.
@@ -444,7 +456,7 @@ impl Swarm {
     /// Whether vehicle `i` was handed to its own Hold because its command could not be
     /// computed.
     pub fn is_isolated(&self, i: usize) -> bool {
-        self.isolated.get(i).copied().unwrap_or(false)
+        self.slots.get(i).is_some_and(|s| s.isolated)
     }
 
     /// Why the flight stopped, once it has (or is stopping).
@@ -455,7 +467,7 @@ impl Swarm {
     /// Vehicle `i`'s attitude response as measured so far (`None` before enough
     /// commanded motion has been seen, or with acceleration setpoints).
     pub fn attitude_response(&self, i: usize) -> Option<crate::control::AttitudeResponse> {
-        self.flown.get(i).and_then(FlownModel::attitude_response)
+        self.slots.get(i).and_then(|s| s.flown.attitude_response())
     }
 
     /// Whether the divergence guard ended the consensus (`fly` and `demo` exit non-zero).
@@ -545,7 +557,7 @@ impl Swarm {
     pub fn common_state(&self, i: usize) -> Option<CommonState> {
         let state = self.links[i].state();
         let origin = state.origin?;
-        let pos_common_ned_m = match self.origin_offsets[i] {
+        let pos_common_ned_m = match self.slots[i].origin_offset {
             Some((known, offset_ned_m)) if known == origin => offset_ned_m + state.pos_local_ned_m,
             _ => self
                 .setup
@@ -687,9 +699,11 @@ impl Swarm {
             return;
         };
         if let Some(origin) = link.state().origin
-            && self.origin_offsets[i].is_none_or(|(known, _)| known != origin)
+            && self.slots[i]
+                .origin_offset
+                .is_none_or(|(known, _)| known != origin)
         {
-            self.origin_offsets[i] = Some((origin, self.setup.frame.offset_ned_m(&origin)));
+            self.slots[i].origin_offset = Some((origin, self.setup.frame.offset_ned_m(&origin)));
         }
         if link.has_output() {
             self.scheduler.has_output(i);

@@ -4,7 +4,6 @@
 use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
-use super::model::FlownModel;
 use super::{MAX_SPEED_MPS, PlanDecision, Retargeted, Swarm, SwarmPhase, TargetVelocity};
 use crate::consensus::{
     LeastChange, PlanOutcome, PlanRequest, RingDigraph, RingModes, analyze, fastest_mode_per_s,
@@ -205,7 +204,7 @@ impl Swarm {
     /// is the horizontal acceleration the envelope allows at hover (`g·tan θ_max` when
     /// thrust allows). `None` without drag.
     fn vehicle_speed_limit_mps(&self, i: usize) -> Option<f64> {
-        let d = self.flown.get(i).map(FlownModel::drag_best_per_s)?;
+        let d = self.slots.get(i).map(|s| s.flown.drag_best_per_s())?;
         let model = self.flown_models.get(i)?;
         (d > 0.0).then(|| SPEED_MARGIN * self.setup.envelope.horizontal_limit_mps2(0.0, model) / d)
     }

@@ -2,6 +2,7 @@
 //! [`crate::safety::SafetyFilter`] between the law and the saturation, and what it did
 //! counted for `summary.json` and logged.
 
+use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
 use super::{BREACH_SHARE, BreachAction, SafetySetup, StopReason, Swarm, SwarmPhase};
@@ -53,6 +54,29 @@ impl SafetyStats {
     }
 }
 
+/// The safety filter and what it works with: its reused input buffers, its tallies and
+/// the closest pair of the last tick.
+#[derive(Debug, Clone)]
+pub(super) struct SafetyWork {
+    pub(super) filter: crate::safety::SafetyFilter,
+    pub(super) agents: Vec<crate::safety::Agent>,
+    pub(super) xy: Vec<Vector2<f64>>,
+    pub(super) stats: SafetyStats,
+    pub(super) closest_pair: Option<(usize, usize, f64)>,
+}
+
+impl SafetyWork {
+    pub(super) fn new(n: usize) -> Self {
+        Self {
+            filter: crate::safety::SafetyFilter::default(),
+            agents: Vec::with_capacity(n),
+            xy: Vec::with_capacity(n),
+            stats: SafetyStats::new(),
+            closest_pair: None,
+        }
+    }
+}
+
 impl Swarm {
     /// Filters the horizontal commands of the vehicles flown on our commands, in place,
     /// when `[safety]` is on.
@@ -68,19 +92,19 @@ impl Swarm {
                 age_s = age_s.max(self.command_age_s(i, now) - period_s);
             }
         }
-        self.safety_agents.clear();
-        self.safety_xy.clear();
+        self.safety.agents.clear();
+        self.safety.xy.clear();
         for i in 0..self.links.len() {
             let controlled = self.states[i].is_some() && self.ours_in_air(i);
             let model = &self.flown_models[i];
             let envelope = &self.setup.envelope;
             let u_z = envelope.limit_vertical(self.commands[i].z, model);
             let limit = envelope.horizontal_limit_mps2(u_z, model);
-            self.safety_agents.push(Agent {
+            self.safety.agents.push(Agent {
                 side: self.states[i].map(|s| Side {
                     pos_m: s.pos_enu_m,
                     vel_mps: s.vel_enu_mps,
-                    accel_z_mps2: if controlled { self.u_z[i] } else { 0.0 },
+                    accel_z_mps2: if controlled { self.slots[i].u_z } else { 0.0 },
                 }),
                 controlled,
                 weight: if consensus { self.w[i] } else { 1.0 },
@@ -90,7 +114,7 @@ impl Swarm {
                 limit_mps2: limit,
                 braking_mps2: setup.braking_share * limit,
             });
-            self.safety_xy.push(self.commands[i].xy());
+            self.safety.xy.push(self.commands[i].xy());
         }
         let settings = Settings {
             separation: setup.separation,
@@ -98,20 +122,20 @@ impl Swarm {
             keep_weighted_sum: consensus,
             time_limit_s: 0.5 * period_s,
         };
-        let report = self.safety_filter.filter(
+        let report = self.safety.filter.filter(
             &settings,
-            &self.safety_agents,
-            &mut self.safety_xy,
+            &self.safety.agents,
+            &mut self.safety.xy,
             self.setup.fence.as_ref().map(|f| (&f.fence, f.margin_m)),
         );
         let fell_back = matches!(report.outcome, Outcome::Fallback { .. });
-        let stats = &mut self.safety_stats;
+        let stats = &mut self.safety.stats;
         stats.ticks += 1;
         stats.active_ticks += u64::from(report.active > 0);
         if let Some((_, _, d)) = report.closest {
             stats.min_seen_m = stats.min_seen_m.min(d);
         }
-        self.closest_pair = report.closest;
+        self.safety.closest_pair = report.closest;
         match report.outcome {
             Outcome::Untouched => {}
             Outcome::Filtered { sum_kept, relaxed } => {
@@ -148,8 +172,8 @@ impl Swarm {
                 }
             }
         }
-        for (i, xy) in self.safety_xy.iter().enumerate() {
-            if self.safety_agents[i].controlled {
+        for (i, xy) in self.safety.xy.iter().enumerate() {
+            if self.safety.agents[i].controlled {
                 self.commands[i].x = xy.x;
                 self.commands[i].y = xy.y;
             }
@@ -170,7 +194,8 @@ impl Swarm {
         }
         let limit_m = BREACH_SHARE * setup.separation.horizontal_m;
         let closest = self
-            .safety_filter
+            .safety
+            .filter
             .close_pairs(limit_m)
             .min_by(|a, b| a.2.total_cmp(&b.2));
         let what = match closest {
@@ -186,8 +211,8 @@ impl Swarm {
         };
         match setup.action {
             BreachAction::Continue => {
-                if !self.safety_stats.continue_reported {
-                    self.safety_stats.continue_reported = true;
+                if !self.safety.stats.continue_reported {
+                    self.safety.stats.continue_reported = true;
                     self.log.push(
                         now,
                         true,
@@ -200,7 +225,7 @@ impl Swarm {
             BreachAction::Hold | BreachAction::Land => {
                 let land = setup.action == BreachAction::Land;
                 let verb = if land { "lands" } else { "holds" };
-                self.safety_stats.separation_actions += 1;
+                self.safety.stats.separation_actions += 1;
                 let text = format!("safety: {what}: the swarm {verb}");
                 self.stop_law(now, StopReason::Separation, land, text);
             }
@@ -225,7 +250,8 @@ impl Swarm {
             .map_or(0.0, |rtt| rtt.as_secs_f64());
         // A fit beyond a second is no attitude loop a swarm flies with (the emulator's
         // ideal vehicles, which have none, fit 4.5 s): not counted.
-        let response = self.flown[i]
+        let response = self.slots[i]
+            .flown
             .attitude_response()
             .map(|r| r.response_s)
             .filter(|r| (0.0..=MAX_RESPONSE_S).contains(r))
@@ -235,10 +261,10 @@ impl Swarm {
 
     /// Logs every pair that came within the separation (once per entry).
     fn log_pairs_inside(&mut self, now: SimTime, sep: crate::safety::Separation) {
-        let mut inside = std::mem::take(&mut self.safety_stats.inside);
+        let mut inside = std::mem::take(&mut self.safety.stats.inside);
         let mut entered: Vec<(usize, usize, f64)> = Vec::new();
         let mut still = Vec::with_capacity(inside.len());
-        for (i, j, d) in self.safety_filter.close_pairs(sep.horizontal_m) {
+        for (i, j, d) in self.safety.filter.close_pairs(sep.horizontal_m) {
             if !inside.contains(&(i, j)) {
                 entered.push((i, j, d));
             }
@@ -246,7 +272,7 @@ impl Swarm {
         }
         inside.clear();
         inside.extend(still);
-        self.safety_stats.inside = inside;
+        self.safety.stats.inside = inside;
         for (i, j, d) in entered {
             let (a, b) = (self.setup.links[i].system_id, self.setup.links[j].system_id);
             self.log.push(
@@ -264,7 +290,7 @@ impl Swarm {
     /// indices; `i == j` against the fence); empty when it is off or changed nothing.
     pub fn safety_active_rows(&self) -> &[(usize, usize)] {
         if self.setup.safety.is_some() {
-            self.safety_filter.active_rows()
+            self.safety.filter.active_rows()
         } else {
             &[]
         }
@@ -272,12 +298,12 @@ impl Swarm {
 
     /// What the safety filter did so far.
     pub fn safety_stats(&self) -> &SafetyStats {
-        &self.safety_stats
+        &self.safety.stats
     }
 
     /// The closest pair on the last control tick (indices and ellipsoidal distance, m).
     pub fn closest_pair(&self) -> Option<(usize, usize, f64)> {
-        self.closest_pair
+        self.safety.closest_pair
     }
 
     /// The separation the filter enforces (`None`: off).

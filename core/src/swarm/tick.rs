@@ -55,11 +55,11 @@ impl Swarm {
                 s.pos_enu_m.z,
                 s.vel_enu_mps.z,
                 self.setup.altitude_m,
-                self.altitude_integral[i],
+                self.slots[i].altitude_integral,
             );
-            self.u_z[i] = u_z;
-            let drag = s.vel_enu_mps * self.flown[i].drag_fed_forward_per_s();
-            let b = self.flown[i].disturbance_mps2();
+            self.slots[i].u_z = u_z;
+            let drag = s.vel_enu_mps * self.slots[i].flown.drag_fed_forward_per_s();
+            let b = self.slots[i].flown.disturbance_mps2();
             self.commands[i] =
                 Vector3::new(self.accel[i].x - b.x, self.accel[i].y - b.y, u_z) + drag;
         }
@@ -85,7 +85,7 @@ impl Swarm {
         self.integrate_altitude();
         for (i, link) in self.links.iter_mut().enumerate() {
             // No usable state (or isolated): level at hover thrust, never a motor cut.
-            let command = if self.states[i].is_some() && !self.isolated[i] {
+            let command = if self.states[i].is_some() && !self.slots[i].isolated {
                 self.commands[i]
             } else {
                 Vector3::zeros()
@@ -95,9 +95,9 @@ impl Swarm {
             let usable = self.setup.setpoint == SetpointKind::Attitude
                 && link.phase() == Phase::Flying
                 && !link.state().landed
-                && !self.isolated[i]
+                && !self.slots[i].isolated
                 && self.states[i].is_some();
-            self.flown[i].attitude_tick(
+            self.slots[i].flown.attitude_tick(
                 now.as_secs_f64(),
                 &sp.attitude_ned_frd,
                 link.state().attitude,
@@ -128,7 +128,9 @@ impl Swarm {
                         HorizontalDrive::TiltPerVertical(direction.xy() / direction.z.max(0.1))
                     }
                 };
-                self.flown[i].commanded(sp.thrust_norm * tilt_cos(&q), horizontal);
+                self.slots[i]
+                    .flown
+                    .commanded(sp.thrust_norm * tilt_cos(&q), horizontal);
             }
         }
         // The links' events are drained by `handle_timeout` right after.
@@ -137,7 +139,7 @@ impl Swarm {
     /// Whether vehicle `i` flies on our commands in the air now.
     pub(super) fn ours_in_air(&self, i: usize) -> bool {
         let link = &self.links[i];
-        link.phase() == Phase::Flying && !link.state().landed && !self.isolated[i]
+        link.phase() == Phase::Flying && !link.state().landed && !self.slots[i].isolated
     }
 
     /// Feeds each vehicle's hover thrust estimator with its latest report and takes the
@@ -145,13 +147,13 @@ impl Swarm {
     fn observe_models(&mut self, now: SimTime) {
         for i in 0..self.links.len() {
             let ours = self.ours_in_air(i);
-            let trusted = self.flown[i].trusted();
-            let drag_trusted = self.flown[i].drag_trusted();
+            let trusted = self.slots[i].flown.trusted();
+            let drag_trusted = self.slots[i].flown.drag_trusted();
             if let (Some(s), Some(at)) = (self.states[i], self.links[i].state().last_position) {
-                self.flown[i].observe(at, s.vel_enu_mps, ours);
+                self.slots[i].flown.observe(at, s.vel_enu_mps, ours);
             }
-            if !drag_trusted && self.flown[i].drag_trusted() {
-                let (drag, std) = self.flown[i].drag_estimate();
+            if !drag_trusted && self.slots[i].flown.drag_trusted() {
+                let (drag, std) = self.slots[i].flown.drag_estimate();
                 self.log.push_vehicle(
                     now,
                     &self.setup.links[i],
@@ -162,8 +164,8 @@ impl Swarm {
                     ),
                 );
             }
-            if !trusted && self.flown[i].trusted() {
-                let (hover, std) = self.flown[i].hover_estimate();
+            if !trusted && self.slots[i].flown.trusted() {
+                let (hover, std) = self.slots[i].flown.hover_estimate();
                 self.log.push_vehicle(
                     now,
                     &self.setup.links[i],
@@ -174,7 +176,7 @@ impl Swarm {
                     ),
                 );
             }
-            self.flown_models[i] = self.flown[i].model();
+            self.flown_models[i] = self.slots[i].flown.model();
         }
     }
 
@@ -190,11 +192,11 @@ impl Swarm {
             if !self.ours_in_air(i) {
                 continue;
             }
-            let drag = self.flown[i].drag_fed_forward_per_s();
+            let drag = self.slots[i].flown.drag_fed_forward_per_s();
             let saturated =
-                (self.commands[i].z - self.u_z[i] - s.vel_enu_mps.z * drag).abs() > 1e-9;
-            self.altitude_integral[i] = self.setup.altitude_gains.integrate(
-                self.altitude_integral[i],
+                (self.commands[i].z - self.slots[i].u_z - s.vel_enu_mps.z * drag).abs() > 1e-9;
+            self.slots[i].altitude_integral = self.setup.altitude_gains.integrate(
+                self.slots[i].altitude_integral,
                 s.pos_enu_m.z,
                 self.setup.altitude_m,
                 dt,
@@ -211,8 +213,8 @@ impl Swarm {
                 continue;
             }
             self.commands[i] = Vector3::zeros();
-            if !self.isolated[i] {
-                self.isolated[i] = true;
+            if !self.slots[i].isolated {
+                self.slots[i].isolated = true;
                 let reason = format!("{what} is not a finite number: isolated");
                 self.log
                     .push_vehicle(now, &self.setup.links[i], true, reason.clone());
