@@ -34,13 +34,15 @@ impl Swarm {
         let envelope = &self.setup.envelope;
         let mut worst: Option<(usize, f64, nalgebra::Vector3<f64>)> = None;
         for i in 0..self.links.len() {
-            let Some(s) = self.states[i] else { continue };
+            let Some(s) = self.law.states[i] else {
+                continue;
+            };
             if !self.ours_in_air(i) {
                 continue;
             }
             let in_band = setup.fence.vertical_margin_m(s.pos_enu_m.z) >= setup.margin_m;
             self.slots[i].fence_band_reached |= in_band;
-            let model = &self.flown_models[i];
+            let model = &self.law.flown_models[i];
             let braking = share * envelope.horizontal_limit_mps2(0.0, model);
             // Vertically: the smaller of what the thrust limits give up and down.
             let up = envelope.limit_vertical(f64::INFINITY, model);

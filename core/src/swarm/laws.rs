@@ -44,11 +44,11 @@ impl Swarm {
                 ring_accelerations(
                     &self.setup.ring,
                     self.setup.gains,
-                    &self.horizontal,
-                    &mut self.accel,
+                    &self.law.horizontal,
+                    &mut self.law.accel,
                 );
                 if let Some(correction) = self.mean_velocity_correction(dt_s) {
-                    self.accel.iter_mut().for_each(|a| *a += correction);
+                    self.law.accel.iter_mut().for_each(|a| *a += correction);
                 }
                 self.setup.saturation
             }
@@ -57,10 +57,11 @@ impl Swarm {
             | SwarmPhase::Landing(_)
             | SwarmPhase::Stopped(_) => {
                 for ((a, h), hold) in self
+                    .law
                     .accel
                     .iter_mut()
-                    .zip(&self.horizontal)
-                    .zip(&mut self.hold_points)
+                    .zip(&self.law.horizontal)
+                    .zip(&mut self.law.hold_points)
                 {
                     if hold.is_none() && h.vel_mps.norm() < HOLD_CAPTURE_MPS {
                         *hold = Some(h.pos_m);
@@ -71,12 +72,12 @@ impl Swarm {
                 SaturationMode::Clip
             }
             SwarmPhase::Handshake => {
-                for i in 0..self.accel.len() {
-                    if self.keep_velocity[i].is_none()
-                        && self.states[i].is_some()
+                for i in 0..self.law.accel.len() {
+                    if self.law.keep_velocity[i].is_none()
+                        && self.law.states[i].is_some()
                         && self.ours_in_air(i)
                     {
-                        self.keep_velocity[i] = Some(self.horizontal[i].vel_mps);
+                        self.law.keep_velocity[i] = Some(self.law.horizontal[i].vel_mps);
                     }
                 }
                 self.keep_velocities();
@@ -86,7 +87,8 @@ impl Swarm {
                 self.keep_velocities();
                 if let Some(PlanDecision::Planned { retarget, .. }) = &self.plan {
                     for &(agent, v) in retarget {
-                        self.accel[agent] = RETARGET_K_V * (v - self.horizontal[agent].vel_mps);
+                        self.law.accel[agent] =
+                            RETARGET_K_V * (v - self.law.horizontal[agent].vel_mps);
                     }
                 }
                 SaturationMode::Clip
@@ -98,10 +100,11 @@ impl Swarm {
     /// others.
     fn keep_velocities(&mut self) {
         for ((a, h), keep) in self
+            .law
             .accel
             .iter_mut()
-            .zip(&self.horizontal)
-            .zip(&self.keep_velocity)
+            .zip(&self.law.horizontal)
+            .zip(&self.law.keep_velocity)
         {
             *a = keep.map_or(Vector2::zeros(), |v| KEEP_K_V * (v - h.vel_mps));
         }
@@ -110,14 +113,15 @@ impl Swarm {
     /// The w-weighted mean velocity `Σwᵢvᵢ / Σwᵢ` of the states flown on this tick (m/s,
     /// ENU); `None` when the weights sum to zero.
     pub(super) fn weighted_mean_velocity(&self) -> Option<Vector2<f64>> {
-        let total: f64 = self.w.iter().sum();
+        let total: f64 = self.law.w.iter().sum();
         if total.abs() < 1e-12 {
             return None;
         }
         let sum = self
+            .law
             .w
             .iter()
-            .zip(&self.horizontal)
+            .zip(&self.law.horizontal)
             .map(|(w, h)| *w * h.vel_mps)
             .sum::<Vector2<f64>>();
         Some(sum / total)

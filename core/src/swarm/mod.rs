@@ -196,6 +196,36 @@ pub struct CommonState {
     pub vel_enu_mps: Vector3<f64>,
 }
 
+/// The law's inputs and outputs, an entry per vehicle in the links' order: arrays, because
+/// the pure laws (consensus, saturation, the safety filter) take them as slices.
+#[derive(Debug, Clone)]
+struct LawArrays {
+    /// The ring's weights `w_i` (the prediction is Σ wᵢ vᵢ / Σ wᵢ).
+    w: Vec<f64>,
+    /// Each vehicle's fresh state in the common frame, `None` when stale or unknown.
+    states: Vec<Option<CommonState>>,
+    /// Horizontal position, velocity and formation offset, as the law reads them.
+    horizontal: Vec<HorizontalState>,
+    /// The horizontal law's output (m/s², ENU).
+    accel: Vec<Vector2<f64>>,
+    /// Each command after the saturation and the safety filter (m/s², ENU, z up).
+    commands: Vec<Vector3<f64>>,
+    /// Each vehicle's command as the law gave it, before the saturation.
+    law_commands: Vec<Vector3<f64>>,
+    /// The attitude and thrust streamed to each vehicle.
+    setpoints: Vec<AttitudeThrust>,
+    /// The vehicle model each command is made for (the configured one, corrected by
+    /// the flown estimates).
+    flown_models: Vec<VehicleModel>,
+    /// The velocity each vehicle holds while the swarm waits for the others (taken when
+    /// it first flies on our commands), and the re-target stage's planned velocity.
+    keep_velocity: Vec<Option<Vector2<f64>>>,
+    /// Where a holding vehicle holds.
+    hold_points: Vec<Option<Vector2<f64>>>,
+    /// Each vehicle's horizontal box in the saturation, kept between ticks.
+    boxes: Vec<Vector2<f64>>,
+}
+
 /// What the swarm keeps of one vehicle between ticks, besides its link and its entries
 /// in the law's arrays (which the pure laws take as slices).
 #[derive(Debug, Clone)]
@@ -238,26 +268,18 @@ pub struct Swarm {
     phase: SwarmPhase,
     next_control: SimTime,
     predicted_final_velocity: Option<Vector2<f64>>,
-    horizontal: Vec<HorizontalState>,
-    accel: Vec<Vector2<f64>>,
-    commands: Vec<Vector3<f64>>,
-    /// Each vehicle's command as the law gave it, before the saturation.
-    law_commands: Vec<Vector3<f64>>,
-    setpoints: Vec<AttitudeThrust>,
-    states: Vec<Option<CommonState>>,
     /// The safety filter, its inputs' buffers, what it did, and the closest pair.
     safety: safety::SafetyWork,
     /// What the swarm keeps of each vehicle besides its link and the law's arrays.
     slots: Vec<VehicleSlot>,
-    w: Vec<f64>,
+    /// The law's inputs and outputs, an entry per vehicle.
+    law: LawArrays,
     saturated_ticks: u64,
     consensus_ticks: u64,
     /// Which links have output, and when each is next due.
     scheduler: LinkScheduler,
     log: EventLog,
     failure: Option<SwarmFailure>,
-    flown_models: Vec<VehicleModel>,
-    keep_velocity: Vec<Option<Vector2<f64>>>,
     mean_velocity_integral: Vector2<f64>,
     all_flying_since: Option<SimTime>,
     first_consensus: Option<SimTime>,
@@ -265,7 +287,6 @@ pub struct Swarm {
     /// consensus): a swarm that holds before consensus ever started (a vehicle lost in
     /// the re-target stage) ends its flight the duration after this.
     first_law: Option<SimTime>,
-    hold_points: Vec<Option<Vector2<f64>>>,
     control_ticks: u64,
     plan: Option<PlanDecision>,
     timing: timing::TickTiming,
@@ -273,8 +294,6 @@ pub struct Swarm {
     listen_lag: Duration,
     /// Since when a control tick has waited for a stall's unread datagrams.
     tick_due_since: Option<SimTime>,
-    /// Each vehicle's horizontal box in the saturation, kept between ticks.
-    boxes: Vec<Vector2<f64>>,
     /// The divergence guard, if on.
     guard: Option<DivergenceGuard>,
     /// Why the flight stopped (or is stopping), once it does.
@@ -338,18 +357,24 @@ impl Swarm {
         let setup_interval = setup.control_interval;
         let setup_guard = setup.guard;
         Self {
-            w,
+            law: LawArrays {
+                w,
+                horizontal: vec![HorizontalState::default(); n],
+                accel: vec![Vector2::zeros(); n],
+                commands: vec![Vector3::zeros(); n],
+                law_commands: vec![Vector3::zeros(); n],
+                setpoints,
+                states: vec![None; n],
+                flown_models,
+                keep_velocity: vec![None; n],
+                hold_points: vec![None; n],
+                boxes: Vec::with_capacity(n),
+            },
             setup,
             links,
             phase: SwarmPhase::Handshake,
             next_control: SimTime::ZERO,
             predicted_final_velocity: None,
-            horizontal: vec![HorizontalState::default(); n],
-            accel: vec![Vector2::zeros(); n],
-            commands: vec![Vector3::zeros(); n],
-            law_commands: vec![Vector3::zeros(); n],
-            setpoints,
-            states: vec![None; n],
             safety: safety::SafetyWork::new(n),
             slots: flown.into_iter().map(VehicleSlot::new).collect(),
             saturated_ticks: 0,
@@ -357,19 +382,15 @@ impl Swarm {
             scheduler: LinkScheduler::new(n),
             log: EventLog::default(),
             failure: None,
-            flown_models,
-            keep_velocity: vec![None; n],
             mean_velocity_integral: Vector2::zeros(),
             all_flying_since: None,
             first_consensus: None,
             first_law: None,
-            hold_points: vec![None; n],
             control_ticks: 0,
             plan: None,
             timing: timing::TickTiming::new(setup_interval),
             listen_lag: Duration::ZERO,
             tick_due_since: None,
-            boxes: Vec::with_capacity(n),
             guard: setup_guard.map(DivergenceGuard::new),
             stop: None,
         }
@@ -450,7 +471,7 @@ impl Swarm {
 
     /// The model vehicle `i` is flown with now.
     pub fn flown_model(&self, i: usize) -> Option<VehicleModel> {
-        self.flown_models.get(i).copied()
+        self.law.flown_models.get(i).copied()
     }
 
     /// Whether vehicle `i` was handed to its own Hold because its command could not be
@@ -494,7 +515,7 @@ impl Swarm {
         if land {
             self.land_because(now, reason);
         } else {
-            self.hold_points.iter_mut().for_each(|p| *p = None);
+            self.law.hold_points.iter_mut().for_each(|p| *p = None);
             self.phase = SwarmPhase::Stopped(now);
         }
     }
@@ -538,18 +559,18 @@ impl Swarm {
 
     /// The last accelerations commanded (m/s², ENU), after saturation.
     pub fn commands(&self) -> &[Vector3<f64>] {
-        &self.commands
+        &self.law.commands
     }
 
     /// Whether the saturation changed vehicle `i`'s command on the last control tick (the
     /// envelope limited it).
     pub fn command_limited(&self, i: usize) -> bool {
-        self.law_commands.get(i) != self.commands.get(i)
+        self.law.law_commands.get(i) != self.law.commands.get(i)
     }
 
     /// The last attitude and thrust setpoint of each vehicle.
     pub fn setpoints(&self) -> &[AttitudeThrust] {
-        &self.setpoints
+        &self.law.setpoints
     }
 
     /// Vehicle `i` in the common frame, once its origin is known (whatever the age of its

@@ -28,7 +28,7 @@ impl Swarm {
     /// Every vehicle within [`PLAN_ALTITUDE_M`] of the commanded altitude and slower than
     /// [`PLAN_CLIMB_MPS`] vertically.
     fn level_at_altitude(&self) -> bool {
-        self.states.iter().all(|s| {
+        self.law.states.iter().all(|s| {
             s.is_some_and(|s| {
                 (s.pos_enu_m.z - self.setup.altitude_m).abs() < PLAN_ALTITUDE_M
                     && s.vel_enu_mps.z.abs() < PLAN_CLIMB_MPS
@@ -39,12 +39,12 @@ impl Swarm {
     /// Moves between phases; runs at the start of every control tick.
     pub(super) fn transition(&mut self, now: SimTime) {
         let all_flying = self.links.iter().all(|l| l.phase() == Phase::Flying)
-            && self.states.iter().all(Option::is_some);
+            && self.law.states.iter().all(Option::is_some);
         // A vehicle taken out of OFFBOARD (pilot, its failsafe) counts as lost: it never
         // comes back on its own, so the swarm holds (or lands) until told otherwise. So
         // does one that flies on a position too old to use, or that was handed to its own
         // Hold.
-        let any_lost = self.links.iter().zip(&self.states).any(|(l, s)| {
+        let any_lost = self.links.iter().zip(&self.law.states).any(|(l, s)| {
             matches!(
                 l.phase(),
                 Phase::Lost | Phase::Overridden | Phase::VehicleHold
@@ -88,7 +88,8 @@ impl Swarm {
                 let tolerance = self.setup.target.map_or(0.05, |t| t.tolerance_mps);
                 let target = self.setup.target.map(|t| t.velocity_mps);
                 let off = |&(agent, v): &(usize, Vector2<f64>)| {
-                    self.states[agent].map_or(f64::INFINITY, |s| (s.vel_enu_mps.xy() - v).norm())
+                    self.law.states[agent]
+                        .map_or(f64::INFINITY, |s| (s.vel_enu_mps.xy() - v).norm())
                 };
                 let worst = retarget
                     .iter()
@@ -99,8 +100,8 @@ impl Swarm {
                 // velocity only starts the formation from a little further away.
                 // Held to the re-targeted agents' share of the weights, the bound on the
                 // prediction is what one agent within `tolerance` would give.
-                let total: f64 = self.w.iter().sum();
-                let share: f64 = retarget.iter().map(|(a, _)| self.w[*a]).sum::<f64>() / total;
+                let total: f64 = self.law.w.iter().sum();
+                let share: f64 = retarget.iter().map(|(a, _)| self.law.w[*a]).sum::<f64>() / total;
                 let mean = self.weighted_mean_velocity();
                 let mean_off = match (mean, target) {
                     (Some(m), Some(t)) => (m - t).norm(),
@@ -119,7 +120,7 @@ impl Swarm {
                     }
                     Some((_, (agent, v))) if now.saturating_since(since) >= timeout => {
                         let at =
-                            self.states[agent].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
+                            self.law.states[agent].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
                         let m = mean.unwrap_or_default();
                         self.log.push_vehicle(
                             now,
@@ -156,7 +157,7 @@ impl Swarm {
                             true,
                             "a vehicle is lost: the others brake and hold".to_owned(),
                         );
-                        self.hold_points.iter_mut().for_each(|p| *p = None);
+                        self.law.hold_points.iter_mut().for_each(|p| *p = None);
                         self.phase = SwarmPhase::Holding(now);
                     }
                     LossPolicy::Land => {
@@ -190,7 +191,7 @@ impl Swarm {
         let not_flying: Vec<(u8, &'static str)> = self
             .links
             .iter()
-            .zip(&self.states)
+            .zip(&self.law.states)
             .zip(&self.setup.links)
             .filter(|((l, s), _)| l.phase() != Phase::Flying || s.is_none())
             .map(|((l, s), cfg)| {
@@ -221,6 +222,7 @@ impl Swarm {
         self.first_consensus.get_or_insert(now);
         self.first_law.get_or_insert(now);
         let v0: Vec<Vector2<f64>> = self
+            .law
             .states
             .iter()
             .flatten()
@@ -255,8 +257,9 @@ impl Swarm {
         let Some(guard) = self.guard.as_mut() else {
             return;
         };
-        let formation = formation_error_m(self.horizontal.iter().map(|h| h.pos_m - h.offset_m));
+        let formation = formation_error_m(self.law.horizontal.iter().map(|h| h.pos_m - h.offset_m));
         let spread = self
+            .law
             .horizontal
             .iter()
             .map(|h| (h.vel_mps - mean).norm())
@@ -280,7 +283,7 @@ impl Swarm {
             EndAction::Hold => {
                 self.log
                     .push(now, false, "duration over: holding".to_owned());
-                self.hold_points.iter_mut().for_each(|p| *p = None);
+                self.law.hold_points.iter_mut().for_each(|p| *p = None);
                 self.phase = SwarmPhase::Ended(now);
             }
         }

@@ -19,19 +19,20 @@ impl Swarm {
             return;
         };
         let velocities: Vec<Vector2<f64>> = self
+            .law
             .states
             .iter()
             .flatten()
             .map(|s| s.vel_enu_mps.xy())
             .collect();
         // Stage 1: the others keep these velocities, with feedback.
-        for (keep, v) in self.keep_velocity.iter_mut().zip(&velocities) {
+        for (keep, v) in self.law.keep_velocity.iter_mut().zip(&velocities) {
             *keep = Some(*v);
         }
         let decision = match self.planned_ring(&target, velocities) {
             Ok((ring, retarget)) => {
                 let k = ring.k();
-                self.w = (0..self.links.len()).map(|i| ring.w(i)).collect();
+                self.law.w = (0..self.links.len()).map(|i| ring.w(i)).collect();
                 self.setup.ring = ring;
                 PlanDecision::Planned { k, retarget }
             }
@@ -51,7 +52,7 @@ impl Swarm {
             }
             for (j, (agent, v)) in retarget.iter().enumerate() {
                 let sep = if j == 0 { "" } else { ", " };
-                let was = self.keep_velocity[*agent].unwrap_or_default();
+                let was = self.law.keep_velocity[*agent].unwrap_or_default();
                 text.push_str(&format!(
                     "{sep}vehicle {} re-targeted to ({:.3}, {:.3}) m/s (by {:.3} m/s)",
                     self.setup.links[*agent].system_id,
@@ -205,7 +206,7 @@ impl Swarm {
     /// thrust allows). `None` without drag.
     fn vehicle_speed_limit_mps(&self, i: usize) -> Option<f64> {
         let d = self.slots.get(i).map(|s| s.flown.drag_best_per_s())?;
-        let model = self.flown_models.get(i)?;
+        let model = self.law.flown_models.get(i)?;
         (d > 0.0).then(|| SPEED_MARGIN * self.setup.envelope.horizontal_limit_mps2(0.0, model) / d)
     }
 }

@@ -88,33 +88,33 @@ impl Swarm {
         let period_s = self.setup.control_interval.as_secs_f64();
         let mut age_s: f64 = 0.0;
         for i in 0..self.links.len() {
-            if self.states[i].is_some() && self.ours_in_air(i) {
+            if self.law.states[i].is_some() && self.ours_in_air(i) {
                 age_s = age_s.max(self.command_age_s(i, now) - period_s);
             }
         }
         self.safety.agents.clear();
         self.safety.xy.clear();
         for i in 0..self.links.len() {
-            let controlled = self.states[i].is_some() && self.ours_in_air(i);
-            let model = &self.flown_models[i];
+            let controlled = self.law.states[i].is_some() && self.ours_in_air(i);
+            let model = &self.law.flown_models[i];
             let envelope = &self.setup.envelope;
-            let u_z = envelope.limit_vertical(self.commands[i].z, model);
+            let u_z = envelope.limit_vertical(self.law.commands[i].z, model);
             let limit = envelope.horizontal_limit_mps2(u_z, model);
             self.safety.agents.push(Agent {
-                side: self.states[i].map(|s| Side {
+                side: self.law.states[i].map(|s| Side {
                     pos_m: s.pos_enu_m,
                     vel_mps: s.vel_enu_mps,
                     accel_z_mps2: if controlled { self.slots[i].u_z } else { 0.0 },
                 }),
                 controlled,
-                weight: if consensus { self.w[i] } else { 1.0 },
+                weight: if consensus { self.law.w[i] } else { 1.0 },
                 // What the command holds besides the law's acceleration (the drag fed
                 // forward less the disturbance taken off), from before the saturation.
-                drift_mps2: self.law_commands[i].xy() - self.accel[i],
+                drift_mps2: self.law.law_commands[i].xy() - self.law.accel[i],
                 limit_mps2: limit,
                 braking_mps2: setup.braking_share * limit,
             });
-            self.safety.xy.push(self.commands[i].xy());
+            self.safety.xy.push(self.law.commands[i].xy());
         }
         let settings = Settings {
             separation: setup.separation,
@@ -174,8 +174,8 @@ impl Swarm {
         }
         for (i, xy) in self.safety.xy.iter().enumerate() {
             if self.safety.agents[i].controlled {
-                self.commands[i].x = xy.x;
-                self.commands[i].y = xy.y;
+                self.law.commands[i].x = xy.x;
+                self.law.commands[i].y = xy.y;
             }
         }
         self.log_pairs_inside(now, setup.separation);

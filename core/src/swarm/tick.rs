@@ -30,7 +30,7 @@ impl Swarm {
             {
                 self.timing.state_age(at, now);
             }
-            self.states[i] = if self.links[i].state_fresh(now) {
+            self.law.states[i] = if self.links[i].state_fresh(now) {
                 self.common_state(i)
             } else {
                 None
@@ -38,9 +38,9 @@ impl Swarm {
         }
         self.transition(now);
         self.observe_models(now);
-        for (i, state) in self.states.iter().enumerate() {
+        for (i, state) in self.law.states.iter().enumerate() {
             let s = state.unwrap_or_default();
-            self.horizontal[i] = HorizontalState {
+            self.law.horizontal[i] = HorizontalState {
                 pos_m: s.pos_enu_m.xy(),
                 vel_mps: s.vel_enu_mps.xy(),
                 offset_m: self.setup.offsets_m[i],
@@ -49,7 +49,7 @@ impl Swarm {
         self.watch_divergence(now);
         self.watch_fence(now);
         let saturation = self.horizontal_law();
-        for (i, state) in self.states.iter().enumerate() {
+        for (i, state) in self.law.states.iter().enumerate() {
             let s = state.unwrap_or_default();
             let u_z = self.setup.altitude_gains.acceleration_with(
                 s.pos_enu_m.z,
@@ -60,18 +60,18 @@ impl Swarm {
             self.slots[i].u_z = u_z;
             let drag = s.vel_enu_mps * self.slots[i].flown.drag_fed_forward_per_s();
             let b = self.slots[i].flown.disturbance_mps2();
-            self.commands[i] =
-                Vector3::new(self.accel[i].x - b.x, self.accel[i].y - b.y, u_z) + drag;
+            self.law.commands[i] =
+                Vector3::new(self.law.accel[i].x - b.x, self.law.accel[i].y - b.y, u_z) + drag;
         }
         self.isolate_non_finite(now, "the law's command");
-        self.law_commands.copy_from_slice(&self.commands);
+        self.law.law_commands.copy_from_slice(&self.law.commands);
         if let Ok(summary) = saturate_with(
             saturation,
             &self.setup.envelope,
-            &self.flown_models,
-            &self.w,
-            &mut self.commands,
-            &mut self.boxes,
+            &self.law.flown_models,
+            &self.law.w,
+            &mut self.law.commands,
+            &mut self.law.boxes,
         ) && matches!(self.phase, SwarmPhase::Consensus(_))
         {
             self.consensus_ticks += 1;
@@ -85,25 +85,25 @@ impl Swarm {
         self.integrate_altitude();
         for (i, link) in self.links.iter_mut().enumerate() {
             // No usable state (or isolated): level at hover thrust, never a motor cut.
-            let command = if self.states[i].is_some() && !self.slots[i].isolated {
-                self.commands[i]
+            let command = if self.law.states[i].is_some() && !self.slots[i].isolated {
+                self.law.commands[i]
             } else {
                 Vector3::zeros()
             };
-            let sp = attitude_thrust_from_acceleration(command, 0.0, &self.flown_models[i]);
-            self.setpoints[i] = sp;
+            let sp = attitude_thrust_from_acceleration(command, 0.0, &self.law.flown_models[i]);
+            self.law.setpoints[i] = sp;
             let usable = self.setup.setpoint == SetpointKind::Attitude
                 && link.phase() == Phase::Flying
                 && !link.state().landed
                 && !self.slots[i].isolated
-                && self.states[i].is_some();
+                && self.law.states[i].is_some();
             self.slots[i].flown.attitude_tick(
                 now.as_secs_f64(),
                 &sp.attitude_ned_frd,
                 link.state().attitude,
                 usable,
             );
-            if self.states[i].is_some() || link.phase() == Phase::Flying {
+            if self.law.states[i].is_some() || link.phase() == Phase::Flying {
                 match self.setup.setpoint {
                     SetpointKind::Attitude => link.set_setpoint(now, sp),
                     SetpointKind::Acceleration => {
@@ -121,7 +121,7 @@ impl Swarm {
                 let horizontal = match self.setup.setpoint {
                     SetpointKind::Attitude => {
                         let specific =
-                            sp.thrust_norm * self.flown_models[i].max_specific_thrust_mps2();
+                            sp.thrust_norm * self.law.flown_models[i].max_specific_thrust_mps2();
                         HorizontalDrive::Acceleration(specific * direction.xy())
                     }
                     SetpointKind::Acceleration => {
@@ -149,7 +149,7 @@ impl Swarm {
             let ours = self.ours_in_air(i);
             let trusted = self.slots[i].flown.trusted();
             let drag_trusted = self.slots[i].flown.drag_trusted();
-            if let (Some(s), Some(at)) = (self.states[i], self.links[i].state().last_position) {
+            if let (Some(s), Some(at)) = (self.law.states[i], self.links[i].state().last_position) {
                 self.slots[i].flown.observe(at, s.vel_enu_mps, ours);
             }
             if !drag_trusted && self.slots[i].flown.drag_trusted() {
@@ -176,7 +176,7 @@ impl Swarm {
                     ),
                 );
             }
-            self.flown_models[i] = self.slots[i].flown.model();
+            self.law.flown_models[i] = self.slots[i].flown.model();
         }
     }
 
@@ -188,13 +188,15 @@ impl Swarm {
         }
         let dt = self.setup.control_interval.as_secs_f64();
         for i in 0..self.links.len() {
-            let Some(s) = self.states[i] else { continue };
+            let Some(s) = self.law.states[i] else {
+                continue;
+            };
             if !self.ours_in_air(i) {
                 continue;
             }
             let drag = self.slots[i].flown.drag_fed_forward_per_s();
             let saturated =
-                (self.commands[i].z - self.slots[i].u_z - s.vel_enu_mps.z * drag).abs() > 1e-9;
+                (self.law.commands[i].z - self.slots[i].u_z - s.vel_enu_mps.z * drag).abs() > 1e-9;
             self.slots[i].altitude_integral = self.setup.altitude_gains.integrate(
                 self.slots[i].altitude_integral,
                 s.pos_enu_m.z,
@@ -208,11 +210,11 @@ impl Swarm {
     /// Isolates every vehicle whose command is not finite: zero acceleration (level at
     /// hover thrust) and its own Hold, for good.
     fn isolate_non_finite(&mut self, now: SimTime, what: &str) {
-        for i in 0..self.commands.len() {
-            if self.commands[i].iter().all(|x| x.is_finite()) {
+        for i in 0..self.law.commands.len() {
+            if self.law.commands[i].iter().all(|x| x.is_finite()) {
                 continue;
             }
-            self.commands[i] = Vector3::zeros();
+            self.law.commands[i] = Vector3::zeros();
             if !self.slots[i].isolated {
                 self.slots[i].isolated = true;
                 let reason = format!("{what} is not a finite number: isolated");
