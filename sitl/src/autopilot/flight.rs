@@ -23,7 +23,7 @@
 use nalgebra::{Vector2, Vector3};
 
 use super::Vehicle;
-use super::mission_run::MissionRun;
+use super::mission_run::{MissionRun, bearing};
 use super::mode::FlightMode;
 use crate::position_control::{TrajectorySetpoint, wrap_pi};
 use crate::time::SimTime;
@@ -131,12 +131,6 @@ pub(super) fn stop_point(pos: Vector3<f64>, vel: Vector3<f64>, limits: &Limits) 
         Vector2::zeros()
     };
     pos + Vector3::new(xy_stop.x, xy_stop.y, brake(vel.z, limits.acc_z_mps2))
-}
-
-/// The heading from `from` to `to` (rad), or `None` when they are within a metre.
-pub(super) fn bearing(from: Vector2<f64>, to: Vector2<f64>) -> Option<f64> {
-    let d = to - from;
-    (d.norm() > 1.0).then(|| d.y.atan2(d.x))
 }
 
 impl Vehicle {

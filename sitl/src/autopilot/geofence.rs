@@ -26,7 +26,7 @@ use std::time::Duration;
 use mavlink::dialects::common::{MavMissionResult, MavSeverity};
 use ringswarm_wire::geo::{Geodetic, MapProjection};
 
-use super::mission::{MissionItem, cmd};
+use super::mission_item::{MissionItem, cmd};
 use super::{FlightMode, Vehicle};
 use crate::time::SimTime;
 
@@ -259,7 +259,7 @@ impl Vehicle {
         self.geofence.crc = if items.is_empty() {
             0
         } else {
-            super::mission::crc_of(&items)
+            super::mission_item::crc_of(&items)
         };
         let home = self.home_geodetic();
         let here = self.position_geodetic();

@@ -19,16 +19,21 @@
 //! acceptance radius. Altitudes of relative frames are above home (the start point on
 //! the ground).
 
-use nalgebra::Vector3;
+use nalgebra::{Vector2, Vector3};
 
 use super::Vehicle;
-use super::flight::bearing;
-use super::mission::{MissionItem, cmd};
+use super::mission_item::{MissionItem, cmd};
 use super::mode::FlightMode;
 use super::tuning::seconds;
 use crate::position_control::TrajectorySetpoint;
 use crate::time::SimTime;
 use crate::trajectory::Approach;
+
+/// The heading from `from` to `to` (rad), or `None` when they are within a metre.
+pub(super) fn bearing(from: Vector2<f64>, to: Vector2<f64>) -> Option<f64> {
+    let d = to - from;
+    (d.norm() > 1.0).then(|| d.y.atan2(d.x))
+}
 
 /// PX4's MIS_YAW_ERR: how close the heading must be for an item with a yaw (rad).
 const YAW_ACCEPTANCE_RAD: f64 = 12.0 * std::f64::consts::PI / 180.0;

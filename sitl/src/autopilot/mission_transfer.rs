@@ -26,7 +26,7 @@ use mavlink::dialects::common::{
 };
 
 use super::geofence::{MAX_FENCE_ITEMS, check_fence_item};
-use super::mission::{MissionItem, check_item, item_from_int, mav_cmd};
+use super::mission_item::{MissionItem, check_item, item_from_int, mav_cmd};
 use super::{LinkId, Vehicle};
 use crate::time::SimTime;
 

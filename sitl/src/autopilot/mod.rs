@@ -33,6 +33,7 @@ mod flight;
 mod geofence;
 mod inbound;
 mod mission;
+mod mission_item;
 mod mission_run;
 mod mission_transfer;
 mod mode;
@@ -52,7 +53,8 @@ use rand_distr::StandardNormal;
 
 pub use config::{BatteryConfig, StartState, VehicleConfig, WindConfig};
 pub use geofence::Geofence;
-pub use mission::{MissionItem, MissionStore};
+pub use mission::MissionStore;
+pub use mission_item::MissionItem;
 pub use mode::FlightMode;
 
 use crate::codec::Encoder;

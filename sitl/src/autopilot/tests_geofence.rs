@@ -233,7 +233,7 @@ fn a_bad_fence_item_gets_its_error_and_leaves_the_fence_unchanged() {
     );
     assert_eq!(
         rig.vehicle.geofence().items(),
-        &[mission::item_from_int(&circle())]
+        &[mission_item::item_from_int(&circle())]
     );
     // More than PX4's 64 fence points: refused at the count.
     rig.received.clear();
