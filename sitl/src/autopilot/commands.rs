@@ -221,7 +221,7 @@ impl Vehicle {
             let frame = self.global_frame();
             let here = self.state.pos_ned_m;
             let target_z = (frame.home_alt_amsl_m - alt_amsl + self.env.ground_z_ned_m).min(here.z);
-            if let Nav::Takeoff { approach, .. } = &mut self.nav {
+            if let Nav::Takeoff { approach, .. } = &mut self.navigator.nav {
                 approach.retarget(Vector3::new(here.x, here.y, target_z));
             }
         }
@@ -253,7 +253,7 @@ impl Vehicle {
             .filter(|s| *s > 0.0)
             .unwrap_or(self.tuning.auto.speed_xy_mps);
         let yaw = cmd.params[3].unwrap_or_else(|| self.yaw_rad());
-        let approach = match &self.nav {
+        let approach = match &self.navigator.nav {
             Nav::Hold { approach, .. } => {
                 let mut a = *approach;
                 a.retarget(target);
@@ -261,7 +261,7 @@ impl Vehicle {
             }
             _ => Approach::new(here, self.state.vel_ned_mps, target),
         };
-        self.nav = Nav::Hold {
+        self.navigator.nav = Nav::Hold {
             approach,
             limits: self.tuning.auto_at(speed),
             yaw_rad: yaw,
@@ -320,7 +320,7 @@ impl Vehicle {
         let entry = centre.xy() + dir * radius.abs();
         self.failsafe = false;
         self.enter_mode(FlightMode::Orbit);
-        self.nav = Nav::Orbit(Orbit {
+        self.navigator.nav = Nav::Orbit(Orbit {
             centre_m: centre.xy(),
             z_m: centre.z,
             radius_m: radius,
@@ -344,7 +344,7 @@ impl Vehicle {
             Some(s) if s > 0.0 => s,
             _ => self.tuning.auto.speed_xy_mps,
         };
-        match &mut self.nav {
+        match &mut self.navigator.nav {
             Nav::Hold { limits, .. } => *limits = self.tuning.auto_at(speed),
             Nav::Mission(run) => run.set_speed(speed),
             _ => {}
@@ -354,9 +354,9 @@ impl Vehicle {
 
     /// MISSION_START: AUTO.MISSION from item param1 (−1: the current one), and arms.
     fn cmd_mission_start(&mut self, now: SimTime, cmd: &Command) -> MavResult {
-        let n = self.mission.items().len() as f64;
+        let n = self.navigator.mission.items().len() as f64;
         let first = cmd.params[0];
-        if !self.mission.is_valid() || first.is_none_or(|f| !(-1.0..n).contains(&f)) {
+        if !self.navigator.mission.is_valid() || first.is_none_or(|f| !(-1.0..n).contains(&f)) {
             return MavResult::MAV_RESULT_DENIED;
         }
         self.failsafe = false;
@@ -381,7 +381,8 @@ impl Vehicle {
         if seq < -1.0 || !(reset == 0.0 || reset == 1.0) {
             return MavResult::MAV_RESULT_DENIED;
         }
-        if !self.mission.is_valid() || seq >= self.mission.items().len() as f64 {
+        if !self.navigator.mission.is_valid() || seq >= self.navigator.mission.items().len() as f64
+        {
             return MavResult::MAV_RESULT_FAILED;
         }
         if seq >= 0.0 {

@@ -174,7 +174,9 @@ impl Vehicle {
                 approach: Approach::new(here, vel, Vector3::new(here.x, here.y, self.return_z())),
                 yaw_rad: yaw,
             },
-            FlightMode::Mission => Nav::Mission(MissionRun::start(self.mission.current_seq())),
+            FlightMode::Mission => {
+                Nav::Mission(MissionRun::start(self.navigator.mission.current_seq()))
+            }
             // Set up by DO_ORBIT; entered otherwise, it holds.
             FlightMode::Orbit => Nav::Hold {
                 approach: Approach::new(here, vel, stop_point(here, vel, &t.auto)),
@@ -202,7 +204,7 @@ impl Vehicle {
 
     /// Whether the current mode wants to leave the ground.
     pub(super) fn nav_wants_climb(&self) -> bool {
-        match &self.nav {
+        match &self.navigator.nav {
             Nav::Takeoff { .. } => true,
             Nav::Mission(run) => run.wants_climb(),
             _ => false,
@@ -214,7 +216,7 @@ impl Vehicle {
     pub(super) fn nav_setpoint(&mut self, t: SimTime, dt_s: f64) -> Option<TrajectorySetpoint> {
         let tuning = self.tuning;
         let height = self.height_m();
-        let mut nav = std::mem::replace(&mut self.nav, Nav::Idle);
+        let mut nav = std::mem::replace(&mut self.navigator.nav, Nav::Idle);
         let (sp, yaw_target, next_mode) = match &mut nav {
             Nav::Idle => (None, self.yaw_rad(), None),
             Nav::Hold {
@@ -238,14 +240,14 @@ impl Vehicle {
                         ..TrajectorySetpoint::UNSET
                     },
                 };
-                (Some(sp), self.nav_yaw_rad, None)
+                (Some(sp), self.navigator.yaw_rad, None)
             }
             Nav::Velocity { vel_ned_mps } => {
                 let sp = TrajectorySetpoint {
                     vel_ned_mps: *vel_ned_mps,
                     ..TrajectorySetpoint::UNSET
                 };
-                (Some(sp), self.nav_yaw_rad, None)
+                (Some(sp), self.navigator.yaw_rad, None)
             }
             Nav::Takeoff { approach, yaw_rad } => {
                 let limits = Limits {
@@ -262,7 +264,11 @@ impl Vehicle {
                 let done = self.state.pos_ned_m.z - target_z < tuning.altitude_radius_m;
                 (Some(sp), *yaw_rad, done.then_some(FlightMode::Hold))
             }
-            Nav::Land { xy_m } => (Some(self.land_setpoint(*xy_m)), self.nav_yaw_rad, None),
+            Nav::Land { xy_m } => (
+                Some(self.land_setpoint(*xy_m)),
+                self.navigator.yaw_rad,
+                None,
+            ),
             Nav::Return {
                 stage,
                 approach,
@@ -280,7 +286,7 @@ impl Vehicle {
                 (Some(sp), yaw, None)
             }
         };
-        self.nav = nav;
+        self.navigator.nav = nav;
         self.slew_yaw(yaw_target, dt_s);
         if let Some(mode) = next_mode {
             self.switch_nav(mode);
@@ -290,7 +296,7 @@ impl Vehicle {
             }
         }
         sp.map(|sp| TrajectorySetpoint {
-            yaw_rad: self.nav_yaw_rad,
+            yaw_rad: self.navigator.yaw_rad,
             ..sp
         })
     }
@@ -298,14 +304,14 @@ impl Vehicle {
     /// Changes mode keeping a Takeoff's or a mission's reference (so Hold holds exactly
     /// the point the vehicle was going to).
     fn switch_nav(&mut self, mode: FlightMode) {
-        let carried = match &self.nav {
+        let carried = match &self.navigator.nav {
             Nav::Takeoff { approach, yaw_rad } => Some((*approach, *yaw_rad)),
             Nav::Mission(run) => run.hold_point(),
             _ => None,
         };
         self.enter_mode(mode);
         if let (FlightMode::Hold, Some((approach, yaw_rad))) = (mode, carried) {
-            self.nav = Nav::Hold {
+            self.navigator.nav = Nav::Hold {
                 approach,
                 limits: self.tuning.auto,
                 yaw_rad,
@@ -369,8 +375,8 @@ impl Vehicle {
     /// Moves the navigator's heading toward `target_rad` at MPC_YAWRAUTO_MAX.
     fn slew_yaw(&mut self, target_rad: f64, dt_s: f64) {
         let max_step = self.tuning.yaw_rate_auto_rps * dt_s;
-        let error = wrap_pi(target_rad - self.nav_yaw_rad);
-        self.nav_yaw_rad = wrap_pi(self.nav_yaw_rad + error.clamp(-max_step, max_step));
+        let error = wrap_pi(target_rad - self.navigator.yaw_rad);
+        self.navigator.yaw_rad = wrap_pi(self.navigator.yaw_rad + error.clamp(-max_step, max_step));
     }
 }
 
@@ -421,7 +427,7 @@ impl Vehicle {
                 if v.xy().norm() > 0.1 {
                     v.y.atan2(v.x)
                 } else {
-                    self.nav_yaw_rad
+                    self.navigator.yaw_rad
                 }
             }
         };

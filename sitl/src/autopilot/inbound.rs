@@ -27,7 +27,7 @@ impl Vehicle {
     /// refuse are counted and skipped; messages for other systems are counted and
     /// ignored.
     pub fn handle_datagram(&mut self, now: SimTime, link: LinkId, bytes: &[u8]) -> bool {
-        let key = self.signing.as_ref().map(|s| s.key().clone());
+        let key = self.io.signing.as_ref().map(|s| s.key().clone());
         let mut vouched = false;
         for frame in frames(bytes, key.as_ref()) {
             match frame {
@@ -35,7 +35,7 @@ impl Vehicle {
                     if !self.admit(&frame) {
                         continue;
                     }
-                    vouched |= self.signing.is_none() || frame.signature.is_some();
+                    vouched |= self.io.signing.is_none() || frame.signature.is_some();
                     let sender = (frame.system_id(), frame.header.component_id);
                     if let MavMessage::SETUP_SIGNING(m) = &frame.msg {
                         self.on_setup_signing(m, frame.signature.is_some());
@@ -141,7 +141,7 @@ impl Vehicle {
             _ => true,
         };
         if heard {
-            self.links[link as usize].last_heard = Some(now);
+            self.io.links[link as usize].last_heard = Some(now);
         }
     }
 

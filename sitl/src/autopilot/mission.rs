@@ -89,13 +89,13 @@ impl Vehicle {
     /// MISSION_CURRENT (and a pending MISSION_ITEM_REACHED, repeated up to 10 times at
     /// 1 Hz as PX4 does) on both links.
     pub(super) fn report_mission(&mut self) {
-        let state = if self.mission.items.is_empty() {
+        let state = if self.navigator.mission.items.is_empty() {
             MissionState::MISSION_STATE_NO_MISSION
-        } else if self.mission.finished {
+        } else if self.navigator.mission.finished {
             MissionState::MISSION_STATE_COMPLETE
         } else if self.mode == super::FlightMode::Mission {
             MissionState::MISSION_STATE_ACTIVE
-        } else if self.mission.started {
+        } else if self.navigator.mission.started {
             MissionState::MISSION_STATE_PAUSED
         } else {
             MissionState::MISSION_STATE_NOT_STARTED
@@ -105,20 +105,20 @@ impl Vehicle {
             super::FlightMode::Mission | super::FlightMode::Takeoff | super::FlightMode::Land
         );
         let current = MavMessage::MISSION_CURRENT(MISSION_CURRENT_DATA {
-            seq: self.mission.current as u16,
-            total: if self.mission.items.is_empty() {
+            seq: self.navigator.mission.current as u16,
+            total: if self.navigator.mission.items.is_empty() {
                 u16::MAX
             } else {
-                self.mission.items.len() as u16
+                self.navigator.mission.items.len() as u16
             },
             mission_state: state,
             mission_mode: if in_mission { 1 } else { 2 },
-            mission_id: self.mission.crc,
+            mission_id: self.navigator.mission.crc,
             fence_id: self.geofence.crc,
             rally_points_id: 0,
         });
-        let reached = self.mission.reached.map(|(seq, left)| {
-            self.mission.reached = left.checked_sub(1).map(|l| (seq, l));
+        let reached = self.navigator.mission.reached.map(|(seq, left)| {
+            self.navigator.mission.reached = left.checked_sub(1).map(|l| (seq, l));
             MavMessage::MISSION_ITEM_REACHED(MISSION_ITEM_REACHED_DATA { seq })
         });
         for link in [LinkId::Offboard, LinkId::Gcs] {
@@ -131,24 +131,24 @@ impl Vehicle {
 
     /// An item was reached: MISSION_ITEM_REACHED now, then repeated with the reports.
     pub(super) fn note_item_reached(&mut self, seq: usize) {
-        self.mission.reached = Some((seq as u16, 10));
+        self.navigator.mission.reached = Some((seq as u16, 10));
         self.report_mission();
     }
 
     /// Stores a new plan (or none) and points a mission being flown at its current item.
     pub(super) fn replace_mission(&mut self, items: Vec<MissionItem>, current: Option<usize>) {
-        self.mission.replace(items, current);
-        let seq = self.mission.current_seq();
-        if let super::flight::Nav::Mission(run) = &mut self.nav {
+        self.navigator.mission.replace(items, current);
+        let seq = self.navigator.mission.current_seq();
+        if let super::flight::Nav::Mission(run) = &mut self.navigator.nav {
             run.jump(seq);
         }
     }
 
     /// Makes `seq` the current item (and tells the clients).
     pub(super) fn jump_to_item(&mut self, seq: usize) {
-        self.mission.set_current(seq);
-        self.mission.finished = false;
-        if let super::flight::Nav::Mission(run) = &mut self.nav {
+        self.navigator.mission.set_current(seq);
+        self.navigator.mission.finished = false;
+        if let super::flight::Nav::Mission(run) = &mut self.navigator.nav {
             run.jump(seq);
         }
         self.report_mission();

@@ -127,15 +127,15 @@ impl Vehicle {
     ) -> (Option<TrajectorySetpoint>, f64, Option<FlightMode>) {
         // Items that take no time are done in the same step, a bounded number of them.
         for _ in 0..64 {
-            let Some(item) = self.mission.items().get(run.seq).copied() else {
-                self.mission.mark_finished();
+            let Some(item) = self.navigator.mission.items().get(run.seq).copied() else {
+                self.navigator.mission.mark_finished();
                 self.report_mission();
                 if self.landed {
                     tracing::info!(sysid = self.cfg.system_id, "mission finished, landed");
                 } else {
                     tracing::info!(sysid = self.cfg.system_id, "mission finished, loitering");
                 }
-                return (None, self.nav_yaw_rad, Some(FlightMode::Hold));
+                return (None, self.navigator.yaw_rad, Some(FlightMode::Hold));
             };
             if run.stage == Stage::Begin {
                 match self.begin_item(t, run, &item) {
@@ -145,25 +145,25 @@ impl Vehicle {
                     }
                     ItemStart::Return => {
                         self.advance(run);
-                        return (None, self.nav_yaw_rad, Some(FlightMode::Return));
+                        return (None, self.navigator.yaw_rad, Some(FlightMode::Return));
                     }
                     ItemStart::Flying => {}
                 }
             }
             return self.fly_item(t, run, &item, dt_s);
         }
-        (None, self.nav_yaw_rad, None)
+        (None, self.navigator.yaw_rad, None)
     }
 
     fn advance(&mut self, run: &mut MissionRun) {
         run.seq += 1;
         run.stage = Stage::Begin;
-        let n = self.mission.items().len();
-        self.mission.set_current(run.seq.min(n));
+        let n = self.navigator.mission.items().len();
+        self.navigator.mission.set_current(run.seq.min(n));
         if run.seq >= n {
             // Past the last item (a final RTL included): the mission is complete, as PX4
             // reports it (MAVSDK's progress reads it from MISSION_CURRENT).
-            self.mission.mark_finished();
+            self.navigator.mission.mark_finished();
         }
         self.note_item_reached(run.seq - 1);
     }
@@ -221,7 +221,7 @@ impl Vehicle {
         let tuning = self.tuning;
         let here = self.state.pos_ned_m;
         let Some(mut approach) = run.approach else {
-            return (None, self.nav_yaw_rad, None);
+            return (None, self.navigator.yaw_rad, None);
         };
         let target = approach.target();
         let radius = if item.params[1] > 0.0 && item.command == cmd::NAV_WAYPOINT {
@@ -231,7 +231,7 @@ impl Vehicle {
         };
         let dist_xy = (target.xy() - here.xy()).norm();
         let dz = (target.z - here.z).abs();
-        let mut yaw_target = run.yaw_rad.unwrap_or(self.nav_yaw_rad);
+        let mut yaw_target = run.yaw_rad.unwrap_or(self.navigator.yaw_rad);
         if run.yaw_rad.is_none()
             && dist_xy > radius
             && let Some(b) = bearing(here.xy(), target.xy())
@@ -248,7 +248,7 @@ impl Vehicle {
                     run.stage = Stage::Fly;
                 }
                 run.approach = Some(approach);
-                (Some(sp), self.nav_yaw_rad, None)
+                (Some(sp), self.navigator.yaw_rad, None)
             }
             Stage::Fly => {
                 let land = item.command == cmd::NAV_LAND;
@@ -290,9 +290,9 @@ impl Vehicle {
                 if self.landed {
                     self.advance(run);
                 }
-                (Some(sp), self.nav_yaw_rad, None)
+                (Some(sp), self.navigator.yaw_rad, None)
             }
-            Stage::Begin => (None, self.nav_yaw_rad, None),
+            Stage::Begin => (None, self.navigator.yaw_rad, None),
         }
     }
 }

@@ -98,7 +98,7 @@ impl Vehicle {
     /// The stored plan's checksum (`opaque_id`) of a mission type.
     fn plan_crc(&self, mission_type: MavMissionType) -> u32 {
         match mission_type {
-            MavMissionType::MAV_MISSION_TYPE_MISSION => self.mission.crc,
+            MavMissionType::MAV_MISSION_TYPE_MISSION => self.navigator.mission.crc,
             MavMissionType::MAV_MISSION_TYPE_FENCE => self.geofence.crc,
             _ => 0,
         }
@@ -107,7 +107,7 @@ impl Vehicle {
     /// Items in the stored plan of a mission type.
     fn plan_len(&self, mission_type: MavMissionType) -> usize {
         match mission_type {
-            MavMissionType::MAV_MISSION_TYPE_MISSION => self.mission.items().len(),
+            MavMissionType::MAV_MISSION_TYPE_MISSION => self.navigator.mission.items().len(),
             MavMissionType::MAV_MISSION_TYPE_FENCE => self.geofence.items().len(),
             _ => 0,
         }
@@ -167,7 +167,7 @@ impl Vehicle {
                 return true;
             }
         };
-        match &self.mission.transfer {
+        match &self.navigator.mission.transfer {
             Transfer::Receiving {
                 partner,
                 items,
@@ -214,7 +214,7 @@ impl Vehicle {
             );
             return true;
         }
-        self.mission.transfer = Transfer::Receiving {
+        self.navigator.mission.transfer = Transfer::Receiving {
             link,
             partner: sender,
             count,
@@ -251,7 +251,7 @@ impl Vehicle {
             current,
             mission_type,
             ..
-        } = &mut self.mission.transfer
+        } = &mut self.navigator.mission.transfer
         else {
             // The last item again after the final ack: the partner missed the ack.
             if usize::from(m.seq) + 1 == self.plan_len(m.mission_type) {
@@ -285,7 +285,7 @@ impl Vehicle {
         let item = item_from_int(m);
         // A legacy MISSION_ITEM carries degrees as floats; an _INT frame there is wrong.
         if legacy && matches!(item.frame, 5 | 6) {
-            self.mission.transfer = Transfer::Idle;
+            self.navigator.mission.transfer = Transfer::Idle;
             self.send_mission_ack(
                 link,
                 sender,
@@ -306,7 +306,7 @@ impl Vehicle {
                 ?result,
                 "mission item refused"
             );
-            self.mission.transfer = Transfer::Idle;
+            self.navigator.mission.transfer = Transfer::Idle;
             self.send_mission_ack(link, sender, result, m.mission_type);
             return true;
         }
@@ -321,7 +321,7 @@ impl Vehicle {
             return true;
         }
         let (items, current) = (std::mem::take(items), *current);
-        self.mission.transfer = Transfer::Idle;
+        self.navigator.mission.transfer = Transfer::Idle;
         if mission_type == MavMissionType::MAV_MISSION_TYPE_FENCE {
             self.replace_fence(items);
             self.send_mission_ack(
@@ -341,7 +341,7 @@ impl Vehicle {
         );
         tracing::info!(
             sysid = self.cfg.system_id,
-            items = self.mission.items().len(),
+            items = self.navigator.mission.items().len(),
             "mission stored"
         );
         true
@@ -360,10 +360,10 @@ impl Vehicle {
             return false;
         }
         let restart = matches!(
-            self.mission.transfer,
+            self.navigator.mission.transfer,
             Transfer::Sending { partner, .. } if partner == sender
         );
-        if self.mission.transfer != Transfer::Idle && !restart {
+        if self.navigator.mission.transfer != Transfer::Idle && !restart {
             return true; // busy: PX4 only says so in a status text
         }
         let count = self.plan_len(mission_type);
@@ -371,7 +371,7 @@ impl Vehicle {
             mission_type,
             MavMissionType::MAV_MISSION_TYPE_MISSION | MavMissionType::MAV_MISSION_TYPE_FENCE
         ) {
-            self.mission.transfer = Transfer::Sending {
+            self.navigator.mission.transfer = Transfer::Sending {
                 link,
                 partner: sender,
                 last_heard: now,
@@ -420,7 +420,7 @@ impl Vehicle {
             requested,
             mission_type,
             ..
-        } = &mut self.mission.transfer
+        } = &mut self.navigator.mission.transfer
         else {
             return true;
         };
@@ -434,10 +434,10 @@ impl Vehicle {
         let stored = if fence {
             self.geofence.items()
         } else {
-            self.mission.items()
+            self.navigator.mission.items()
         };
         let Some(mut item) = stored.get(usize::from(seq)).copied() else {
-            self.mission.transfer = Transfer::Idle;
+            self.navigator.mission.transfer = Transfer::Idle;
             self.send_mission_ack(
                 link,
                 sender,
@@ -454,7 +454,7 @@ impl Vehicle {
             item.autocontinue = 0;
         }
         // As PX4, `current` compares with the mission's current item whatever the type.
-        let current = u8::from(usize::from(seq) == self.mission.current_seq());
+        let current = u8::from(usize::from(seq) == self.navigator.mission.current_seq());
         let mut msg = if legacy {
             item_message_float(&item, seq, sender, current)
         } else {
@@ -475,10 +475,10 @@ impl Vehicle {
         if !self.mission_for_us(target.0, target.1) {
             return false;
         }
-        if let Transfer::Sending { partner, .. } = self.mission.transfer
+        if let Transfer::Sending { partner, .. } = self.navigator.mission.transfer
             && partner == sender
         {
-            self.mission.transfer = Transfer::Idle;
+            self.navigator.mission.transfer = Transfer::Idle;
         }
         true
     }
@@ -494,7 +494,7 @@ impl Vehicle {
         if !self.mission_for_us(target.0, target.1) {
             return false;
         }
-        if self.mission.transfer != Transfer::Idle {
+        if self.navigator.mission.transfer != Transfer::Idle {
             return true;
         }
         if matches!(
@@ -523,7 +523,8 @@ impl Vehicle {
         if !self.mission_for_us(target.0, target.1) {
             return false;
         }
-        if self.mission.transfer == Transfer::Idle && usize::from(seq) < self.mission.items().len()
+        if self.navigator.mission.transfer == Transfer::Idle
+            && usize::from(seq) < self.navigator.mission.items().len()
         {
             self.jump_to_item(usize::from(seq));
         }
@@ -532,7 +533,7 @@ impl Vehicle {
 
     /// Retries and timeouts of the transfer in progress, and the 1 Hz MISSION_CURRENT.
     pub(super) fn mission_timers(&mut self, now: SimTime) {
-        match &mut self.mission.transfer {
+        match &mut self.navigator.mission.transfer {
             Transfer::Receiving {
                 link,
                 partner,
@@ -545,7 +546,7 @@ impl Vehicle {
             } => {
                 if now.saturating_since(*last_heard) > TRANSFER_TIMEOUT {
                     tracing::warn!(sysid = self.cfg.system_id, "mission sync timeout");
-                    self.mission.transfer = Transfer::Idle;
+                    self.navigator.mission.transfer = Transfer::Idle;
                 } else if now.saturating_since(*last_request) >= RETRY {
                     *last_request = now;
                     let (link, partner, seq, legacy, kind) =
@@ -562,7 +563,7 @@ impl Vehicle {
                 mission_type,
             } => {
                 if now.saturating_since(*last_heard) > TRANSFER_TIMEOUT {
-                    self.mission.transfer = Transfer::Idle;
+                    self.navigator.mission.transfer = Transfer::Idle;
                 } else if !*requested && now.saturating_since(*last_sent) >= RETRY {
                     *last_sent = now;
                     let (link, partner, kind) = (*link, *partner, *mission_type);
@@ -572,8 +573,8 @@ impl Vehicle {
             }
             Transfer::Idle => {}
         }
-        if now >= self.mission.next_report {
-            self.mission.next_report = now + Duration::from_secs(1);
+        if now >= self.navigator.mission.next_report {
+            self.navigator.mission.next_report = now + Duration::from_secs(1);
             self.report_mission();
         }
     }

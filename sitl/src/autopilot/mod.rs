@@ -32,11 +32,13 @@ pub mod estimator;
 mod flight;
 mod geofence;
 mod inbound;
+mod io;
 mod mission;
 mod mission_item;
 mod mission_run;
 mod mission_transfer;
 mod mode;
+mod navigator;
 pub mod offboard;
 mod signing;
 mod steer;
@@ -61,11 +63,12 @@ use crate::codec::Encoder;
 use crate::control::AttitudeController;
 use crate::params::ParamTable;
 use crate::physics::{Airframe, BodyState, Environment};
-use crate::position_control::PositionController;
 use crate::profile::GRAVITY_MPS2;
 use crate::time::SimTime;
 use crate::world::World;
 use flight::Nav;
+use io::MavlinkIo;
+use navigator::Navigator;
 use offboard::{GlobalFrame, OffboardTarget};
 use tuning::Tuning;
 
@@ -197,8 +200,6 @@ pub struct Vehicle {
     state: BodyState,
     env: Environment,
     controller: AttitudeController,
-    pos_ctrl: PositionController,
-    pos_ctrl_active: bool,
     params: ParamTable,
     tuning: Tuning,
     armed: bool,
@@ -210,9 +211,9 @@ pub struct Vehicle {
     armed_at: SimTime,
     offboard: Option<OffboardTarget>,
     offboard_signal: Option<SimTime>,
-    nav: Nav,
-    nav_yaw_rad: f64,
-    mission: MissionStore,
+    /// What it navigates by: the mode's target, the heading, the mission, the position
+    /// controller.
+    navigator: Navigator,
     geofence: Geofence,
     datalink: datalink::DataLink,
     battery: Battery,
@@ -221,18 +222,12 @@ pub struct Vehicle {
     estimator: estimator::Estimator,
     /// The origin shift last reported in GPS_GLOBAL_ORIGIN (m, NED).
     origin_shift_sent_ned_m: Vector3<f64>,
-    links: [Link; 2],
-    /// MAVLink 2 signing, once a key is set.
-    signing: Option<ringswarm_wire::signing::Signing>,
-    outbox: VecDeque<Transmit>,
-    /// Sent datagrams' buffers given back by the driver ([`Vehicle::recycle`]).
-    spare: crate::codec::FramePool,
+    /// Its MAVLink links, signing, and the frames waiting for the driver.
+    io: MavlinkIo,
     events: VecDeque<VehicleEvent>,
     last_step: SimTime,
     boot_at: SimTime,
     counters: Counters,
-    /// The id of the last STATUSTEXT sent in chunks.
-    statustext_id: u16,
 }
 
 impl Vehicle {
@@ -292,8 +287,6 @@ impl Vehicle {
             frame,
             env,
             controller: AttitudeController::default(),
-            pos_ctrl: PositionController::default(),
-            pos_ctrl_active: false,
             params,
             tuning,
             armed: in_air,
@@ -311,9 +304,7 @@ impl Vehicle {
             armed_at: SimTime::ZERO,
             offboard: None,
             offboard_signal: None,
-            nav,
-            nav_yaw_rad: start.yaw_rad,
-            mission: MissionStore::default(),
+            navigator: Navigator::new(nav, start.yaw_rad),
             geofence: Geofence::default(),
             datalink: datalink::DataLink::default(),
             battery: Battery {
@@ -324,18 +315,20 @@ impl Vehicle {
             rng,
             estimator: estimator::Estimator::new(cfg.estimator.clone(), cfg.seed),
             origin_shift_sent_ned_m: Vector3::zeros(),
-            links,
-            signing: cfg
-                .signing
-                .as_ref()
-                .map(|s| ringswarm_wire::signing::Signing::new(s.key.clone(), s.timestamp)),
-            outbox: VecDeque::new(),
-            spare: crate::codec::FramePool::default(),
+            io: MavlinkIo {
+                links,
+                signing: cfg
+                    .signing
+                    .as_ref()
+                    .map(|s| ringswarm_wire::signing::Signing::new(s.key.clone(), s.timestamp)),
+                outbox: VecDeque::new(),
+                spare: crate::codec::FramePool::default(),
+                statustext_id: 0,
+            },
             events: VecDeque::new(),
             last_step: SimTime::ZERO,
             boot_at: SimTime::ZERO,
             counters: Counters::default(),
-            statustext_id: 0,
             state,
             cfg,
         })
@@ -350,15 +343,16 @@ impl Vehicle {
         // The key and its clock are stored, not configured: they survive; the stream
         // table is memory and does not.
         let signing = self.signing_key();
-        let wired = self.links.each_ref().map(|l| l.wired);
+        let wired = self.io.links.each_ref().map(|l| l.wired);
         *self = fresh;
-        for (link, wired) in self.links.iter_mut().zip(wired) {
+        for (link, wired) in self.io.links.iter_mut().zip(wired) {
             link.wired = wired;
         }
-        self.signing = signing.map(|s| ringswarm_wire::signing::Signing::new(s.key, s.timestamp));
+        self.io.signing =
+            signing.map(|s| ringswarm_wire::signing::Signing::new(s.key, s.timestamp));
         self.last_step = now;
         self.boot_at = now;
-        for link in &mut self.links {
+        for link in &mut self.io.links {
             for stream in &mut link.streams {
                 stream.next_due = now;
             }
@@ -383,20 +377,20 @@ impl Vehicle {
 
     /// The next frame to send, if any.
     pub fn poll_transmit(&mut self) -> Option<Transmit> {
-        self.outbox.pop_front()
+        self.io.outbox.pop_front()
     }
 
     /// Whether a driver carries `link`'s frames (both links are wired at boot, as in
     /// PX4's SITL layout). A driver that serves only the offboard link unwires the other:
     /// nothing is built or encoded for it, streams or replies (a reboot keeps the wiring).
     pub fn set_link_wired(&mut self, link: LinkId, wired: bool) {
-        self.links[link as usize].wired = wired;
+        self.io.links[link as usize].wired = wired;
     }
 
     /// Gives a sent frame's buffer back for the next one: a driver that does so makes
     /// the vehicle allocate nothing per frame in steady state.
     pub fn recycle(&mut self, bytes: Vec<u8>) {
-        self.spare.give(bytes);
+        self.io.spare.give(bytes);
     }
 
     /// The next event, if any.
@@ -428,7 +422,7 @@ impl Vehicle {
             pos_world_ned_m: self.cfg.start.pos_world_ned_m + self.state.pos_ned_m,
             vel_ned_mps: self.state.vel_ned_mps,
             battery_pct: self.battery_remaining_pct(),
-            last_heard: [self.links[0].last_heard, self.links[1].last_heard],
+            last_heard: [self.io.links[0].last_heard, self.io.links[1].last_heard],
             counters: self.counters,
         }
     }
@@ -504,10 +498,10 @@ impl Vehicle {
     /// is now).
     fn enter_mode(&mut self, mode: FlightMode) {
         if mode == FlightMode::Mission {
-            self.mission.mark_started();
+            self.navigator.mission.mark_started();
         }
-        self.nav = self.nav_for(mode);
-        self.nav_yaw_rad = self.yaw_rad();
+        self.navigator.nav = self.nav_for(mode);
+        self.navigator.yaw_rad = self.yaw_rad();
         if self.mode != mode {
             self.mode = mode;
             self.events.push_back(VehicleEvent::ModeChanged(mode));
@@ -526,7 +520,7 @@ impl Vehicle {
             self.armed_at = t;
             self.took_off = !self.landed;
             self.controller.reset();
-            self.pos_ctrl_active = false;
+            self.navigator.pos_ctrl_active = false;
             self.events.push_back(VehicleEvent::Armed);
             tracing::info!(sysid = self.cfg.system_id, "armed");
         }

@@ -32,7 +32,7 @@ impl Vehicle {
 
     /// Whether a decoded frame passes the signing rules; a refusal is counted.
     pub(super) fn admit(&mut self, frame: &Frame) -> bool {
-        let Some(signing) = self.signing.as_mut() else {
+        let Some(signing) = self.io.signing.as_mut() else {
             return true;
         };
         match signing.accept(&frame.stamp(), &PX4_UNSIGNED_ALLOWED) {
@@ -51,7 +51,7 @@ impl Vehicle {
 
     /// The key the vehicle signs with now and its clock, if signing is on.
     pub fn signing_key(&self) -> Option<StoredKey> {
-        self.signing.as_ref().map(|s| StoredKey {
+        self.io.signing.as_ref().map(|s| StoredKey {
             key: s.key().clone(),
             timestamp: s.timestamp(),
         })
@@ -68,7 +68,7 @@ impl Vehicle {
         }
         let key = SigningKey::from_bytes(m.secret_key);
         if m.initial_timestamp == 0 && key.is_blank() {
-            if self.signing.is_none() {
+            if self.io.signing.is_none() {
                 self.send_statustext(MavSeverity::MAV_SEVERITY_INFO, "MAVLink signing disabled");
                 return;
             }
@@ -82,11 +82,11 @@ impl Vehicle {
             // The statustext goes out signed: the peer that turned signing off still
             // holds the key.
             self.send_statustext(MavSeverity::MAV_SEVERITY_INFO, "MAVLink signing disabled");
-            self.signing = None;
+            self.io.signing = None;
             self.events.push_back(VehicleEvent::SigningChanged(None));
             return;
         }
-        self.signing = Some(Signing::new(key.clone(), m.initial_timestamp));
+        self.io.signing = Some(Signing::new(key.clone(), m.initial_timestamp));
         self.send_statustext(
             MavSeverity::MAV_SEVERITY_INFO,
             "MAVLink signing key accepted",

@@ -16,7 +16,7 @@ impl Vehicle {
     /// (disarmed).
     pub(super) fn attitude_command(&mut self, t: SimTime, dt: f64) -> Option<AttitudeCommand> {
         if !self.armed {
-            self.pos_ctrl_active = false;
+            self.navigator.pos_ctrl_active = false;
             return None;
         }
         // Level at idle thrust, holding the heading (computed only when flown: the
@@ -32,7 +32,7 @@ impl Vehicle {
                     thrust,
                     yawspeed_ff_rps,
                 }) => {
-                    self.pos_ctrl_active = false;
+                    self.navigator.pos_ctrl_active = false;
                     return Some(AttitudeCommand::Attitude {
                         setpoint: AttitudeSetpoint {
                             attitude,
@@ -45,7 +45,7 @@ impl Vehicle {
                     rates_frd_rps,
                     thrust,
                 }) => {
-                    self.pos_ctrl_active = false;
+                    self.navigator.pos_ctrl_active = false;
                     return Some(AttitudeCommand::Rates {
                         rates_frd_rps,
                         thrust_norm: thrust,
@@ -65,18 +65,18 @@ impl Vehicle {
                 // Never idle in the air: a mode with nothing to fly holds where it is.
                 None if !self.landed => Some(TrajectorySetpoint::hold(
                     self.state.pos_ned_m,
-                    self.nav_yaw_rad,
+                    self.navigator.yaw_rad,
                 )),
                 None => None,
             }
         };
         let Some(sp) = trajectory else {
-            self.pos_ctrl_active = false;
+            self.navigator.pos_ctrl_active = false;
             return Some(idle(self));
         };
-        if !self.pos_ctrl_active {
-            self.pos_ctrl.reset();
-            self.pos_ctrl_active = true;
+        if !self.navigator.pos_ctrl_active {
+            self.navigator.pos_ctrl.reset();
+            self.navigator.pos_ctrl_active = true;
         }
         let kin = Kinematics {
             pos_ned_m: self.state.pos_ned_m,
@@ -84,14 +84,14 @@ impl Vehicle {
             yaw_rad: self.yaw_rad(),
         };
         let mut mpc = self.tuning.mpc;
-        if let Nav::Velocity { vel_ned_mps } = self.nav {
+        if let Nav::Velocity { vel_ned_mps } = self.navigator.nav {
             // The pilot of a vehicle started in the air holds its start velocity, however
             // fast: an emulator's fiction, not bound by MPC_XY_VEL_MAX / MPC_Z_VEL_MAX_*.
             mpc.xy_vel_max_mps = mpc.xy_vel_max_mps.max(vel_ned_mps.xy().norm());
             mpc.z_vel_max_up_mps = mpc.z_vel_max_up_mps.max(-vel_ned_mps.z);
             mpc.z_vel_max_dn_mps = mpc.z_vel_max_dn_mps.max(vel_ned_mps.z);
         }
-        let out = self.pos_ctrl.update(&mpc, &sp, &kin, dt);
+        let out = self.navigator.pos_ctrl.update(&mpc, &sp, &kin, dt);
         Some(AttitudeCommand::Attitude {
             setpoint: out.attitude,
             yawspeed_ff_rps: out.yawspeed_ff_rps,
@@ -138,7 +138,7 @@ impl Vehicle {
     pub(super) fn can_run(&self, t: SimTime, mode: FlightMode) -> bool {
         match mode {
             FlightMode::Offboard => self.offboard_available(t),
-            FlightMode::Mission => self.mission.is_valid(),
+            FlightMode::Mission => self.navigator.mission.is_valid(),
             _ => true,
         }
     }

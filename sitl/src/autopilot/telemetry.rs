@@ -87,18 +87,19 @@ fn is_known(msg_id: u32) -> bool {
 impl Vehicle {
     /// Encodes `msg` for `link` and queues it.
     pub(super) fn send(&mut self, link: LinkId, msg: &MavMessage) {
-        if !self.links[link as usize].wired {
+        if !self.io.links[link as usize].wired {
             return;
         }
         let signing = self
+            .io
             .signing
             .as_mut()
             .map(|s| (s, Self::signing_link_id(link)));
-        let mut bytes = self.spare.take();
-        self.links[link as usize]
+        let mut bytes = self.io.spare.take();
+        self.io.links[link as usize]
             .encoder
             .encode_into(msg, signing, &mut bytes);
-        self.outbox.push_back(Transmit { link, bytes });
+        self.io.outbox.push_back(Transmit { link, bytes });
     }
 
     /// A STATUSTEXT on both links, as PX4's `mavlink_log` reaches every ground station.
@@ -111,8 +112,8 @@ impl Vehicle {
         let (id, chunks) = if bytes.len() <= FIELD {
             (0, 1)
         } else {
-            self.statustext_id = self.statustext_id.wrapping_add(1).max(1);
-            (self.statustext_id, bytes.len() / FIELD + 1)
+            self.io.statustext_id = self.io.statustext_id.wrapping_add(1).max(1);
+            (self.io.statustext_id, bytes.len() / FIELD + 1)
         };
         for k in 0..chunks {
             let chunk = &bytes[(k * FIELD).min(bytes.len())..((k + 1) * FIELD).min(bytes.len())];
@@ -142,12 +143,13 @@ impl Vehicle {
             }
         }
         for link in [LinkId::Offboard, LinkId::Gcs] {
-            if self.links[link as usize].streams_due > now || !self.links[link as usize].wired {
+            if self.io.links[link as usize].streams_due > now || !self.io.links[link as usize].wired
+            {
                 continue;
             }
             let mut earliest = SimTime::MAX;
-            for i in 0..self.links[link as usize].streams.len() {
-                let stream = self.links[link as usize].streams[i];
+            for i in 0..self.io.links[link as usize].streams.len() {
+                let stream = self.io.links[link as usize].streams[i];
                 let Some(interval) = stream.interval else {
                     continue;
                 };
@@ -160,10 +162,10 @@ impl Vehicle {
                 }
                 let next = stream.next_due + interval;
                 let next = if next <= now { now + interval } else { next };
-                self.links[link as usize].streams[i].next_due = next;
+                self.io.links[link as usize].streams[i].next_due = next;
                 earliest = earliest.min(next);
             }
-            self.links[link as usize].streams_due = earliest;
+            self.io.links[link as usize].streams_due = earliest;
         }
     }
 
@@ -179,7 +181,7 @@ impl Vehicle {
         if !is_known(msg_id) || msg_id == AUTOPILOT_VERSION {
             return false;
         }
-        let streams = &mut self.links[link as usize].streams;
+        let streams = &mut self.io.links[link as usize].streams;
         let index = match streams.iter().position(|s| s.msg_id == msg_id) {
             Some(i) => i,
             None => {
@@ -195,7 +197,7 @@ impl Vehicle {
         let stream = &mut streams[index];
         stream.interval = interval.unwrap_or(stream.default_interval);
         stream.next_due = now;
-        let link = &mut self.links[link as usize];
+        let link = &mut self.io.links[link as usize];
         link.streams_due = link.streams_due.min(now);
         true
     }

@@ -88,7 +88,7 @@ fn upload_is_requested_item_by_item_and_accepted() {
         Some(MavMissionResult::MAV_MISSION_ACCEPTED)
     );
     assert_eq!(rig.requests(), vec![0, 1, 2]);
-    assert_eq!(rig.vehicle.mission.items().len(), 3);
+    assert_eq!(rig.vehicle.navigator.mission.items().len(), 3);
 }
 
 #[test]
@@ -154,7 +154,7 @@ fn an_item_out_of_sequence_is_ignored_and_the_right_one_asked_again() {
 fn bad_items_get_their_specific_error_and_leave_the_mission_unchanged() {
     let mut rig = Rig::on_ground();
     rig.upload(&three_waypoints());
-    let stored = rig.vehicle.mission.items().to_vec();
+    let stored = rig.vehicle.navigator.mission.items().to_vec();
     let mut unsupported = waypoint(0, 0.0, 0.0, 10.0);
     unsupported.command = MavCmd::MAV_CMD_NAV_LOITER_TURNS;
     let mut bad_frame = waypoint(0, 0.0, 0.0, 10.0);
@@ -181,7 +181,7 @@ fn bad_items_get_their_specific_error_and_leave_the_mission_unchanged() {
         );
         // NaN params: compare what is printed.
         assert_eq!(
-            format!("{:?}", rig.vehicle.mission.items()),
+            format!("{:?}", rig.vehicle.navigator.mission.items()),
             format!("{stored:?}"),
             "{expected:?}"
         );
@@ -282,7 +282,7 @@ fn a_huge_hold_time_is_held_without_breaking_anything() {
     rig.advance(Duration::from_secs(20));
     // Still holding the first waypoint, 10 m up.
     assert!((rig.vehicle.body().pos_ned_m - Vector3::new(0.0, 0.0, -10.0)).norm() < 0.2);
-    assert_eq!(rig.vehicle.mission.current_seq(), 0);
+    assert_eq!(rig.vehicle.navigator.mission.current_seq(), 0);
 }
 
 #[test]
@@ -296,14 +296,14 @@ fn mission_start_after_a_finished_mission_starts_at_the_asked_item() {
     rig.arm();
     rig.command(MavCmd::MAV_CMD_MISSION_START, [0.0; 7]);
     rig.advance(Duration::from_secs(60));
-    assert!(rig.vehicle.mission.finished());
+    assert!(rig.vehicle.navigator.mission.finished());
     rig.received.clear();
     let r = rig.command(
         MavCmd::MAV_CMD_MISSION_START,
         [2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     );
     assert_eq!(r, MavResult::MAV_RESULT_ACCEPTED);
-    assert_eq!(rig.vehicle.mission.current_seq(), 2);
+    assert_eq!(rig.vehicle.navigator.mission.current_seq(), 2);
 }
 
 // MISSION_REQUEST and MISSION_ITEM are deprecated in the XML (which asks for an _INT
