@@ -205,6 +205,9 @@ pub struct Summary {
     pub models: Vec<ModelReport>,
     /// Warnings in `events.csv`.
     pub warnings: usize,
+    /// A vehicle's warnings left out of `events.csv` as repeats of one of the same kind
+    /// logged less than a second before (the next one logged counts them).
+    pub warnings_repeated: u64,
     /// The control loop's punctuality (in lockstep every tick is on time).
     pub timing: TimingReport,
     /// What the safety filter enforced and did (`null` when `[safety]` is off).
@@ -244,6 +247,7 @@ impl Summary {
             guard: swarm.guard_trip().map(|t| t.to_string()),
             models: ModelReport::of(swarm),
             warnings: swarm.events().iter().filter(|e| e.warning).count(),
+            warnings_repeated: swarm.repeated_warnings(),
             timing: swarm.timing(),
             safety: SafetyReport::of(swarm),
             mirrors: Vec::new(),

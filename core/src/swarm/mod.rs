@@ -59,7 +59,7 @@ use crate::consensus::HorizontalState;
 use crate::control::{AttitudeThrust, VehicleModel, attitude_thrust_from_acceleration};
 use crate::vehicle::{Phase, Setpoint, VehicleLink};
 use events::EventLog;
-pub use events::{MAX_KEPT_EVENTS, SwarmEvent};
+pub use events::{MAX_KEPT_EVENTS, REPEAT_WINDOW, SwarmEvent};
 pub use guard::{DivergenceGuard, GuardLimits, GuardTrip};
 use model::FlownModel;
 pub use safety::SafetyStats;
@@ -445,6 +445,13 @@ impl Swarm {
     /// Events not kept because the log was full.
     pub fn dropped_events(&self) -> u64 {
         self.log.dropped()
+    }
+
+    /// A vehicle's warnings left out of the log as repeats of one of the same kind (the
+    /// same words, whatever their numbers) logged less than
+    /// [`REPEAT_WINDOW`] before.
+    pub fn repeated_warnings(&self) -> u64 {
+        self.log.repeated()
     }
 
     /// Vehicle `i`'s hover thrust estimate and its standard deviation (the configured
