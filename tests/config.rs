@@ -657,3 +657,43 @@ fn a_fence_is_checked_by_name() {
     assert_eq!(f.margin_m, 5.0);
     assert_eq!(f.action, ringswarm::swarm::LossPolicy::Land);
 }
+
+#[test]
+fn a_coordinator_file_and_a_sitl_file_are_read_into_one_emulator_schema() {
+    // paper-sim1's vehicle 1 (ENU start 20 m north, 9 east / 4 north m/s, 100 m above the
+    // ground) with a true airframe and an estimator of its own…
+    let coordinator = with(
+        "ground_below_m = 100.0   # the paper's z = 0 is 100 m above the ground",
+        "ground_below_m = 100.0\nposition_noise_m = 0.2\nestimator_latency_ms = 40.0\nbattery_sag = 0.1",
+    )
+    .replacen(
+        "start_velocity_enu_mps = [9.0, 4.0, 0.0]\nin_air = true",
+        "start_velocity_enu_mps = [9.0, 4.0, 0.0]\nin_air = true\nairframe = { mass_kg = 1.2 }",
+        1,
+    );
+    let (_, from_coordinator) = Config::from_toml(&coordinator).unwrap().emulator().unwrap();
+    // …is the sitl file's vehicle with the same numbers in NED.
+    let sitl = ringswarm_sitl::config_file::SitlConfig::from_toml(
+        "[world]\nground_down_m = 100.0\n[[vehicle]]\nsystem_id = 1\nprofile = \"ideal\"\n\
+         start_ned_m = [20.0, 0.0, 0.0]\nvelocity_ned_mps = [4.0, 9.0, 0.0]\nin_air = true\n\
+         mass_kg = 1.2\nposition_noise_m = 0.2\nestimator_latency_ms = 40.0\nbattery_sag = 0.1\n",
+    )
+    .unwrap();
+    assert_eq!(from_coordinator[0], sitl.vehicles[0]);
+    // The shared estimator's problems are named as the coordinator file has them, once.
+    let bad = with(
+        "ground_below_m = 100.0   # the paper's z = 0 is 100 m above the ground",
+        "ground_below_m = 100.0\nposition_noise_m = -1.0",
+    )
+    .replacen(
+        "start_enu_m = [0.0, 20.0, 0.0]",
+        "start_enu_m = [0.0, 20.0, 0.0]\nairframe = { hover_throttle = 1.5 }",
+        1,
+    );
+    let err = Config::from_toml(&bad).unwrap().emulator().unwrap_err();
+    assert_eq!(
+        err,
+        "emulator.position_noise_m must be a finite number in [0, 100] m, got -1\n\
+         vehicle[0].airframe.hover_throttle must be in [0.01, 0.99], got 1.5"
+    );
+}

@@ -71,7 +71,7 @@ struct RawConfig {
     #[serde(default)]
     faults: RawFaults,
     #[serde(default)]
-    vehicle: Vec<RawVehicle>,
+    vehicle: Vec<EmulatedVehicle>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -117,44 +117,206 @@ impl Default for RawFaults {
     }
 }
 
-#[derive(Debug, Deserialize)]
+/// One emulated vehicle as the emulator's schema says it (the `[[vehicle]]` table of
+/// `ringswarm sitl --config`, NED about the world's reference): the one description every
+/// emulator configuration is read into, and built from by [`EmulatedVehicle::build`]. A
+/// coordinator file's `[[vehicle]]` and `[emulator]` tables are translated into it.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawVehicle {
-    system_id: Option<u8>,
+pub struct EmulatedVehicle {
+    /// MAVLink system id (default: instance + 1).
+    pub system_id: Option<u8>,
+    /// Profile: `x500` or `ideal`.
     #[serde(default = "default_profile")]
-    profile: String,
+    pub profile: String,
+    /// Start position: NED offset from the world's reference (m); becomes its origin.
     #[serde(default)]
-    start_ned_m: [f64; 3],
+    pub start_ned_m: [f64; 3],
+    /// Start velocity (m/s, NED).
     #[serde(default)]
-    velocity_ned_mps: [f64; 3],
+    pub velocity_ned_mps: [f64; 3],
+    /// Start heading (deg).
     #[serde(default)]
-    yaw_deg: f64,
+    pub yaw_deg: f64,
+    /// Started armed in the air, a pilot holding `velocity_ned_mps` until OFFBOARD.
     #[serde(default)]
-    in_air: bool,
+    pub in_air: bool,
+    /// Rate of the fast telemetry streams (Hz).
     #[serde(default = "default_rate")]
-    telemetry_rate_hz: f64,
+    pub telemetry_rate_hz: f64,
+    /// Steady wind (m/s, NED).
     #[serde(default)]
-    wind_ned_mps: [f64; 3],
+    pub wind_ned_mps: [f64; 3],
+    /// Gusts: standard deviation (m/s) and correlation time (s).
     #[serde(default)]
-    gust_std_mps: f64,
+    pub gust_std_mps: f64,
+    /// See `gust_std_mps`.
     #[serde(default = "default_gust_tau")]
-    gust_tau_s: f64,
-    mass_kg: Option<f64>,
-    hover_throttle: Option<f64>,
-    drag_per_s: Option<f64>,
+    pub gust_tau_s: f64,
+    /// The true airframe where it differs from the profile: mass (kg).
+    pub mass_kg: Option<f64>,
+    /// True hover throttle (0..1): sets the motors' thrust for the true mass.
+    pub hover_throttle: Option<f64>,
+    /// True linear drag (1/s).
+    pub drag_per_s: Option<f64>,
+    /// What its estimator reports: white noise on each position axis (m, 1 sigma).
     #[serde(default)]
-    position_noise_m: f64,
+    pub position_noise_m: f64,
+    /// White noise on each velocity axis (m/s, 1 sigma).
     #[serde(default)]
-    velocity_noise_mps: f64,
+    pub velocity_noise_mps: f64,
+    /// A slow GPS-like horizontal drift (m, 1 sigma) and its correlation time (s).
     #[serde(default)]
-    drift_std_m: f64,
+    pub drift_std_m: f64,
+    /// See `drift_std_m`.
     #[serde(default = "default_drift_tau")]
-    drift_tau_s: f64,
+    pub drift_tau_s: f64,
+    /// The age of what it reports (ms).
     #[serde(default)]
-    estimator_latency_ms: f64,
+    pub estimator_latency_ms: f64,
+    /// Thrust lost when the battery is empty (0..0.5).
     #[serde(default)]
-    battery_sag: f64,
-    battery_capacity_mah: Option<f64>,
+    pub battery_sag: f64,
+    /// Battery capacity (mAh; default the profile's BAT1_CAPACITY).
+    pub battery_capacity_mah: Option<f64>,
+}
+
+impl Default for EmulatedVehicle {
+    fn default() -> Self {
+        Self {
+            system_id: None,
+            profile: default_profile(),
+            start_ned_m: [0.0; 3],
+            velocity_ned_mps: [0.0; 3],
+            yaw_deg: 0.0,
+            in_air: false,
+            telemetry_rate_hz: default_rate(),
+            wind_ned_mps: [0.0; 3],
+            gust_std_mps: 0.0,
+            gust_tau_s: default_gust_tau(),
+            mass_kg: None,
+            hover_throttle: None,
+            drag_per_s: None,
+            position_noise_m: 0.0,
+            velocity_noise_mps: 0.0,
+            drift_std_m: 0.0,
+            drift_tau_s: default_drift_tau(),
+            estimator_latency_ms: 0.0,
+            battery_sag: 0.0,
+            battery_capacity_mah: None,
+        }
+    }
+}
+
+/// How a configuration names the keys of an [`EmulatedVehicle`] in its messages: a
+/// prefix for the vehicle's own keys, one for the true airframe's and one for the
+/// estimator's and battery's (a sitl file: `vehicle[i].` for all three; a coordinator
+/// file: `vehicle[i].`, `vehicle[i].airframe.` and `emulator.`).
+#[derive(Debug, Clone, Copy)]
+pub struct KeyNames<'a> {
+    /// Before `profile`, and the vehicle named in a problem of its start or rates.
+    pub vehicle: &'a str,
+    /// Before `mass_kg`, `hover_throttle`, `drag_per_s`.
+    pub airframe: &'a str,
+    /// Before the estimator's and the battery's keys.
+    pub estimator: &'a str,
+}
+
+impl EmulatedVehicle {
+    /// The vehicle's configuration, as system `system_id`.
+    ///
+    /// # Errors
+    /// Every problem, each naming its key as `names` says: an unknown profile, an
+    /// airframe the profile cannot take, an estimator or battery number out of range,
+    /// a start state or rate the vehicle refuses.
+    pub fn build(&self, system_id: u8, names: &KeyNames<'_>) -> Result<VehicleConfig, Vec<String>> {
+        let mut problems = Vec::new();
+        let est = names.estimator;
+        let mut within = |key: &str, value: f64, lo: f64, hi: f64, unit: &str| {
+            let good = value.is_finite() && value >= lo && value <= hi;
+            if !good {
+                problems.push(format!(
+                    "{est}{key} must be a finite number in [{lo}, {hi}]{unit}, got {value}"
+                ));
+            }
+            good
+        };
+        within("position_noise_m", self.position_noise_m, 0.0, 100.0, " m");
+        within(
+            "velocity_noise_mps",
+            self.velocity_noise_mps,
+            0.0,
+            10.0,
+            " m/s",
+        );
+        within("drift_std_m", self.drift_std_m, 0.0, 100.0, " m");
+        within(
+            "estimator_latency_ms",
+            self.estimator_latency_ms,
+            0.0,
+            2000.0,
+            " ms",
+        );
+        within("battery_sag", self.battery_sag, 0.0, 0.5, "");
+        if let Some(c) = self.battery_capacity_mah {
+            within("battery_capacity_mah", c, 1.0, 1.0e6, " mAh");
+        }
+        if !(self.drift_tau_s.is_finite() && self.drift_tau_s > 0.0 && self.drift_tau_s <= 1.0e4) {
+            problems.push(format!(
+                "{est}drift_tau_s must be a finite number in (0, 10000] s, got {}",
+                self.drift_tau_s
+            ));
+        }
+        let profile = match self.profile.parse::<Profile>() {
+            Ok(p) => match p.with_airframe(self.mass_kg, self.hover_throttle, self.drag_per_s) {
+                Ok(p) => Some(p),
+                Err(e) => {
+                    problems.push(format!("{}{e}", names.airframe));
+                    None
+                }
+            },
+            Err(e) => {
+                problems.push(format!("{}profile: {e}", names.vehicle));
+                None
+            }
+        };
+        let Some(profile) = profile.filter(|_| problems.is_empty()) else {
+            return Err(problems);
+        };
+        let cfg = VehicleConfig {
+            system_id,
+            profile,
+            start: StartState {
+                pos_world_ned_m: Vector3::from(self.start_ned_m),
+                vel_ned_mps: Vector3::from(self.velocity_ned_mps),
+                yaw_rad: self.yaw_deg.to_radians(),
+                in_air: self.in_air,
+            },
+            fast_rate_hz: self.telemetry_rate_hz,
+            wind: WindConfig {
+                steady_ned_mps: Vector3::from(self.wind_ned_mps),
+                gust_std_mps: self.gust_std_mps,
+                gust_tau_s: self.gust_tau_s,
+            },
+            seed: u64::from(system_id),
+            estimator: EstimatorConfig {
+                position_noise_m: self.position_noise_m,
+                velocity_noise_mps: self.velocity_noise_mps,
+                drift_std_m: self.drift_std_m,
+                drift_tau_s: self.drift_tau_s,
+                latency: Duration::from_secs_f64(self.estimator_latency_ms / 1000.0),
+                faults: Vec::new(),
+            },
+            battery: BatteryConfig {
+                capacity_mah: self.battery_capacity_mah,
+                sag: self.battery_sag,
+            },
+            signing: None,
+        };
+        cfg.validate()
+            .map_err(|e| vec![format!("{}: {e}", names.vehicle.trim_end_matches('.'))])?;
+        Ok(cfg)
+    }
 }
 
 fn default_drift_tau() -> f64 {
@@ -239,60 +401,19 @@ impl SitlConfig {
                 problems.push(format!("vehicle[{i}].system_id {system_id} is used twice"));
             }
             seen_ids.push(system_id);
-            let profile = match v.profile.parse::<Profile>() {
-                Ok(p) => p,
-                Err(e) => {
-                    problems.push(format!("vehicle[{i}].profile: {e}"));
+            let prefix = format!("vehicle[{i}].");
+            let names = KeyNames {
+                vehicle: &prefix,
+                airframe: &prefix,
+                estimator: &prefix,
+            };
+            let cfg = match v.build(system_id, &names) {
+                Ok(cfg) => cfg,
+                Err(found) => {
+                    problems.extend(found);
                     continue;
                 }
             };
-            let profile = match profile.with_airframe(v.mass_kg, v.hover_throttle, v.drag_per_s) {
-                Ok(p) => p,
-                Err(e) => {
-                    problems.push(format!("vehicle[{i}].{e}"));
-                    continue;
-                }
-            };
-            let latency_ms = v.estimator_latency_ms;
-            if !(latency_ms.is_finite() && (0.0..=2000.0).contains(&latency_ms)) {
-                problems.push(format!(
-                    "vehicle[{i}].estimator_latency_ms must be in [0, 2000] ms, got {latency_ms}"
-                ));
-                continue;
-            }
-            let cfg = VehicleConfig {
-                system_id,
-                profile,
-                start: StartState {
-                    pos_world_ned_m: Vector3::from(v.start_ned_m),
-                    vel_ned_mps: Vector3::from(v.velocity_ned_mps),
-                    yaw_rad: v.yaw_deg.to_radians(),
-                    in_air: v.in_air,
-                },
-                fast_rate_hz: v.telemetry_rate_hz,
-                wind: WindConfig {
-                    steady_ned_mps: Vector3::from(v.wind_ned_mps),
-                    gust_std_mps: v.gust_std_mps,
-                    gust_tau_s: v.gust_tau_s,
-                },
-                seed: u64::from(system_id),
-                estimator: EstimatorConfig {
-                    position_noise_m: v.position_noise_m,
-                    velocity_noise_mps: v.velocity_noise_mps,
-                    drift_std_m: v.drift_std_m,
-                    drift_tau_s: v.drift_tau_s,
-                    latency: Duration::from_secs_f64(latency_ms / 1000.0),
-                    faults: Vec::new(),
-                },
-                battery: BatteryConfig {
-                    capacity_mah: v.battery_capacity_mah,
-                    sag: v.battery_sag,
-                },
-                signing: None,
-            };
-            if let Err(e) = cfg.validate() {
-                problems.push(format!("vehicle[{i}]: {e}"));
-            }
             if v.start_ned_m[2] > w.ground_down_m {
                 problems.push(format!(
                     "vehicle[{i}].start_ned_m is below the ground (z = {} > ground_down_m = {})",

@@ -2,12 +2,11 @@
 //! vehicles, and the lockstep link faults (built with the `emulator` feature only).
 
 use std::net::{IpAddr, SocketAddr};
-use std::time::Duration;
 
 use nalgebra::Vector3;
-use ringswarm_sitl::autopilot::estimator::{EstimatorConfig, FaultKind, TelemetryFault};
-use ringswarm_sitl::autopilot::{BatteryConfig, StartState, VehicleConfig};
-use ringswarm_sitl::profile::Profile;
+use ringswarm_sitl::autopilot::VehicleConfig;
+use ringswarm_sitl::autopilot::estimator::{FaultKind, TelemetryFault};
+use ringswarm_sitl::config_file::{EmulatedVehicle, KeyNames};
 use ringswarm_sitl::udp::{Placement, PortPlan};
 use ringswarm_sitl::world::World;
 use ringswarm_wire::px4;
@@ -105,40 +104,51 @@ impl Config {
             ground_down_m: self.emulator.ground_below_m,
         };
         let mut p = Problems::default();
-        let estimator = self.estimator(&mut p);
-        let battery = self.battery(&mut p);
+        let e = &self.emulator;
         let mut vehicles = Vec::new();
         for (i, v) in self.vehicle.iter().enumerate() {
-            let mut profile: Profile = match v.profile.parse::<Profile>() {
-                Ok(profile) => profile,
-                Err(e) => {
-                    p.push(format!("vehicle[{i}].profile: {e}"));
-                    continue;
-                }
-            };
-            if let Some(a) = &v.airframe {
-                match profile
-                    .clone()
-                    .with_airframe(a.mass_kg, a.hover_throttle, a.drag_per_s)
-                {
-                    Ok(changed) => profile = changed,
-                    Err(e) => p.push(format!("vehicle[{i}].airframe.{e}")),
-                }
-            }
-            let mut cfg = VehicleConfig::new(v.system_id, profile);
-            cfg.start = StartState {
-                pos_world_ned_m: enu_to_ned(Vector3::from(v.start_enu_m)),
-                vel_ned_mps: enu_to_ned(Vector3::from(v.start_velocity_enu_mps)),
-                yaw_rad: 0.0,
+            // The coordinator's tables in the emulator's one schema: ENU made NED, the
+            // shared estimator and battery of `[emulator]`, the true airframe's overrides.
+            let airframe = v.airframe.unwrap_or_default();
+            let emulated = EmulatedVehicle {
+                system_id: Some(v.system_id),
+                profile: v.profile.clone(),
+                start_ned_m: enu_to_ned(Vector3::from(v.start_enu_m)).into(),
+                velocity_ned_mps: enu_to_ned(Vector3::from(v.start_velocity_enu_mps)).into(),
                 in_air: v.in_air,
+                mass_kg: airframe.mass_kg,
+                hover_throttle: airframe.hover_throttle,
+                drag_per_s: airframe.drag_per_s,
+                position_noise_m: e.position_noise_m,
+                velocity_noise_mps: e.velocity_noise_mps,
+                drift_std_m: e.drift_std_m,
+                drift_tau_s: e.drift_tau_s,
+                estimator_latency_ms: e.estimator_latency_ms,
+                battery_sag: e.battery_sag,
+                battery_capacity_mah: e.battery_capacity_mah,
+                ..EmulatedVehicle::default()
             };
-            cfg.estimator = estimator.clone();
-            cfg.battery = battery;
-            cfg.estimator.faults = self.faults_of(i, &mut p);
-            if let Err(e) = cfg.validate() {
-                p.push(format!("vehicle[{i}]: {e}"));
+            let (vehicle, airframe_key) =
+                (format!("vehicle[{i}]."), format!("vehicle[{i}].airframe."));
+            let names = KeyNames {
+                vehicle: &vehicle,
+                airframe: &airframe_key,
+                estimator: "emulator.",
+            };
+            match emulated.build(v.system_id, &names) {
+                Ok(mut cfg) => {
+                    cfg.estimator.faults = self.faults_of(i, &mut p);
+                    vehicles.push(cfg);
+                }
+                // `[emulator]`'s problems are every vehicle's: said once.
+                Err(found) => {
+                    for problem in found {
+                        if !p.0.contains(&problem) {
+                            p.push(problem);
+                        }
+                    }
+                }
             }
-            vehicles.push(cfg);
         }
         if !p.0.is_empty() {
             return Err(p.0.join("\n"));
@@ -191,60 +201,6 @@ impl Config {
             });
         }
         Ok(out)
-    }
-
-    /// The estimate's errors of `[emulator]`, the same for every vehicle (each draws its
-    /// own numbers).
-    fn estimator(&self, p: &mut Problems) -> EstimatorConfig {
-        let e = &self.emulator;
-        p.within(
-            "emulator.position_noise_m",
-            e.position_noise_m,
-            0.0,
-            100.0,
-            " m",
-        );
-        p.within(
-            "emulator.velocity_noise_mps",
-            e.velocity_noise_mps,
-            0.0,
-            10.0,
-            " m/s",
-        );
-        p.within("emulator.drift_std_m", e.drift_std_m, 0.0, 100.0, " m");
-        p.positive("emulator.drift_tau_s", e.drift_tau_s, 1.0e4, " s");
-        let latency_ok = p.within(
-            "emulator.estimator_latency_ms",
-            e.estimator_latency_ms,
-            0.0,
-            2000.0,
-            " ms",
-        );
-        EstimatorConfig {
-            position_noise_m: e.position_noise_m,
-            velocity_noise_mps: e.velocity_noise_mps,
-            drift_std_m: e.drift_std_m,
-            drift_tau_s: e.drift_tau_s,
-            latency: if latency_ok {
-                Duration::from_secs_f64(e.estimator_latency_ms / 1000.0)
-            } else {
-                Duration::ZERO
-            },
-            faults: Vec::new(),
-        }
-    }
-
-    /// The battery of `[emulator]`, the same for every vehicle.
-    fn battery(&self, p: &mut Problems) -> BatteryConfig {
-        let e = &self.emulator;
-        p.within("emulator.battery_sag", e.battery_sag, 0.0, 0.5, "");
-        if let Some(c) = e.battery_capacity_mah {
-            p.within("emulator.battery_capacity_mah", c, 1.0, 1.0e6, " mAh");
-        }
-        BatteryConfig {
-            capacity_mah: e.battery_capacity_mah,
-            sag: e.battery_sag,
-        }
     }
 
     /// The `[[emulator.fault]]` tables of vehicle `i` (0-based).
