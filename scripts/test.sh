@@ -34,34 +34,14 @@ fi
 .venv/bin/python -m pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
 export RINGSWARM_BIN="$PWD/target/debug/ringswarm"
 # Most of these tests wait on real time (flights over UDP, MAVSDK's examples), so they run
-# in three groups at once, each in a network namespace of its own: its own loopback, so
-# the fixed ports (14540, 14550, …) do not collide. Where namespaces cannot be made (not
-# root), the groups run one after the other.
-examples=tests/python/test_mavsdk_examples.py
-half="mission or velocity_body or takeoff_and_land or offboard_attitude"
-group_1=("$examples" -k "$half")
-group_2=("$examples" -k "not ($half)")
-group_3=(tests/python --ignore="$examples")
-pytest_args=(-q -p no:cacheprovider)
+# in parallel, on pytest-xdist's workers. They use PX4's fixed ports (14540, 14550, …), so
+# each worker takes a network namespace of its own with its own loopback
+# (tests/python/conftest.py). Where namespaces cannot be made (not root), they run in one
+# process, one after the other.
+pytest_args=(-q -p no:cacheprovider --durations=8 tests/python)
 if unshare -n true 2>/dev/null; then
-  logs=$(mktemp -d)
-  pids=()
-  for g in 1 2 3; do
-    declare -n group="group_$g"
-    unshare -n bash -c 'ip link set lo up && exec .venv/bin/python -m pytest "$@"' _ \
-      "${pytest_args[@]}" "${group[@]}" >"$logs/$g.log" 2>&1 &
-    pids+=($!)
-  done
-  status=0
-  for g in 1 2 3; do
-    wait "${pids[$((g - 1))]}" || status=1
-    echo "-- python group $g of 3"
-    cat "$logs/$g.log"
-  done
-  rm -rf "$logs"
-  exit "$status"
+  RINGSWARM_TEST_NETNS=1 .venv/bin/python -m pytest "${pytest_args[@]}" -n "${RINGSWARM_PYTEST_WORKERS:-6}"
+else
+  echo "python checks: network namespaces cannot be made here (unshare -n), so they run one at a time"
+  .venv/bin/python -m pytest "${pytest_args[@]}" -n 0
 fi
-for g in 1 2 3; do
-  declare -n group="group_$g"
-  .venv/bin/python -m pytest "${pytest_args[@]}" "${group[@]}"
-done
