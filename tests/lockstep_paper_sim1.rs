@@ -139,9 +139,9 @@ fn two_runs_with_the_same_seed_are_identical_bit_for_bit() {
 }
 
 #[test]
-fn the_swarm_reaches_the_predicted_velocity_in_formation_at_50_m_within_40_s() {
+fn the_swarm_reaches_the_predicted_velocity_in_formation_at_50_m_within_55_s() {
     let mut run = build(LinkConditions::default());
-    run.run_until(SimTime::from_millis(40_000), |_| {});
+    run.run_until(SimTime::from_millis(55_000), |_| {});
     // Hand-derived prediction (w = (1, 6, 1, 6, 1, 6)); the emulator's truth is compared,
     // not the coordinator's view of it.
     let predicted = Vector2::new(271.0 / 21.0, 157.0 / 21.0);
@@ -151,25 +151,26 @@ fn the_swarm_reaches_the_predicted_velocity_in_formation_at_50_m_within_40_s() {
             Vector2::new(a.cos(), a.sin()) * 20.0
         })
         .collect();
-    // Measured (deterministic): velocity within 0.061 % of the prediction, altitude within
-    // 0.11 m, formation within 0.036 m at 40 s; the bounds leave half as much again.
+    // Measured (deterministic, the same in debug and release builds): at 55 s, about 54 s into
+    // consensus, every velocity within 2.8e-5 of the prediction (relative), altitude
+    // within 6 mm, formation within 4.6 mm. The bounds: 1e-4, 2 cm, 1 cm.
     let truth: Vec<_> = run.vehicles().iter().map(|v| v.status()).collect();
     let enu = |v: nalgebra::Vector3<f64>| ringswarm::control::ned_to_enu(v);
     for (i, s) in truth.iter().enumerate() {
         let v = enu(s.vel_ned_mps).xy();
         assert!(
-            (v - predicted).norm() <= 0.001 * predicted.norm(),
+            (v - predicted).norm() <= 1e-4 * predicted.norm(),
             "vehicle {}: velocity {v:?}, predicted {predicted:?}",
             i + 1
         );
         let altitude = enu(s.pos_world_ned_m).z;
         assert!(
-            (altitude - 50.0).abs() <= 0.15,
+            (altitude - 50.0).abs() <= 0.02,
             "vehicle {}: altitude {altitude} m",
             i + 1
         );
     }
-    // Formation: every p_i - d_i at the same point (their mean) within 5 cm.
+    // Formation: every p_i - d_i at the same point (their mean) within 1 cm.
     let shifted: Vec<Vector2<f64>> = truth
         .iter()
         .zip(&offsets)
@@ -178,7 +179,7 @@ fn the_swarm_reaches_the_predicted_velocity_in_formation_at_50_m_within_40_s() {
     let centre = shifted.iter().sum::<Vector2<f64>>() / 6.0;
     for (i, p) in shifted.iter().enumerate() {
         assert!(
-            (p - centre).norm() < 0.05,
+            (p - centre).norm() < 0.01,
             "vehicle {}: {} m from its formation slot",
             i + 1,
             (p - centre).norm()
