@@ -21,6 +21,8 @@
 //!   fence upload, link health, the telemetry gate.
 //! - [`swarm`]: the sans-IO swarm machine: the laws at the control rate over every link,
 //!   the safety filter, the divergence guard, the fence, the events.
+//! - [`distributed`]: the swarm split into shards: which shard flies which vehicle, and
+//!   the messages between shards.
 //! - [`error`]: the maths' and the control's errors.
 //!
 //! The public surface a driver needs is [`swarm::Swarm`] (`handle_datagram`,
@@ -31,6 +33,7 @@
 
 pub mod consensus;
 pub mod control;
+pub mod distributed;
 pub mod error;
 pub mod frame;
 pub mod link;

@@ -1,0 +1,248 @@
+//! What crosses between shards, and its bytes.
+//!
+//! A payload is one version byte ([`PAYLOAD_VERSION`]) followed by a [`ShardMessage`] in
+//! postcard's form (integers as varints, floats little-endian, enums by their index).
+//! A receiver takes only its own version: a payload of another version is refused with
+//! [`PayloadError::Version`], never guessed at.
+//!
+//! Times are on the swarm clock: microseconds since the Unix epoch on a real deployment
+//! (each shard's clock, aligned by NTP or PTP), microseconds of virtual time in lockstep.
+//! Positions and velocities are in the common frame (ENU, about the `[frame]`
+//! reference), as `f32`: at 10 km from the reference a position is resolved to 1 mm, a
+//! velocity of 100 m/s to 8 µm/s, far below what a vehicle's own estimate resolves. The
+//! sums that decide the prediction are `f64`, so that every shard adds the same numbers
+//! to the same value.
+
+use serde::{Deserialize, Serialize};
+
+/// The version of the payload's form; bumped on any change to the types below.
+pub const PAYLOAD_VERSION: u8 = 1;
+
+/// Where a vehicle's link is, as another shard needs it: whether it flies on its
+/// shard's commands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum MemberPhase {
+    /// Not flying on its shard's commands yet (discovering, handshaking).
+    Waiting,
+    /// Flying in OFFBOARD on its shard's commands.
+    Flying,
+    /// Lost: silent, out of OFFBOARD, or handed to its own Hold.
+    Lost,
+    /// Told to land, or landed and disarmed.
+    Landing,
+    /// Its handshake gave up (it never flew).
+    Failed,
+}
+
+impl MemberPhase {
+    /// A short lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Waiting => "waiting",
+            Self::Flying => "flying",
+            Self::Lost => "lost",
+            Self::Landing => "landing",
+            Self::Failed => "failed",
+        }
+    }
+}
+
+/// One vehicle's state, published by the shard that flies it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct VehicleReport {
+    /// The vehicle's place in the ring (0-based, the `[[vehicle]]` order).
+    pub vehicle: u16,
+    /// When its shard received the position below (µs, swarm clock).
+    pub measured_us: u64,
+    /// Its link.
+    pub phase: MemberPhase,
+    /// Whether it reports being on the ground.
+    pub landed: bool,
+    /// Position (m, ENU, common frame).
+    pub pos_enu_m: [f32; 3],
+    /// Velocity (m/s, ENU).
+    pub vel_enu_mps: [f32; 3],
+}
+
+/// `Σ wᵢ vᵢ` and `Σ wᵢ` over a shard's vehicles.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct WeightedSum {
+    /// `Σ wᵢ vᵢ` (m/s, ENU, x and y).
+    pub wv_mps: [f64; 2],
+    /// `Σ wᵢ`.
+    pub w: f64,
+}
+
+/// What a shard says of itself every control tick.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShardReport {
+    /// The shard's index (the `[[shard]]` order).
+    pub shard: u16,
+    /// When it was sent (µs, swarm clock).
+    pub sent_us: u64,
+    /// How many vehicles it flies.
+    pub vehicles: u16,
+    /// How many of them fly on its commands with a fresh state.
+    pub flying: u16,
+    /// How many of them are lost.
+    pub lost: u16,
+    /// The instant at which it starts (or started) consensus (µs, swarm clock), once
+    /// every vehicle it knows of flies: the swarm adopts the earliest one proposed.
+    pub start_us: Option<u64>,
+    /// Its vehicles' `Σ wᵢ vᵢ` at the first control tick at or after `start_us`: every
+    /// shard adds the same partial sums, in shard order, to the same prediction.
+    pub start_sum: Option<WeightedSum>,
+    /// Its vehicles' `Σ wᵢ vᵢ` over the fresh states of this tick (the mean-velocity
+    /// correction and the divergence guard read the swarm's from these).
+    pub now_sum: WeightedSum,
+}
+
+/// One payload between shards.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum ShardMessage {
+    /// A vehicle's state, under `ringswarm/<swarm>/state/<network>/<sysid>`.
+    Vehicle(VehicleReport),
+    /// A shard's report, under `ringswarm/<swarm>/shard/<name>`.
+    Shard(ShardReport),
+}
+
+/// Why a payload was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PayloadError {
+    /// No byte at all.
+    #[error("empty payload")]
+    Empty,
+    /// A version this build does not read.
+    #[error("payload version {got}, this build reads version {PAYLOAD_VERSION}")]
+    Version {
+        /// The version byte received.
+        got: u8,
+    },
+    /// The bytes after the version do not decode, or bytes are left over.
+    #[error("payload does not decode: {0}")]
+    Malformed(String),
+}
+
+/// Appends `message`'s payload (version byte, then postcard) to `out`.
+pub fn encode(message: &ShardMessage, out: &mut Vec<u8>) {
+    out.push(PAYLOAD_VERSION);
+    // Serialising these plain types into a growing Vec cannot fail.
+    if let Ok(bytes) = postcard::to_allocvec(message) {
+        out.extend_from_slice(&bytes);
+    }
+}
+
+/// A payload's message.
+///
+/// # Errors
+/// [`PayloadError`] for an empty payload, another version, or bytes that do not decode
+/// exactly.
+pub fn decode(bytes: &[u8]) -> Result<ShardMessage, PayloadError> {
+    let (&version, body) = bytes.split_first().ok_or(PayloadError::Empty)?;
+    if version != PAYLOAD_VERSION {
+        return Err(PayloadError::Version { got: version });
+    }
+    let (message, rest) = postcard::take_from_bytes::<ShardMessage>(body)
+        .map_err(|e| PayloadError::Malformed(e.to_string()))?;
+    if !rest.is_empty() {
+        return Err(PayloadError::Malformed(format!(
+            "{} bytes after the message",
+            rest.len()
+        )));
+    }
+    Ok(message)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn vehicle() -> ShardMessage {
+        ShardMessage::Vehicle(VehicleReport {
+            vehicle: 5,
+            measured_us: 1_764_000_000_000_000,
+            phase: MemberPhase::Flying,
+            landed: false,
+            pos_enu_m: [120.5, -33.25, 50.0],
+            vel_enu_mps: [12.9, 7.48, -0.01],
+        })
+    }
+
+    fn shard() -> ShardMessage {
+        ShardMessage::Shard(ShardReport {
+            shard: 2,
+            sent_us: 1_764_000_000_020_000,
+            vehicles: 2,
+            flying: 2,
+            lost: 0,
+            start_us: Some(1_764_000_001_000_000),
+            start_sum: Some(WeightedSum {
+                wv_mps: [3.5, -1.25],
+                w: 7.0,
+            }),
+            now_sum: WeightedSum {
+                wv_mps: [90.3, 52.3],
+                w: 7.0,
+            },
+        })
+    }
+
+    #[test]
+    fn messages_come_back_as_they_went() {
+        for m in [vehicle(), shard()] {
+            let mut bytes = Vec::new();
+            encode(&m, &mut bytes);
+            assert_eq!(bytes[0], PAYLOAD_VERSION);
+            assert_eq!(decode(&bytes), Ok(m));
+        }
+    }
+
+    #[test]
+    fn a_vehicle_report_is_37_bytes() {
+        // version 1 + enum tag 1 + vehicle 1 (varint 5) + time 8 (varint of 1.76e15:
+        // 51 bits, 7 per byte) + phase 1 + landed 1 + six f32 24 = 37; the same fields in
+        // JSON take over 150.
+        let mut bytes = Vec::new();
+        encode(&vehicle(), &mut bytes);
+        assert_eq!(bytes.len(), 37);
+        let json = serde_json::to_vec(&vehicle()).unwrap();
+        assert!(json.len() > 150, "{}", json.len());
+    }
+
+    #[test]
+    fn other_versions_and_bad_bytes_are_refused_by_name() {
+        let mut bytes = Vec::new();
+        encode(&vehicle(), &mut bytes);
+        let mut newer = bytes.clone();
+        newer[0] = PAYLOAD_VERSION + 1;
+        assert_eq!(
+            decode(&newer),
+            Err(PayloadError::Version {
+                got: PAYLOAD_VERSION + 1
+            })
+        );
+        assert_eq!(decode(&[]), Err(PayloadError::Empty));
+        assert!(matches!(
+            decode(&bytes[..bytes.len() - 1]),
+            Err(PayloadError::Malformed(_))
+        ));
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert_eq!(
+            decode(&longer),
+            Err(PayloadError::Malformed("1 bytes after the message".into()))
+        );
+        // Every truncation and every single byte changed: an error or a message, never a
+        // panic.
+        for cut in 0..bytes.len() {
+            let _ = decode(&bytes[..cut]);
+        }
+        for i in 0..bytes.len() {
+            for b in [0u8, 0x7f, 0x80, 0xff] {
+                let mut changed = bytes.clone();
+                changed[i] = b;
+                let _ = decode(&changed);
+            }
+        }
+    }
+}
