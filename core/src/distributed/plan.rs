@@ -115,9 +115,9 @@ impl ShardPlan {
         // Vehicle j is read by the shards flying its out-neighbours (the law), or by
         // every other shard (watch all).
         let mut read_by: Vec<Vec<usize>> = vec![Vec::new(); n];
-        for i in 0..n {
+        for (i, reader) in owner.iter().enumerate() {
             for e in ring.neighbours(i).iter() {
-                read_by[e.from].push(owner[i]);
+                read_by[e.from].push(*reader);
             }
         }
         let watched = (0..n)
