@@ -5,6 +5,8 @@
 //! - [`udp`]: tokio, a socket per vehicle or per MAVLink network, for real PX4 or
 //!   `ringswarm sitl` vehicles.
 //! - [`mirror`]: every datagram of a UDP flight copied to extra addresses, read-only.
+//! - [`shards`]: several shards of one swarm in one process, in lockstep with the
+//!   vehicles, their messages on a bus with seeded latency and loss. Deterministic.
 //! - [`listening`]: how far behind its sockets the UDP driver is, so that its own stall
 //!   is not taken for vehicles going silent.
 //!
@@ -15,6 +17,8 @@ pub mod listening;
 #[cfg(feature = "emulator")]
 pub mod lockstep;
 pub mod mirror;
+#[cfg(feature = "emulator")]
+pub mod shards;
 pub mod signals;
 pub mod udp;
 

@@ -52,8 +52,12 @@ impl MemberPhase {
 pub struct VehicleReport {
     /// The vehicle's place in the ring (0-based, the `[[vehicle]]` order).
     pub vehicle: u16,
-    /// When its shard received the position below (µs, swarm clock).
-    pub measured_us: u64,
+    /// Its shard's control tick that sent it (µs, swarm clock).
+    pub sent_us: u64,
+    /// How old the position below was at that tick (µs): its shard received it
+    /// `sent_us − age_us`. A receiver carries it forward by the hop only (its own
+    /// vehicles' states are as old as their telemetry made them, too).
+    pub age_us: u32,
     /// Its link.
     pub phase: MemberPhase,
     /// Whether it reports being on the ground.
@@ -64,9 +68,11 @@ pub struct VehicleReport {
     pub vel_enu_mps: [f32; 3],
 }
 
-/// `Σ wᵢ vᵢ` and `Σ wᵢ` over a shard's vehicles.
+/// `Σ wᵢ pᵢ`, `Σ wᵢ vᵢ` and `Σ wᵢ` over a shard's vehicles.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct WeightedSum {
+    /// `Σ wᵢ pᵢ` (m, ENU, x and y).
+    pub wp_m: [f64; 2],
     /// `Σ wᵢ vᵢ` (m/s, ENU, x and y).
     pub wv_mps: [f64; 2],
     /// `Σ wᵢ`.
@@ -160,7 +166,8 @@ mod tests {
     fn vehicle() -> ShardMessage {
         ShardMessage::Vehicle(VehicleReport {
             vehicle: 5,
-            measured_us: 1_764_000_000_000_000,
+            sent_us: 1_764_000_000_000_000,
+            age_us: 12_000,
             phase: MemberPhase::Flying,
             landed: false,
             pos_enu_m: [120.5, -33.25, 50.0],
@@ -177,10 +184,12 @@ mod tests {
             lost: 0,
             start_us: Some(1_764_000_001_000_000),
             start_sum: Some(WeightedSum {
+                wp_m: [10.0, 20.0],
                 wv_mps: [3.5, -1.25],
                 w: 7.0,
             }),
             now_sum: WeightedSum {
+                wp_m: [1000.0, 2000.0],
                 wv_mps: [90.3, 52.3],
                 w: 7.0,
             },
@@ -198,13 +207,13 @@ mod tests {
     }
 
     #[test]
-    fn a_vehicle_report_is_37_bytes() {
+    fn a_vehicle_report_is_39_bytes() {
         // version 1 + enum tag 1 + vehicle 1 (varint 5) + time 8 (varint of 1.76e15:
-        // 51 bits, 7 per byte) + phase 1 + landed 1 + six f32 24 = 37; the same fields in
-        // JSON take over 150.
+        // 51 bits, 7 per byte) + age 2 (varint of 12 000: 14 bits) + phase 1 + landed 1
+        // + six f32 24 = 39; the same fields in JSON take over 150.
         let mut bytes = Vec::new();
         encode(&vehicle(), &mut bytes);
-        assert_eq!(bytes.len(), 37);
+        assert_eq!(bytes.len(), 39);
         let json = serde_json::to_vec(&vehicle()).unwrap();
         assert!(json.len() > 150, "{}", json.len());
     }

@@ -66,6 +66,9 @@ pub struct ShardPlan {
     watched: Vec<bool>,
     /// Whether another shard reads this vehicle's state (its own only).
     read_elsewhere: Vec<bool>,
+    /// Whether this shard knows the state of the vehicle and of each of its ring
+    /// in-neighbours: its law command can be computed here.
+    computable: Vec<bool>,
     watch: Watch,
     start_lead: Duration,
     epoch_us: u64,
@@ -120,7 +123,7 @@ impl ShardPlan {
                 read_by[e.from].push(*reader);
             }
         }
-        let watched = (0..n)
+        let watched: Vec<bool> = (0..n)
             .map(|j| {
                 owner[j] != this
                     && match watch {
@@ -138,12 +141,17 @@ impl ShardPlan {
                     }
             })
             .collect();
+        let known = |j: usize| owner[j] == this || watched[j];
+        let computable = (0..n)
+            .map(|i| known(i) && ring.neighbours(i).iter().all(|e| known(e.from)))
+            .collect();
         Ok(Self {
             this,
             shards,
             owner,
             watched,
             read_elsewhere,
+            computable,
             watch,
             start_lead: DEFAULT_START_LEAD,
             epoch_us: 0,
@@ -185,6 +193,12 @@ impl ShardPlan {
     /// Whether this shard reads remote vehicle `i`'s state.
     pub fn is_watched(&self, i: usize) -> bool {
         self.watched.get(i).copied().unwrap_or(false)
+    }
+
+    /// Whether vehicle `i`'s law command can be computed here (its state and its ring
+    /// in-neighbours' are known): the saturation's `conserve` counts it.
+    pub fn is_computable(&self, i: usize) -> bool {
+        self.computable.get(i).copied().unwrap_or(false)
     }
 
     /// Whether another shard reads this shard's vehicle `i`: its state is published.
@@ -236,7 +250,10 @@ mod tests {
         let published: Vec<usize> = (0..6).filter(|i| plan.is_read_elsewhere(*i)).collect();
         assert_eq!(published, vec![3]);
         assert_eq!(plan.vehicles_of(2), 2);
+        let computable: Vec<usize> = (0..6).filter(|i| plan.is_computable(*i)).collect();
+        assert_eq!(computable, vec![2, 3]);
         let all = ShardPlan::new(1, 3, owner, &ring(6), Watch::All).unwrap();
+        assert!((0..6).all(|i| all.is_computable(i)));
         let watched: Vec<usize> = (0..6).filter(|i| all.is_watched(*i)).collect();
         assert_eq!(watched, vec![0, 1, 4, 5]);
         assert!(all.is_read_elsewhere(2) && all.is_read_elsewhere(3));

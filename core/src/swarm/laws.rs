@@ -18,6 +18,7 @@
 //!   stopped: `u = −HOLD_K_V·v + HOLD_K_P·(p_hold − p)`.
 
 use nalgebra::Vector2;
+use ringswarm_wire::time::SimTime;
 
 use super::{PlanDecision, Swarm, SwarmPhase};
 use crate::consensus::ring_accelerations;
@@ -37,7 +38,7 @@ pub const MEAN_INTEGRAL_LIMIT_MPS2: f64 = 1.0;
 
 impl Swarm {
     /// The horizontal accelerations of this phase into `accel`; the saturation to use.
-    pub(super) fn horizontal_law(&mut self) -> SaturationMode {
+    pub(super) fn horizontal_law(&mut self, now: SimTime) -> SaturationMode {
         let dt_s = self.setup.control_interval.as_secs_f64();
         match self.phase {
             SwarmPhase::Consensus(_) => {
@@ -47,7 +48,7 @@ impl Swarm {
                     &self.law.horizontal,
                     &mut self.law.accel,
                 );
-                if let Some(correction) = self.mean_velocity_correction(dt_s) {
+                if let Some(correction) = self.mean_velocity_correction(now, dt_s) {
                     self.law.accel.iter_mut().for_each(|a| *a += correction);
                 }
                 self.setup.saturation
@@ -113,6 +114,9 @@ impl Swarm {
     /// The w-weighted mean velocity `Σwᵢvᵢ / Σwᵢ` of the states flown on this tick (m/s,
     /// ENU); `None` when the weights sum to zero.
     pub(super) fn weighted_mean_velocity(&self) -> Option<Vector2<f64>> {
+        if self.peers.is_some() {
+            return self.shard_mean_velocity();
+        }
         let total: f64 = self.law.w.iter().sum();
         if total.abs() < 1e-12 {
             return None;
@@ -130,7 +134,7 @@ impl Swarm {
     /// The uniform correction of the w-weighted mean velocity, if it is on: a PI loop on
     /// `e = v̄_w − v_f`, `−k·e − (k²/2)·∫e` (damping 0.707), the integral kept within
     /// [`MEAN_INTEGRAL_LIMIT_MPS2`] and reset when consensus (re)starts.
-    fn mean_velocity_correction(&mut self, dt_s: f64) -> Option<Vector2<f64>> {
+    fn mean_velocity_correction(&mut self, now: SimTime, dt_s: f64) -> Option<Vector2<f64>> {
         let k = self.setup.mean_velocity_gain;
         let target = self.predicted_final_velocity?;
         if k == 0.0 {
@@ -140,8 +144,13 @@ impl Swarm {
         let error = mean - target;
         let k_i = 0.5 * k * k;
         let limit = MEAN_INTEGRAL_LIMIT_MPS2 / k_i;
-        self.mean_velocity_integral =
-            (self.mean_velocity_integral + error * dt_s).map(|x| x.clamp(-limit, limit));
+        self.mean_velocity_integral = match self.shard_mean_integral(now) {
+            // With shards, the state the sum integrates to (shard.rs); held within the
+            // same limit.
+            Some(integral) => integral.map(|x| x.clamp(-limit, limit)),
+            None if self.peers.is_some() => Vector2::zeros(),
+            None => (self.mean_velocity_integral + error * dt_s).map(|x| x.clamp(-limit, limit)),
+        };
         Some(-k * error - k_i * self.mean_velocity_integral)
     }
 }

@@ -45,6 +45,7 @@ mod plan;
 mod safety;
 mod scheduler;
 mod setup;
+mod shard;
 mod tick;
 pub mod timing;
 
@@ -298,6 +299,8 @@ pub struct Swarm {
     guard: Option<DivergenceGuard>,
     /// Why the flight stopped (or is stopping), once it does.
     stop: Option<StopReason>,
+    /// The other shards, when this swarm is one shard of several.
+    peers: Option<Box<shard::Peers>>,
 }
 
 /// The finest a link timer is looked at again when it stays due: the emulator's and the
@@ -393,7 +396,40 @@ impl Swarm {
             tick_due_since: None,
             guard: setup_guard.map(DivergenceGuard::new),
             stop: None,
+            peers: None,
         }
+    }
+
+    /// One shard of a swarm flown by several ([`crate::distributed`]): it handshakes and
+    /// commands the vehicles `plan` gives it, and takes the others from the other
+    /// shards' messages ([`Swarm::handle_shard_message`], [`Swarm::poll_shard_message`]).
+    ///
+    /// # Errors
+    /// When the plan is not for this ring, or the setup asks for what shards do not fly
+    /// yet (a target velocity: its planner needs every vehicle's velocity at one instant).
+    pub fn new_shard(
+        setup: SwarmSetup,
+        plan: crate::distributed::ShardPlan,
+    ) -> Result<Self, String> {
+        let n = setup.links.len();
+        if plan.vehicles_of(plan.this()) == 0 || (0..n).any(|i| plan.owner(i).is_none()) {
+            return Err(format!(
+                "the shard plan does not give each of the {n} vehicles a shard"
+            ));
+        }
+        if setup.target.is_some() {
+            return Err(
+                "a [target] velocity is not flown by shards yet: its planner needs every vehicle's velocity at one instant"
+                    .to_owned(),
+            );
+        }
+        let mut swarm = Self::new(setup);
+        for i in (0..n).filter(|i| !plan.is_local(*i)) {
+            // Never due: a remote vehicle's link is its own shard's.
+            swarm.scheduler.schedule(i, SimTime::MAX);
+        }
+        swarm.peers = Some(Box::new(shard::Peers::new(plan, &swarm.law.w)));
+        Ok(swarm)
     }
 
     /// The control loop's punctuality so far: tick lateness and the age of the states
@@ -534,8 +570,10 @@ impl Swarm {
                 .push(now, false, "landing every vehicle".to_owned());
             self.phase = SwarmPhase::Landing(now);
         }
-        for link in &mut self.links {
-            link.land(now);
+        for i in 0..self.links.len() {
+            if !self.is_remote(i) {
+                self.links[i].land(now);
+            }
         }
         self.after_all_links(now);
     }
@@ -544,10 +582,10 @@ impl Swarm {
     /// longer be reached (failed).
     pub fn is_finished(&self) -> bool {
         matches!(self.phase, SwarmPhase::Landing(_))
-            && self
-                .links
-                .iter()
-                .all(|l| matches!(l.phase(), Phase::Done | Phase::Failed | Phase::Overridden))
+            && self.links.iter().enumerate().all(|(i, l)| {
+                self.is_remote(i)
+                    || matches!(l.phase(), Phase::Done | Phase::Failed | Phase::Overridden)
+            })
     }
 
     /// The final velocity predicted at the start of consensus (m/s, ENU).
@@ -583,7 +621,12 @@ impl Swarm {
     /// Vehicle `i` in the common frame, once its origin is known (whatever the age of its
     /// position; the control tick uses only fresh ones).
     pub fn common_state(&self, i: usize) -> Option<CommonState> {
-        let state = self.links[i].state();
+        if let Some(p) = self.peers.as_ref()
+            && !p.plan.is_local(i)
+        {
+            return p.remote.get(i).copied().flatten().map(|r| r.state);
+        }
+        let state = self.links.get(i)?.state();
         let origin = state.origin?;
         let pos_common_ned_m = match self.slots[i].origin_offset {
             Some((known, offset_ned_m)) if known == origin => offset_ned_m + state.pos_local_ned_m,
@@ -603,6 +646,9 @@ impl Swarm {
     ///
     /// Costs the link's work only: nothing here visits the other links.
     pub fn handle_datagram(&mut self, now: SimTime, i: usize, bytes: &[u8]) -> bool {
+        if self.is_remote(i) {
+            return false;
+        }
         let Some(link) = self.links.get_mut(i) else {
             return false;
         };
@@ -663,6 +709,7 @@ impl Swarm {
         let shrank = lag < self.listen_lag;
         self.listen_lag = lag;
         for link in &mut self.links {
+            // A remote vehicle's placeholder link is never driven: the lag changes nothing.
             link.set_listen_lag(lag);
         }
         if shrank {
@@ -723,6 +770,9 @@ impl Swarm {
 
     /// After link `i` ran: its output, its next deadline, its events.
     fn after_link(&mut self, now: SimTime, i: usize) {
+        if self.is_remote(i) {
+            return;
+        }
         let Some(link) = self.links.get(i) else {
             return;
         };

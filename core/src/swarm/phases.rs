@@ -38,18 +38,23 @@ impl Swarm {
 
     /// Moves between phases; runs at the start of every control tick.
     pub(super) fn transition(&mut self, now: SimTime) {
-        let all_flying = self.links.iter().all(|l| l.phase() == Phase::Flying)
-            && self.law.states.iter().all(Option::is_some);
+        // Over the vehicles known here (all of them in one process); with shards, the
+        // others through their shard's report (shard.rs).
+        let known = |i: &usize| self.is_known(*i);
+        let n = self.links.len();
+        let all_flying = (0..n)
+            .filter(known)
+            .all(|i| self.member_phase(i) == Phase::Flying && self.law.states[i].is_some())
+            && self.others_flying(now);
         // A vehicle taken out of OFFBOARD (pilot, its failsafe) counts as lost: it never
         // comes back on its own, so the swarm holds (or lands) until told otherwise. So
         // does one that flies on a position too old to use, or that was handed to its own
         // Hold.
-        let any_lost = self.links.iter().zip(&self.law.states).any(|(l, s)| {
-            matches!(
-                l.phase(),
-                Phase::Lost | Phase::Overridden | Phase::VehicleHold
-            ) || (l.phase() == Phase::Flying && s.is_none())
-        });
+        let any_lost = (0..n).filter(known).any(|i| {
+            let phase = self.member_phase(i);
+            matches!(phase, Phase::Lost | Phase::Overridden | Phase::VehicleHold)
+                || (phase == Phase::Flying && self.law.states[i].is_none())
+        }) || self.others_lost(now).is_some();
         if self.phase == SwarmPhase::Handshake && !all_flying && self.handshake_over(now) {
             return;
         }
@@ -147,24 +152,29 @@ impl Swarm {
                     self.end(now);
                     return;
                 }
-                self.start_consensus(now);
+                if self.start_due(now) {
+                    self.start_consensus(now);
+                }
             }
             SwarmPhase::Consensus(_) | SwarmPhase::Retargeting(_) if any_lost => {
                 match self.setup.loss_policy {
                     LossPolicy::Hold => {
+                        let why = self.loss_cause(now);
                         self.log.push(
                             now,
                             true,
-                            "a vehicle is lost: the others brake and hold".to_owned(),
+                            format!("a vehicle is lost{why}: the others brake and hold"),
                         );
                         self.law.hold_points.iter_mut().for_each(|p| *p = None);
                         self.phase = SwarmPhase::Holding(now);
+                        self.new_round(now);
                     }
                     LossPolicy::Land => {
+                        let why = self.loss_cause(now);
                         self.log.push(
                             now,
                             true,
-                            "a vehicle is lost: landing (on_link_loss = land)".to_owned(),
+                            format!("a vehicle is lost{why}: landing (on_link_loss = land)"),
                         );
                         self.land_because(now, StopReason::LinkLoss);
                     }
@@ -182,25 +192,39 @@ impl Swarm {
 
     /// Gives up on the handshake when the timeout is over or a vehicle's handshake failed:
     /// names the vehicles not flying and lands the others. Whether it gave up.
+    /// With shards, which shard the loss was seen in (`""` in one process).
+    fn loss_cause(&self, now: SimTime) -> String {
+        self.others_lost(now)
+            .map_or(String::new(), |why| format!(" ({why})"))
+    }
+
     fn handshake_over(&mut self, now: SimTime) -> bool {
-        let failed = self.links.iter().any(|l| l.phase() == Phase::Failed);
+        let failed = (0..self.links.len())
+            .filter(|i| self.is_known(*i))
+            .any(|i| self.member_phase(i) == Phase::Failed);
         let timed_out = now >= SimTime::ZERO + self.setup.handshake_timeout;
         if !(failed || timed_out) {
             return false;
         }
-        let not_flying: Vec<(u8, &'static str)> = self
-            .links
-            .iter()
-            .zip(&self.law.states)
-            .zip(&self.setup.links)
-            .filter(|((l, s), _)| l.phase() != Phase::Flying || s.is_none())
-            .map(|((l, s), cfg)| {
-                let phase = if l.phase() == Phase::Flying && s.is_none() {
+        let not_flying: Vec<(u8, &'static str)> = (0..self.links.len())
+            .filter_map(|i| {
+                let cfg = &self.setup.links[i];
+                if !self.is_known(i) {
+                    // Another shard's, not watched here: its shard's report speaks for it.
+                    return (!self.others_flying(now))
+                        .then_some((cfg.system_id, "its shard not all flying"));
+                }
+                let phase = self.member_phase(i);
+                let state = self.law.states[i];
+                if phase == Phase::Flying && state.is_some() {
+                    return None;
+                }
+                let name = if phase == Phase::Flying {
                     "no usable position"
                 } else {
-                    l.phase().name()
+                    phase.name()
                 };
-                (cfg.system_id, phase)
+                Some((cfg.system_id, name))
             })
             .collect();
         let failure = SwarmFailure::Handshake {
@@ -214,13 +238,28 @@ impl Swarm {
     }
 
     pub(super) fn start_consensus(&mut self, now: SimTime) {
-        self.phase = SwarmPhase::Consensus(now);
+        // With shards, the instant every shard adopted (at most a tick before `now`): the
+        // flight's end is counted from it, the same in every shard.
+        let start = self.shard_start(now);
+        let t0 = start.unwrap_or(now);
+        self.phase = SwarmPhase::Consensus(t0);
         self.mean_velocity_integral = Vector2::zeros();
         if let Some(guard) = self.guard.as_mut() {
             guard.reset();
         }
-        self.first_consensus.get_or_insert(now);
-        self.first_law.get_or_insert(now);
+        self.first_consensus.get_or_insert(t0);
+        self.first_law.get_or_insert(t0);
+        if start.is_some() {
+            // From every shard's sum at the start, once all are in (shard.rs).
+            self.predicted_final_velocity = None;
+            self.log.push(
+                now,
+                false,
+                format!("consensus started at the adopted {:.3} s", t0.as_secs_f64()),
+            );
+            self.shard_prediction(now);
+            return;
+        }
         let v0: Vec<Vector2<f64>> = self
             .law
             .states
@@ -257,12 +296,24 @@ impl Swarm {
         let Some(guard) = self.guard.as_mut() else {
             return;
         };
-        let formation = formation_error_m(self.law.horizontal.iter().map(|h| h.pos_m - h.offset_m));
+        // Over the vehicles known here (every one in one process).
+        let peers = self.peers.as_deref();
+        let known = |i: usize| peers.is_none_or(|p| p.plan.is_local(i) || p.plan.is_watched(i));
+        let formation = formation_error_m(
+            self.law
+                .horizontal
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| known(*i))
+                .map(|(_, h)| h.pos_m - h.offset_m),
+        );
         let spread = self
             .law
             .horizontal
             .iter()
-            .map(|h| (h.vel_mps - mean).norm())
+            .enumerate()
+            .filter(|(i, _)| known(*i))
+            .map(|(_, h)| (h.vel_mps - mean).norm())
             .fold(0.0, f64::max);
         let Some(trip) = guard.observe(now, mean, predicted, (formation, spread)) else {
             return;

@@ -90,6 +90,11 @@ impl Swarm {
         for i in 0..self.links.len() {
             if self.law.states[i].is_some() && self.ours_in_air(i) {
                 age_s = age_s.max(self.command_age_s(i, now) - period_s);
+            } else if self.law.states[i].is_some()
+                && let Some(at) = self.remote_measured(i)
+            {
+                // Another shard's vehicle: its state is as old as the hop made it.
+                age_s = age_s.max(now.saturating_since(at).as_secs_f64());
             }
         }
         self.safety.agents.clear();

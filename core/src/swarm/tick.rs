@@ -25,6 +25,10 @@ impl Swarm {
     pub(super) fn control(&mut self, now: SimTime) {
         self.control_ticks += 1;
         for i in 0..self.links.len() {
+            if self.is_remote(i) {
+                self.law.states[i] = self.remote_fresh_state(i, now);
+                continue;
+            }
             if self.links[i].phase() == Phase::Flying
                 && let Some(at) = self.links[i].state().last_position
             {
@@ -37,6 +41,7 @@ impl Swarm {
             };
         }
         self.transition(now);
+        self.shard_prediction(now);
         self.observe_models(now);
         for (i, state) in self.law.states.iter().enumerate() {
             let s = state.unwrap_or_default();
@@ -48,7 +53,7 @@ impl Swarm {
         }
         self.watch_divergence(now);
         self.watch_fence(now);
-        let saturation = self.horizontal_law();
+        let saturation = self.horizontal_law(now);
         for (i, state) in self.law.states.iter().enumerate() {
             let s = state.unwrap_or_default();
             let u_z = self.setup.altitude_gains.acceleration_with(
@@ -65,11 +70,24 @@ impl Swarm {
         }
         self.isolate_non_finite(now, "the law's command");
         self.law.law_commands.copy_from_slice(&self.law.commands);
+        if let Some(p) = self.peers.as_ref() {
+            // A vehicle whose command cannot be computed here (its state or a neighbour's
+            // is not read) has none to saturate with.
+            for (i, c) in self.law.commands.iter_mut().enumerate() {
+                if !p.plan.is_computable(i) {
+                    *c = Vector3::zeros();
+                }
+            }
+        }
+        let weights = self
+            .peers
+            .as_ref()
+            .map_or(&self.law.w, |p| &p.saturation_weights);
         if let Ok(summary) = saturate_with(
             saturation,
             &self.setup.envelope,
             &self.law.flown_models,
-            &self.law.w,
+            weights,
             &mut self.law.commands,
             &mut self.law.boxes,
         ) && matches!(self.phase, SwarmPhase::Consensus(_))
@@ -84,6 +102,9 @@ impl Swarm {
         self.isolate_non_finite(now, "the saturated command");
         self.integrate_altitude();
         for (i, link) in self.links.iter_mut().enumerate() {
+            if self.peers.as_ref().is_some_and(|p| !p.plan.is_local(i)) {
+                continue;
+            }
             // No usable state (or isolated): level at hover thrust, never a motor cut.
             let command = if self.law.states[i].is_some() && !self.slots[i].isolated {
                 self.law.commands[i]
@@ -133,11 +154,15 @@ impl Swarm {
                     .commanded(sp.thrust_norm * tilt_cos(&q), horizontal);
             }
         }
+        self.publish(now);
         // The links' events are drained by `handle_timeout` right after.
     }
 
     /// Whether vehicle `i` flies on our commands in the air now.
     pub(super) fn ours_in_air(&self, i: usize) -> bool {
+        if self.is_remote(i) {
+            return false;
+        }
         let link = &self.links[i];
         link.phase() == Phase::Flying && !link.state().landed && !self.slots[i].isolated
     }
@@ -146,6 +171,9 @@ impl Swarm {
     /// model to fly this tick.
     fn observe_models(&mut self, now: SimTime) {
         for i in 0..self.links.len() {
+            if self.is_remote(i) {
+                continue;
+            }
             let ours = self.ours_in_air(i);
             let trusted = self.slots[i].flown.trusted();
             let drag_trusted = self.slots[i].flown.drag_trusted();
@@ -215,7 +243,7 @@ impl Swarm {
                 continue;
             }
             self.law.commands[i] = Vector3::zeros();
-            if !self.slots[i].isolated {
+            if !self.slots[i].isolated && !self.is_remote(i) {
                 self.slots[i].isolated = true;
                 let reason = format!("{what} is not a finite number: isolated");
                 self.log

@@ -1,0 +1,588 @@
+//! The swarm machine as one shard of several ([`crate::distributed`]): it flies its own
+//! vehicles' links and takes the other vehicles from the other shards' messages.
+//!
+//! - **Remote vehicles.** A remote vehicle the plan watches is known by its
+//!   [`VehicleReport`]s: its link phase and its state, fresh while the position is
+//!   younger than the state timeout (the hop between shards counts in that age). It is
+//!   never commanded here: for the law it is a neighbour, for the safety filter a
+//!   vehicle this shard does not control.
+//! - **Every vehicle flying, a vehicle lost.** As in one process, over the vehicles
+//!   known here; the others through their shard's [`ShardReport`]: every shard heard
+//!   within the link timeout, each with all its vehicles flying on fresh states. A shard
+//!   silent for the link timeout, or one with a vehicle not flying, is a lost vehicle:
+//!   the loss policy applies (hold, or land).
+//! - **One start for all.** A shard that sees every vehicle flying proposes to start
+//!   consensus [`ShardPlan::start_lead`] later; the swarm adopts the earliest proposal
+//!   of the round (a round starts with the flight, and again with each hold). Each
+//!   shard takes its own vehicles' `Σ wᵢ vᵢ` at the first control tick at or after the
+//!   adopted instant and publishes it; once every shard's sum for that instant is in,
+//!   each adds them in shard order: the same prediction, bit for bit, in every shard.
+//!   The flight ends the configured duration after that instant, in every shard.
+//! - **The mean velocity** (the correction and the guard) is the sum of this shard's
+//!   own `Σ wᵢ vᵢ` now and the others' latest.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use nalgebra::{Vector2, Vector3};
+use ringswarm_wire::time::SimTime;
+
+use super::{CommonState, Swarm, SwarmPhase};
+use crate::distributed::{
+    MemberPhase, ShardMessage, ShardPlan, ShardReport, VehicleReport, WeightedSum,
+};
+use crate::vehicle::Phase;
+
+/// Messages kept for the driver at most: one that does not poll loses the oldest.
+const OUTBOX_CAPACITY: usize = 1 << 16;
+
+/// What is known of a remote vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct RemoteVehicle {
+    pub(super) phase: Phase,
+    pub(super) landed: bool,
+    /// When its shard received the position (this shard's clock).
+    pub(super) measured: SimTime,
+    /// When its shard sent it (its control tick, this shard's clock).
+    pub(super) sent: SimTime,
+    pub(super) state: CommonState,
+}
+
+/// The shard's side of the swarm.
+#[derive(Debug, Clone)]
+pub(super) struct Peers {
+    pub(super) plan: ShardPlan,
+    /// The ring's weights for the vehicles whose commands are computed here (every one
+    /// when every state is watched), zero for the others: the saturation's `conserve`
+    /// keeps their `Σ wᵢuᵢ` with one shift, as one process does for the whole swarm.
+    pub(super) saturation_weights: Vec<f64>,
+    /// Each shard's latest report and when it came (this shard's own slot stays empty).
+    reports: Vec<Option<(SimTime, ShardReport)>>,
+    /// Each watched remote vehicle's latest report.
+    pub(super) remote: Vec<Option<RemoteVehicle>>,
+    /// This shard's proposal in the current round.
+    proposal: Option<SimTime>,
+    /// When the current round started: proposals before it belong to an earlier one.
+    round_since: SimTime,
+    /// The start adopted in the current round, and this shard's sum at it.
+    started: Option<(SimTime, WeightedSum)>,
+    /// Whether the prediction of the current round was made.
+    predicted: bool,
+    /// This shard's `Σ wᵢ vᵢ` on the last control tick.
+    now_sum: WeightedSum,
+    outbox: VecDeque<ShardMessage>,
+    /// Messages refused: from this shard's own index, out of range, or older than the
+    /// one kept.
+    refused: u64,
+    /// Messages lost because the driver did not take them.
+    dropped: u64,
+}
+
+impl Peers {
+    pub(super) fn new(plan: ShardPlan, w: &[f64]) -> Self {
+        let shards = plan.shards();
+        let n = w.len();
+        let saturation_weights = w
+            .iter()
+            .enumerate()
+            .map(|(i, w)| if plan.is_computable(i) { *w } else { 0.0 })
+            .collect();
+        Self {
+            plan,
+            saturation_weights,
+            reports: vec![None; shards],
+            remote: vec![None; n],
+            proposal: None,
+            round_since: SimTime::ZERO,
+            started: None,
+            predicted: false,
+            now_sum: WeightedSum::default(),
+            outbox: VecDeque::new(),
+            refused: 0,
+            dropped: 0,
+        }
+    }
+
+    fn to_swarm_us(&self, t: SimTime) -> u64 {
+        self.plan.epoch_us().saturating_add(t.as_micros())
+    }
+
+    fn local_time_of(&self, us: u64) -> SimTime {
+        SimTime::from_micros(us.saturating_sub(self.plan.epoch_us()))
+    }
+
+    fn push(&mut self, message: ShardMessage) {
+        if self.outbox.len() >= OUTBOX_CAPACITY {
+            self.outbox.pop_front();
+            self.dropped += 1;
+        }
+        self.outbox.push_back(message);
+    }
+
+    /// The other shards, each heard within `timeout` and flying all its vehicles.
+    fn others_flying(&self, now: SimTime, timeout: Duration) -> bool {
+        self.reports.iter().enumerate().all(|(s, r)| {
+            s == self.plan.this()
+                || r.as_ref().is_some_and(|(at, r)| {
+                    now.saturating_since(*at) <= timeout && r.flying == r.vehicles
+                })
+        })
+    }
+
+    /// Another shard silent for `timeout`, or with a vehicle not flying.
+    fn others_lost(&self, now: SimTime, timeout: Duration) -> Option<String> {
+        self.reports.iter().enumerate().find_map(|(s, r)| {
+            if s == self.plan.this() {
+                return None;
+            }
+            match r {
+                None => Some(format!("shard {s} never heard")),
+                Some((at, _)) if now.saturating_since(*at) > timeout => Some(format!(
+                    "shard {s} silent for {:.0} ms",
+                    now.saturating_since(*at).as_secs_f64() * 1e3
+                )),
+                Some((_, r)) if r.flying < r.vehicles => Some(format!(
+                    "shard {s} flies {} of its {} vehicles",
+                    r.flying, r.vehicles
+                )),
+                _ => None,
+            }
+        })
+    }
+
+    /// The earliest start proposed in this round, this shard's own included.
+    fn adopted_start(&self) -> Option<SimTime> {
+        let others = self.reports.iter().flatten().filter_map(|(_, r)| {
+            r.start_us
+                .map(|us| self.local_time_of(us))
+                .filter(|t| *t >= self.round_since)
+        });
+        self.proposal.into_iter().chain(others).min()
+    }
+
+    /// Σ over every shard, in shard order, of its sum at `start`, once all are in.
+    fn prediction(&self, start: SimTime, own: WeightedSum) -> Option<Vector2<f64>> {
+        let start_us = self.to_swarm_us(start);
+        let mut wv = Vector2::zeros();
+        let mut w = 0.0;
+        for (s, r) in self.reports.iter().enumerate() {
+            let sum = if s == self.plan.this() {
+                own
+            } else {
+                let (_, r) = r.as_ref()?;
+                if r.start_us != Some(start_us) {
+                    return None;
+                }
+                r.start_sum?
+            };
+            wv += Vector2::new(sum.wv_mps[0], sum.wv_mps[1]);
+            w += sum.w;
+        }
+        (w.abs() > 1e-12).then(|| wv / w)
+    }
+}
+
+/// What another shard is told of a link's phase.
+pub(super) fn member_phase(phase: Phase) -> MemberPhase {
+    match phase {
+        Phase::Discovering | Phase::Streaming(_) | Phase::Arming | Phase::Offboarding => {
+            MemberPhase::Waiting
+        }
+        Phase::Flying => MemberPhase::Flying,
+        Phase::Lost | Phase::Overridden | Phase::VehicleHold => MemberPhase::Lost,
+        Phase::Landing | Phase::Disarming | Phase::Done => MemberPhase::Landing,
+        Phase::Failed => MemberPhase::Failed,
+    }
+}
+
+/// The link phase a remote vehicle is taken to be in.
+fn link_phase(phase: MemberPhase) -> Phase {
+    match phase {
+        MemberPhase::Waiting => Phase::Discovering,
+        MemberPhase::Flying => Phase::Flying,
+        MemberPhase::Lost => Phase::Lost,
+        MemberPhase::Landing => Phase::Landing,
+        MemberPhase::Failed => Phase::Failed,
+    }
+}
+
+fn to_f32(v: Vector3<f64>) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
+}
+
+fn from_f32(v: [f32; 3]) -> Vector3<f64> {
+    Vector3::new(f64::from(v[0]), f64::from(v[1]), f64::from(v[2]))
+}
+
+impl Swarm {
+    /// Whether vehicle `i` is flown by another shard.
+    pub(super) fn is_remote(&self, i: usize) -> bool {
+        self.peers.as_ref().is_some_and(|p| !p.plan.is_local(i))
+    }
+
+    /// Whether vehicle `i`'s state is known here: flown here, or a watched remote one.
+    pub(super) fn is_known(&self, i: usize) -> bool {
+        self.peers
+            .as_ref()
+            .is_none_or(|p| p.plan.is_local(i) || p.plan.is_watched(i))
+    }
+
+    /// Vehicle `i`'s link phase: its link's, or its shard's report of it.
+    pub(super) fn member_phase(&self, i: usize) -> Phase {
+        match self.peers.as_ref() {
+            Some(p) if !p.plan.is_local(i) => p
+                .remote
+                .get(i)
+                .copied()
+                .flatten()
+                .map_or(Phase::Discovering, |r| r.phase),
+            _ => self.links[i].phase(),
+        }
+    }
+
+    /// A remote vehicle's state, when fresh, carried forward to `now` at its velocity:
+    /// the hop between shards (since its shard's control tick sent it) makes it older
+    /// than the states of this shard's own vehicles, and in a swarm moving at `v` a hop
+    /// `τ` would otherwise put it `v·τ` behind them for the law (a steady formation
+    /// error: 0.3 m at 15 m/s and 20 ms). Its age at that tick is kept, as this shard's
+    /// own vehicles' ages are.
+    pub(super) fn remote_fresh_state(&self, i: usize, now: SimTime) -> Option<CommonState> {
+        let p = self.peers.as_ref()?;
+        let r = p.remote.get(i).copied().flatten()?;
+        let age = now.saturating_since(r.measured);
+        let hop = now.saturating_since(r.sent).as_secs_f64();
+        (age <= self.setup.links[i].state_timeout).then(|| CommonState {
+            pos_enu_m: r.state.pos_enu_m + r.state.vel_enu_mps * hop,
+            vel_enu_mps: r.state.vel_enu_mps,
+        })
+    }
+
+    /// When a remote vehicle's position was measured.
+    pub(super) fn remote_measured(&self, i: usize) -> Option<SimTime> {
+        self.peers
+            .as_ref()?
+            .remote
+            .get(i)
+            .copied()
+            .flatten()
+            .map(|r| r.measured)
+    }
+
+    /// Takes a message from another shard.
+    pub fn handle_shard_message(&mut self, now: SimTime, message: &ShardMessage) {
+        let Some(p) = self.peers.as_mut() else {
+            return;
+        };
+        match message {
+            ShardMessage::Vehicle(v) => {
+                let i = usize::from(v.vehicle);
+                if !p.plan.is_watched(i) {
+                    p.refused += 1;
+                    return;
+                }
+                let sent = p.local_time_of(v.sent_us);
+                let measured =
+                    SimTime::from_micros(sent.as_micros().saturating_sub(u64::from(v.age_us)));
+                if p.remote[i].is_some_and(|r| r.sent > sent) {
+                    p.refused += 1;
+                    return;
+                }
+                let state = CommonState {
+                    pos_enu_m: from_f32(v.pos_enu_m),
+                    vel_enu_mps: from_f32(v.vel_enu_mps),
+                };
+                if !(state.pos_enu_m.iter().chain(state.vel_enu_mps.iter())).all(|x| x.is_finite())
+                {
+                    p.refused += 1;
+                    return;
+                }
+                p.remote[i] = Some(RemoteVehicle {
+                    phase: link_phase(v.phase),
+                    landed: v.landed,
+                    measured,
+                    sent,
+                    state,
+                });
+            }
+            ShardMessage::Shard(r) => {
+                let s = usize::from(r.shard);
+                let expected = p.plan.vehicles_of(s);
+                if s == p.plan.this()
+                    || s >= p.plan.shards()
+                    || usize::from(r.vehicles) != expected
+                    || p.reports[s]
+                        .as_ref()
+                        .is_some_and(|(_, old)| old.sent_us > r.sent_us)
+                {
+                    p.refused += 1;
+                    return;
+                }
+                p.reports[s] = Some((now, r.clone()));
+            }
+        }
+    }
+
+    /// The next message for the other shards.
+    pub fn poll_shard_message(&mut self) -> Option<ShardMessage> {
+        self.peers.as_mut()?.outbox.pop_front()
+    }
+
+    /// Messages from other shards refused, and messages lost because they were not
+    /// polled.
+    pub fn shard_message_counts(&self) -> (u64, u64) {
+        self.peers
+            .as_ref()
+            .map_or((0, 0), |p| (p.refused, p.dropped))
+    }
+
+    /// The shard's plan, when the swarm is one shard of several.
+    pub fn shard_plan(&self) -> Option<&ShardPlan> {
+        self.peers.as_ref().map(|p| &p.plan)
+    }
+
+    /// The other shards: all flying (true without shards).
+    pub(super) fn others_flying(&self, now: SimTime) -> bool {
+        let timeout = self.link_timeout();
+        self.peers
+            .as_ref()
+            .is_none_or(|p| p.others_flying(now, timeout))
+    }
+
+    /// Another shard silent, or with a vehicle not flying: why.
+    pub(super) fn others_lost(&self, now: SimTime) -> Option<String> {
+        let timeout = self.link_timeout();
+        self.peers.as_ref()?.others_lost(now, timeout)
+    }
+
+    fn link_timeout(&self) -> Duration {
+        self.setup
+            .links
+            .first()
+            .map_or(Duration::from_millis(1500), |l| l.link_timeout)
+    }
+
+    /// A new round of the start agreement (a hold began).
+    pub(super) fn new_round(&mut self, now: SimTime) {
+        if let Some(p) = self.peers.as_mut() {
+            p.round_since = now;
+            p.proposal = None;
+            p.started = None;
+            p.predicted = false;
+        }
+    }
+
+    /// With every vehicle flying: whether consensus starts on this tick. Without shards,
+    /// at once; with them, at the adopted instant (this shard proposes one first).
+    pub(super) fn start_due(&mut self, now: SimTime) -> bool {
+        let Some(p) = self.peers.as_mut() else {
+            return true;
+        };
+        if p.proposal.is_none() {
+            p.proposal = Some(now + p.plan.start_lead());
+        }
+        p.adopted_start().is_some_and(|t| now >= t)
+    }
+
+    /// Consensus starts on this tick: this shard's sum at the adopted instant, and the
+    /// prediction once every shard's is in. Without shards, `None`: the caller predicts
+    /// from every state.
+    pub(super) fn shard_start(&mut self, now: SimTime) -> Option<SimTime> {
+        let own = self.local_sum();
+        let p = self.peers.as_mut()?;
+        let start = p.adopted_start().unwrap_or(now);
+        p.started = Some((start, own));
+        p.predicted = false;
+        Some(start)
+    }
+
+    /// This shard's `Σ wᵢ vᵢ` over its own vehicles' states flown on this tick.
+    fn local_sum(&self) -> WeightedSum {
+        let mut sum = WeightedSum::default();
+        for i in 0..self.links.len() {
+            if self.is_remote(i) {
+                continue;
+            }
+            let w = self.law.w[i];
+            let h = &self.law.horizontal[i];
+            let v = h.vel_mps;
+            sum.wp_m[0] += w * h.pos_m.x;
+            sum.wp_m[1] += w * h.pos_m.y;
+            sum.wv_mps[0] += w * v.x;
+            sum.wv_mps[1] += w * v.y;
+            sum.w += w;
+        }
+        sum
+    }
+
+    /// The prediction of this round, once every shard's sum at the start is in.
+    pub(super) fn shard_prediction(&mut self, now: SimTime) {
+        let Some(p) = self.peers.as_ref() else {
+            return;
+        };
+        let Some((start, own)) = p.started else {
+            return;
+        };
+        if p.predicted {
+            return;
+        }
+        if let Some(v) = p.prediction(start, own) {
+            if let Some(p) = self.peers.as_mut() {
+                p.predicted = true;
+            }
+            self.predicted_final_velocity = Some(v);
+            self.log.push(
+                now,
+                false,
+                format!(
+                    "every shard's sum at the start is in: predicted final velocity ({:.3}, {:.3}) m/s",
+                    v.x, v.y
+                ),
+            );
+        }
+    }
+
+    /// The swarm's w-weighted mean velocity from this shard's vehicles now and the other
+    /// shards' latest sums.
+    pub(super) fn shard_mean_velocity(&self) -> Option<Vector2<f64>> {
+        self.shard_means(SimTime::ZERO).map(|(_, v)| v)
+    }
+
+    /// The swarm's w-weighted mean position and velocity now: this shard's own sums,
+    /// and the others' latest, their positions carried forward by the hop (from when
+    /// they were sent to `now`; with `now` zero, not carried).
+    fn shard_means(&self, now: SimTime) -> Option<(Vector2<f64>, Vector2<f64>)> {
+        let p = self.peers.as_ref()?;
+        let own = self.local_sum();
+        let mut wp = Vector2::new(own.wp_m[0], own.wp_m[1]);
+        let mut wv = Vector2::new(own.wv_mps[0], own.wv_mps[1]);
+        let mut w = own.w;
+        for (s, r) in p.reports.iter().enumerate() {
+            if s == p.plan.this() {
+                continue;
+            }
+            let (_, r) = r.as_ref()?;
+            let v = Vector2::new(r.now_sum.wv_mps[0], r.now_sum.wv_mps[1]);
+            let hop = if now == SimTime::ZERO {
+                0.0
+            } else {
+                now.saturating_since(p.local_time_of(r.sent_us))
+                    .as_secs_f64()
+            };
+            wp += Vector2::new(r.now_sum.wp_m[0], r.now_sum.wp_m[1]) + v * hop;
+            wv += v;
+            w += r.now_sum.w;
+        }
+        (w.abs() > 1e-12).then(|| (wp / w, wv / w))
+    }
+
+    /// With shards, the mean-velocity correction's integral `∫(v̄_w − v_f) dt` since the
+    /// start, as the state it integrates to: `p̄_w(now) − p̄_w(t₀) − v_f·(now − t₀)`, from
+    /// every shard's sums at the start (the same in every shard) and now. A sum of
+    /// errors kept by each shard would hold, for good, whatever the hop's delays made
+    /// them differ by: a steady acceleration of one shard against another, which the
+    /// formation pays for with a steady error. `None` without shards, or before the
+    /// prediction.
+    pub(super) fn shard_mean_integral(&self, now: SimTime) -> Option<Vector2<f64>> {
+        let p = self.peers.as_ref()?;
+        let (start, own) = p.started?;
+        let target = self.predicted_final_velocity?;
+        let start_us = p.to_swarm_us(start);
+        let mut wp = Vector2::zeros();
+        let mut w = 0.0;
+        for (s, r) in p.reports.iter().enumerate() {
+            let sum = if s == p.plan.this() {
+                own
+            } else {
+                let (_, r) = r.as_ref()?;
+                if r.start_us != Some(start_us) {
+                    return None;
+                }
+                r.start_sum?
+            };
+            wp += Vector2::new(sum.wp_m[0], sum.wp_m[1]);
+            w += sum.w;
+        }
+        if w.abs() < 1e-12 {
+            return None;
+        }
+        let (mean_now, _) = self.shard_means(now)?;
+        let elapsed = now.saturating_since(start).as_secs_f64();
+        Some(mean_now - wp / w - target * elapsed)
+    }
+
+    /// After a control tick: this shard's vehicles' states others read, then its report.
+    pub(super) fn publish(&mut self, now: SimTime) {
+        if self.peers.is_none() {
+            return;
+        }
+        let mut vehicles = 0u16;
+        let mut flying = 0u16;
+        let mut lost = 0u16;
+        let mut messages = Vec::new();
+        for i in 0..self.links.len() {
+            if self.is_remote(i) {
+                continue;
+            }
+            vehicles = vehicles.saturating_add(1);
+            let phase = self.links[i].phase();
+            let fresh = self.law.states[i].is_some();
+            if phase == Phase::Flying && fresh && !self.slots[i].isolated {
+                flying = flying.saturating_add(1);
+            }
+            let member = if self.slots[i].isolated {
+                MemberPhase::Lost
+            } else {
+                member_phase(phase)
+            };
+            if member == MemberPhase::Lost {
+                lost = lost.saturating_add(1);
+            }
+            let read = self
+                .peers
+                .as_ref()
+                .is_some_and(|p| p.plan.is_read_elsewhere(i));
+            if let (true, Some(s), Some(at)) = (
+                read,
+                self.common_state(i),
+                self.links[i].state().last_position,
+            ) {
+                messages.push((i, s, at, member));
+            }
+        }
+        let own = self.local_sum();
+        let phase = self.phase;
+        let Some(p) = self.peers.as_mut() else {
+            return;
+        };
+        p.now_sum = own;
+        for (i, s, at, member) in messages {
+            let age_us = now.saturating_since(at).as_micros();
+            let report = VehicleReport {
+                vehicle: u16::try_from(i).unwrap_or(u16::MAX),
+                sent_us: p.to_swarm_us(now),
+                age_us: u32::try_from(age_us).unwrap_or(u32::MAX),
+                phase: member,
+                landed: self.links[i].state().landed,
+                pos_enu_m: to_f32(s.pos_enu_m),
+                vel_enu_mps: to_f32(s.vel_enu_mps),
+            };
+            p.push(ShardMessage::Vehicle(report));
+        }
+        let in_round = matches!(
+            phase,
+            SwarmPhase::Handshake | SwarmPhase::Holding(_) | SwarmPhase::Consensus(_)
+        );
+        let start = p.started.map(|(t, _)| t).or(p.proposal);
+        let report = ShardReport {
+            shard: u16::try_from(p.plan.this()).unwrap_or(u16::MAX),
+            sent_us: p.to_swarm_us(now),
+            vehicles,
+            flying,
+            lost,
+            start_us: start.filter(|_| in_round).map(|t| p.to_swarm_us(t)),
+            start_sum: p.started.map(|(_, s)| s).filter(|_| in_round),
+            now_sum: own,
+        };
+        p.push(ShardMessage::Shard(report));
+    }
+}
