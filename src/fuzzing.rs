@@ -285,7 +285,8 @@ fn check_setpoint(msg: &MavMessage) {
 
 /// The coordinator's configuration parser and every path that takes its numbers: the
 /// validation, the bandwidth gate, the transport plan, the emulator's vehicles, places
-/// and link faults (lockstep and real time), and a lockstep flight's first steps.
+/// and link faults (lockstep and real time), the split into shards and each shard's plan,
+/// and a lockstep flight's first steps.
 pub fn coordinator_config(bytes: &[u8]) {
     let Ok(config) = Config::from_toml(&String::from_utf8_lossy(bytes)) else {
         return;
@@ -297,6 +298,11 @@ pub fn coordinator_config(bytes: &[u8]) {
     let _ = config.emulator_placements();
     let _ = config.link_faults();
     let _ = config.lockstep_faults();
+    if let (Ok(Some(layout)), Ok(setup)) = (config.shard_layout(), config.validate()) {
+        for name in &layout.names {
+            let _ = config.shard_plan(name, &setup.ring);
+        }
+    }
     // A flight of up to 16 vehicles (larger rings take too long per input).
     if config.vehicle.len() <= 16
         && let Ok(mut run) = crate::driver::lockstep::Lockstep::from_config(&config)

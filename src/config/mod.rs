@@ -10,6 +10,7 @@
 #[cfg(feature = "emulator")]
 mod emulator;
 mod gate;
+mod shards;
 mod transport;
 mod validate;
 
@@ -23,6 +24,7 @@ use crate::swarm::{EndAction, LossPolicy, SetpointKind};
 #[cfg(feature = "emulator")]
 pub use emulator::EMULATOR_FAULT_NAMES;
 pub use gate::warn_if_too_fast;
+pub use shards::{DistributedSection, ShardLayout, ShardSection, ShardVehicle, WatchName};
 pub(crate) use validate::show;
 pub use validate::{MAX_DISTANCE_M, MAX_DURATION_S, MAX_GAIN, MAX_SPEED_MPS};
 
@@ -66,6 +68,11 @@ pub struct Config {
     pub safety: SafetySection,
     /// Where the swarm may fly (optional).
     pub fence: Option<FenceSection>,
+    /// The swarm split into shards (optional; docs/distributed.md).
+    pub distributed: Option<DistributedSection>,
+    /// One table per shard, with `[distributed]`.
+    #[serde(default)]
+    pub shard: Vec<ShardSection>,
 }
 
 /// The fence's horizontal shape.

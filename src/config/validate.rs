@@ -92,6 +92,9 @@ impl Config {
     /// All problems found, each naming the key and the value.
     pub fn validate(&self) -> Result<SwarmSetup, String> {
         let mut p = Problems::default();
+        if let Err(split) = self.shard_layout() {
+            split.lines().for_each(|l| p.push(l.to_owned()));
+        }
         let n = self.vehicle.len();
         let g = &self.gains;
         p.within("gains.k_vmean", g.k_vmean, 0.0, 10.0, " 1/s");
