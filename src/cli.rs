@@ -168,6 +168,10 @@ pub struct FlyArgs {
     /// Seconds of consensus before the end action (overrides swarm.duration_s).
     #[arg(long)]
     pub duration_s: Option<f64>,
+    /// Fly only this `[[shard]]` of the file's split, talking to the other shards over
+    /// Zenoh (docs/distributed.md); without it, one process flies every vehicle.
+    #[arg(long)]
+    pub shard: Option<String>,
     /// The live view and the mirrors.
     #[command(flatten)]
     pub live: LiveArgs,

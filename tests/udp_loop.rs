@@ -126,6 +126,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
                 eprintln!("all flying at {:.3} s", now.as_secs_f64());
             }
         },
+        None,
     ));
     // Every vehicle armed in OFFBOARD within 5 s (the handshake needs 1.2 s of stream).
     let deadline = tokio::time::Instant::now() + Duration::from_secs(5);

@@ -286,7 +286,7 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
             .map_err(|e| anyhow::anyhow!("emulated {e}"))?;
         let shards = spawn_shards(fleet, crate::cmd::sitl::cores(), clock, &stop_rx);
         let summary =
-            crate::cmd::fly::fly(Swarm::new(setup), &transport, &out, None, &args.live).await;
+            crate::cmd::fly::fly(Swarm::new(setup), &transport, &out, None, &args.live, None).await;
         stop_tx.send_replace(true);
         shards.join().await.context("emulated vehicles")?;
         summary

@@ -17,7 +17,7 @@ use crate::cli::{FlyArgs, LiveArgs};
 use crate::config::Config;
 use crate::driver::Observer;
 use crate::driver::mirror::Mirrors;
-use crate::driver::udp::{DriverCommand, run_swarm};
+use crate::driver::udp::{DriverCommand, ShardTransport, run_swarm};
 use crate::link::router::{Router, TransportPlan};
 use crate::record::metrics::Summary;
 use crate::record::{Recorder, RowText, RunSetup};
@@ -65,6 +65,10 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         None => None,
     };
     let transport = config.transport_plan().map_err(anyhow::Error::msg)?;
+    let (swarm, bus) = match &args.shard {
+        None => (Swarm::new(setup), None),
+        Some(name) => shard(&config, setup, name)?,
+    };
     let out = args
         .out
         .clone()
@@ -75,17 +79,55 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("start the tokio runtime")?;
-    let summary = runtime.block_on(fly(
-        Swarm::new(setup),
-        &transport,
-        &out,
-        signing,
-        &args.live,
-    ))?;
+    let summary = runtime.block_on(fly(swarm, &transport, &out, signing, &args.live, bus))?;
     runtime.shutdown_background();
     println!("{}", serde_json::to_string_pretty(&summary)?);
     println!("run directory: {}", out.display());
     crate::error::flight_result(&summary)
+}
+
+/// Shard `name` of the file's split: its swarm machine, and its bus to the others.
+///
+/// # Errors
+/// The split's problems, no such shard, or a Zenoh session that cannot be opened.
+#[cfg(feature = "zenoh")]
+fn shard(
+    config: &Config,
+    setup: crate::swarm::SwarmSetup,
+    name: &str,
+) -> anyhow::Result<(Swarm, Option<Box<dyn ShardTransport + Send>>)> {
+    let layout = config
+        .shard_layout()
+        .map_err(anyhow::Error::msg)?
+        .context("--shard needs [distributed] and [[shard]] tables in the file")?;
+    let plan = config
+        .shard_plan(name, &setup.ring)
+        .map_err(anyhow::Error::msg)?;
+    let vehicles: Vec<(Option<String>, u8)> = config
+        .vehicle
+        .iter()
+        .map(|v| (v.network.clone(), v.system_id))
+        .collect();
+    let bus = crate::driver::zenoh_bus::ZenohBus::open(&layout, &plan, &vehicles)
+        .map_err(anyhow::Error::msg)?;
+    eprintln!(
+        "shard \"{name}\": {} of {} vehicles here, the others over Zenoh (watching {})",
+        plan.vehicles_of(plan.this()),
+        setup.links.len(),
+        plan.watch().name()
+    );
+    let swarm = Swarm::new_shard(setup, plan).map_err(anyhow::Error::msg)?;
+    Ok((swarm, Some(Box::new(bus))))
+}
+
+/// Without Zenoh, no shard can talk to the others.
+#[cfg(not(feature = "zenoh"))]
+fn shard(
+    _config: &Config,
+    _setup: crate::swarm::SwarmSetup,
+    name: &str,
+) -> anyhow::Result<(Swarm, Option<Box<dyn ShardTransport + Send>>)> {
+    bail!("--shard {name}: this ringswarm was built without the zenoh feature")
 }
 
 /// `runs/<config stem>-<unix seconds>`.
@@ -112,8 +154,18 @@ pub(crate) async fn fly(
     out: &Path,
     signing: Option<FlightSigning>,
     live: &LiveArgs,
+    mut bus: Option<Box<dyn ShardTransport + Send>>,
 ) -> anyhow::Result<Summary> {
-    let sockets = bind_all(transport).await?;
+    let local = |s: usize| {
+        swarm.shard_plan().is_none_or(|plan| {
+            transport
+                .routes
+                .iter()
+                .enumerate()
+                .any(|(i, r)| r.socket == s && plan.is_local(i))
+        })
+    };
+    let sockets = bind_all(transport, local).await?;
     let mirrors = Mirrors::open(&live.mirror).map_err(anyhow::Error::msg)?;
     for m in &live.mirror {
         eprintln!("mirroring every datagram to udp {m}");
@@ -169,7 +221,18 @@ pub(crate) async fn fly(
     };
     let wall = Instant::now();
     let router = Router::new(transport);
-    let (swarm, mut observer) = run_swarm(swarm, sockets, router, command_rx, observer).await?;
+    let (swarm, mut observer) = run_swarm(
+        swarm,
+        sockets,
+        router,
+        command_rx,
+        observer,
+        bus.as_deref_mut(),
+    )
+    .await?;
+    if let Some(bus) = bus {
+        bus.close();
+    }
     observer.keep_signing_clock(&swarm);
     let now = observer.last;
     if let Some(feed) = observer.feed.take() {
@@ -211,9 +274,21 @@ const WEB_GOODBYE: Duration = Duration::from_millis(300);
 ///
 /// # Errors
 /// The first bind error.
-pub(crate) async fn bind_all(transport: &TransportPlan) -> anyhow::Result<Vec<UdpSocket>> {
+pub(crate) async fn bind_all(
+    transport: &TransportPlan,
+    local: impl Fn(usize) -> bool,
+) -> anyhow::Result<Vec<UdpSocket>> {
     let mut sockets = Vec::with_capacity(transport.sockets.len());
     for (s, plan) in transport.sockets.iter().enumerate() {
+        if !local(s) {
+            // Only another shard's vehicles use it: a socket of no consequence, so that
+            // the shards of one host do not take each other's ports.
+            let unused = UdpSocket::bind((std::net::Ipv4Addr::LOCALHOST, 0))
+                .await
+                .context("bind a placeholder socket for another shard's vehicle")?;
+            sockets.push(unused);
+            continue;
+        }
         let bind = plan.bind;
         let socket = UdpSocket::bind(bind).await.with_context(|| match &plan.network {
             Some(name) => format!("bind {bind} for network \"{name}\" (another ground station on that port?)"),

@@ -7,6 +7,8 @@
 //! - [`mirror`]: every datagram of a UDP flight copied to extra addresses, read-only.
 //! - [`shards`]: several shards of one swarm in one process, in lockstep with the
 //!   vehicles, their messages on a bus with seeded latency and loss. Deterministic.
+//! - `zenoh_bus` (feature `zenoh`): the messages between shards over a Zenoh peer
+//!   session, on a thread of its own.
 //! - [`listening`]: how far behind its sockets the UDP driver is, so that its own stall
 //!   is not taken for vehicles going silent.
 //!
@@ -21,6 +23,8 @@ pub mod mirror;
 pub mod shards;
 pub mod signals;
 pub mod udp;
+#[cfg(feature = "zenoh")]
+pub mod zenoh_bus;
 
 use std::net::SocketAddr;
 use std::ops::Range;

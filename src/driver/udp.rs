@@ -23,6 +23,16 @@ use super::{Intake, Observer};
 use crate::link::router::Router;
 use crate::swarm::Swarm;
 
+/// What carries a shard's messages to the other shards (Zenoh, `zenoh_bus`).
+pub trait ShardTransport {
+    /// The payloads from other shards.
+    fn inbound(&mut self) -> &mut mpsc::Receiver<Vec<u8>>;
+    /// Sends one message to the shards that read it (never waits).
+    fn publish(&mut self, message: &crate::distributed::ShardMessage);
+    /// Sends what is queued and closes.
+    fn close(self: Box<Self>);
+}
+
 /// What the owner of a running swarm asks of it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum DriverCommand {
@@ -109,6 +119,8 @@ fn has_waiting(socket: &UdpSocket) -> bool {
 /// landed every vehicle, or `commands` says [`DriverCommand::Stop`]; returns the swarm
 /// and the observer. The observer sees every datagram (a network datagram once per
 /// vehicle frame in it) and the swarm after every change, with the time since start.
+/// A swarm that is one shard of several gets `shards`: their payloads go to the swarm,
+/// its messages to them, and its clock is set to the Unix time at start.
 ///
 /// # Errors
 /// A receive task's error (send errors are logged: a vehicle may be unreachable for a
@@ -119,8 +131,14 @@ pub async fn run_swarm<O: Observer>(
     mut router: Router,
     mut commands: watch::Receiver<DriverCommand>,
     mut observer: O,
+    mut shards: Option<&mut (dyn ShardTransport + Send + 'static)>,
 ) -> io::Result<(Swarm, O)> {
     let start = Instant::now();
+    swarm.set_swarm_epoch_us(
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX)),
+    );
     let now = || SimTime::from_micros(start.elapsed().as_micros() as u64);
     let sockets: Vec<Arc<UdpSocket>> = sockets.into_iter().map(Arc::new).collect();
     let (tx, mut rx) = mpsc::channel::<Batch>(RECEIVE_QUEUE);
@@ -180,6 +198,18 @@ pub async fn run_swarm<O: Observer>(
                 swarm.set_listen_lag(t, listening.lag(t));
                 swarm.handle_timeout(t);
             }
+            payload = async {
+                match shards.as_mut() {
+                    Some(s) => s.inbound().recv().await,
+                    None => std::future::pending().await,
+                }
+            } => match payload {
+                Some(bytes) => match crate::distributed::decode(&bytes) {
+                    Ok(message) => swarm.handle_shard_message(now(), &message),
+                    Err(e) => tracing::warn!(error = %e, "payload from another shard refused"),
+                },
+                None => shards = None,
+            },
             received = rx.recv() => match received {
                 Some(first) => {
                     // What has arrived, then one round of sends; no further than the next
@@ -231,6 +261,11 @@ pub async fn run_swarm<O: Observer>(
                 None => unsent[i] += 1,
             }
             swarm.recycle(i, bytes);
+        }
+        if let Some(s) = shards.as_mut() {
+            while let Some(message) = swarm.poll_shard_message() {
+                s.publish(&message);
+            }
         }
         observer.swarm(&swarm, now());
         if swarm.is_finished() {

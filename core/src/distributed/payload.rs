@@ -92,6 +92,9 @@ pub struct ShardReport {
     pub flying: u16,
     /// How many of them are lost.
     pub lost: u16,
+    /// Whether its flight is over (the configured duration elapsed): its vehicles not
+    /// flying are then no loss.
+    pub ended: bool,
     /// The instant at which it starts (or started) consensus (µs, swarm clock), once
     /// every vehicle it knows of flies: the swarm adopts the earliest one proposed.
     pub start_us: Option<u64>,
@@ -182,6 +185,7 @@ mod tests {
             vehicles: 2,
             flying: 2,
             lost: 0,
+            ended: false,
             start_us: Some(1_764_000_001_000_000),
             start_sum: Some(WeightedSum {
                 wp_m: [10.0, 20.0],

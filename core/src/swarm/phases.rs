@@ -252,10 +252,14 @@ impl Swarm {
         if start.is_some() {
             // From every shard's sum at the start, once all are in (shard.rs).
             self.predicted_final_velocity = None;
+            let swarm_us = self.swarm_clock_us(t0).unwrap_or_default();
             self.log.push(
                 now,
                 false,
-                format!("consensus started at the adopted {:.3} s", t0.as_secs_f64()),
+                format!(
+                    "consensus started at the adopted {:.3} s (swarm clock {swarm_us} µs)",
+                    t0.as_secs_f64()
+                ),
             );
             self.shard_prediction(now);
             return;

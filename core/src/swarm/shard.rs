@@ -129,7 +129,8 @@ impl Peers {
         })
     }
 
-    /// Another shard silent for `timeout`, or with a vehicle not flying.
+    /// Another shard silent for `timeout`, or with a vehicle not flying while its flight
+    /// is not over.
     fn others_lost(&self, now: SimTime, timeout: Duration) -> Option<String> {
         self.reports.iter().enumerate().find_map(|(s, r)| {
             if s == self.plan.this() {
@@ -141,7 +142,7 @@ impl Peers {
                     "shard {s} silent for {:.0} ms",
                     now.saturating_since(*at).as_secs_f64() * 1e3
                 )),
-                Some((_, r)) if r.flying < r.vehicles => Some(format!(
+                Some((_, r)) if r.flying < r.vehicles && !r.ended => Some(format!(
                     "shard {s} flies {} of its {} vehicles",
                     r.flying, r.vehicles
                 )),
@@ -333,6 +334,19 @@ impl Swarm {
         self.peers
             .as_ref()
             .map_or((0, 0), |p| (p.refused, p.dropped))
+    }
+
+    /// Sets the swarm clock (µs since the Unix epoch on a real deployment) at this
+    /// shard's time zero: the driver calls it when its clock starts.
+    pub fn set_swarm_epoch_us(&mut self, epoch_us: u64) {
+        if let Some(p) = self.peers.as_mut() {
+            p.plan = p.plan.clone().with_epoch_us(epoch_us);
+        }
+    }
+
+    /// `t` on the swarm clock (µs), when the swarm is one shard of several.
+    pub fn swarm_clock_us(&self, t: SimTime) -> Option<u64> {
+        self.peers.as_ref().map(|p| p.to_swarm_us(t))
     }
 
     /// The shard's plan, when the swarm is one shard of several.
@@ -551,6 +565,7 @@ impl Swarm {
         }
         let own = self.local_sum();
         let phase = self.phase;
+        let ended = self.stop == Some(super::StopReason::DurationOver);
         let Some(p) = self.peers.as_mut() else {
             return;
         };
@@ -579,6 +594,7 @@ impl Swarm {
             vehicles,
             flying,
             lost,
+            ended,
             start_us: start.filter(|_| in_round).map(|t| p.to_swarm_us(t)),
             start_sum: p.started.map(|(_, s)| s).filter(|_| in_round),
             now_sum: own,

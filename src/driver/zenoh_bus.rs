@@ -1,0 +1,266 @@
+//! The bus between shards over Zenoh: a peer session on a thread of its own (Zenoh runs
+//! its own multi-threaded runtime; the coordinator's loop stays on its one thread), fed
+//! and read through channels.
+//!
+//! - Publishes each [`ShardMessage`] the swarm makes: a vehicle's state under
+//!   `ringswarm/<swarm>/state/<network>/<sysid>`, the shard's report under
+//!   `ringswarm/<swarm>/shard/<name>`.
+//! - Subscribes to the state keys of the remote vehicles its plan watches, and to every
+//!   shard's report (`ringswarm/<swarm>/shard/*`).
+//! - Declares the liveliness token `ringswarm/<swarm>/alive/<name>` while it runs: any
+//!   Zenoh peer (`ringswarm view --zenoh`, a monitor) sees which shards are up.
+//!
+//! Payloads are the versioned bytes of [`crate::distributed::payload`]. A payload that
+//! arrives while the coordinator's queue is full is dropped and counted: the next tick's
+//! replaces it.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::thread::JoinHandle;
+
+use tokio::sync::mpsc;
+
+use crate::config::ShardLayout;
+use crate::distributed::{ShardMessage, ShardPlan, encode};
+
+/// Payloads waiting for the coordinator's loop at most.
+const INBOUND_QUEUE: usize = 4096;
+
+/// Messages waiting for the Zenoh thread at most.
+const OUTBOUND_QUEUE: usize = 65_536;
+
+/// Counters of a bus.
+#[derive(Debug, Default)]
+pub struct BusStats {
+    /// Payloads published.
+    pub published: AtomicU64,
+    /// Their bytes.
+    pub published_bytes: AtomicU64,
+    /// Payloads received.
+    pub received: AtomicU64,
+    /// Payloads received and dropped because the coordinator's queue was full.
+    pub dropped_inbound: AtomicU64,
+    /// Messages not published because the Zenoh thread's queue was full.
+    pub dropped_outbound: AtomicU64,
+}
+
+/// The coordinator's side of the bus.
+pub struct ZenohBus {
+    /// Payloads from other shards.
+    pub inbound: mpsc::Receiver<Vec<u8>>,
+    outbound: mpsc::Sender<(String, Vec<u8>)>,
+    state_keys: Vec<String>,
+    shard_key: String,
+    stats: Arc<BusStats>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl std::fmt::Debug for ZenohBus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ZenohBus")
+            .field("shard_key", &self.shard_key)
+            .finish_non_exhaustive()
+    }
+}
+
+impl crate::driver::udp::ShardTransport for ZenohBus {
+    fn inbound(&mut self) -> &mut mpsc::Receiver<Vec<u8>> {
+        &mut self.inbound
+    }
+
+    fn publish(&mut self, message: &ShardMessage) {
+        ZenohBus::publish(self, message);
+    }
+
+    fn close(self: Box<Self>) {
+        ZenohBus::close(*self);
+    }
+}
+
+impl ZenohBus {
+    /// Opens shard `plan.this()`'s session (its listen and connect endpoints from
+    /// `layout`) and declares its subscriptions; `vehicles` names each vehicle of the
+    /// ring (network, system id) for its key. Returns once the session is open.
+    ///
+    /// # Errors
+    /// The session cannot be opened (an endpoint that cannot be bound), or a key or a
+    /// subscription is refused; each named.
+    pub fn open(
+        layout: &ShardLayout,
+        plan: &ShardPlan,
+        vehicles: &[(Option<String>, u8)],
+    ) -> Result<Self, String> {
+        let this = plan.this();
+        let state_keys: Vec<String> = vehicles
+            .iter()
+            .map(|(network, id)| layout.state_key(network.as_deref(), *id))
+            .collect();
+        let watched: Vec<String> = state_keys
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| plan.is_watched(*i))
+            .map(|(_, k)| k.clone())
+            .collect();
+        let reports = format!("ringswarm/{}/shard/*", layout.swarm);
+        let alive = format!(
+            "ringswarm/{}/alive/{}",
+            layout.swarm,
+            layout.names.get(this).map_or("", String::as_str)
+        );
+        let mut config = zenoh::Config::default();
+        let listen = layout.listen.get(this).cloned().unwrap_or_default();
+        let connect = layout.connect.get(this).cloned().unwrap_or_default();
+        let json = |v: &Vec<String>| serde_json::to_string(v).unwrap_or_else(|_| "[]".into());
+        let mut settings = vec![("mode", "\"peer\"".to_owned())];
+        if !listen.is_empty() {
+            settings.push(("listen/endpoints", json(&listen)));
+        }
+        if !connect.is_empty() {
+            settings.push(("connect/endpoints", json(&connect)));
+        }
+        if !(listen.is_empty() && connect.is_empty()) {
+            // Endpoints given: the shards find each other there, not by multicast.
+            settings.push(("scouting/multicast/enabled", "false".to_owned()));
+        }
+        for (key, value) in settings {
+            config
+                .insert_json5(key, &value)
+                .map_err(|e| format!("zenoh config {key} = {value}: {e}"))?;
+        }
+        let (in_tx, inbound) = mpsc::channel::<Vec<u8>>(INBOUND_QUEUE);
+        let (outbound, mut out_rx) = mpsc::channel::<(String, Vec<u8>)>(OUTBOUND_QUEUE);
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
+        let stats = Arc::new(BusStats::default());
+        let thread_stats = Arc::clone(&stats);
+        let thread = std::thread::Builder::new()
+            .name("zenoh-bus".into())
+            .spawn(move || {
+                let runtime = match tokio::runtime::Builder::new_multi_thread()
+                    .worker_threads(1)
+                    .enable_all()
+                    .build()
+                {
+                    Ok(r) => r,
+                    Err(e) => {
+                        let _ =
+                            ready_tx.send(Err(format!("start the Zenoh thread's runtime: {e}")));
+                        return;
+                    }
+                };
+                runtime.block_on(async move {
+                    let session = match zenoh::open(config).await {
+                        Ok(s) => s,
+                        Err(e) => {
+                            let _ = ready_tx.send(Err(format!("open the Zenoh session: {e}")));
+                            return;
+                        }
+                    };
+                    let mut subscribers = Vec::new();
+                    for key in watched.iter().chain(std::iter::once(&reports)) {
+                        let tx = in_tx.clone();
+                        let stats = Arc::clone(&thread_stats);
+                        let declared = session
+                            .declare_subscriber(key.as_str())
+                            .callback(move |sample| {
+                                stats.received.fetch_add(1, Ordering::Relaxed);
+                                let bytes = sample.payload().to_bytes().into_owned();
+                                if tx.try_send(bytes).is_err() {
+                                    stats.dropped_inbound.fetch_add(1, Ordering::Relaxed);
+                                }
+                            })
+                            .await;
+                        match declared {
+                            Ok(s) => subscribers.push(s),
+                            Err(e) => {
+                                let _ = ready_tx.send(Err(format!("subscribe to {key}: {e}")));
+                                return;
+                            }
+                        }
+                    }
+                    let token = match session.liveliness().declare_token(alive.as_str()).await {
+                        Ok(t) => t,
+                        Err(e) => {
+                            let _ = ready_tx.send(Err(format!("declare {alive}: {e}")));
+                            return;
+                        }
+                    };
+                    let _ = ready_tx.send(Ok(()));
+                    let mut publishers = std::collections::HashMap::new();
+                    while let Some((key, bytes)) = out_rx.recv().await {
+                        if !publishers.contains_key(&key) {
+                            match session.declare_publisher(key.clone()).await {
+                                Ok(p) => {
+                                    publishers.insert(key.clone(), p);
+                                }
+                                Err(e) => {
+                                    tracing::warn!(key, error = %e, "zenoh publisher refused");
+                                    continue;
+                                }
+                            }
+                        }
+                        if let Some(publisher) = publishers.get(&key) {
+                            let n = bytes.len() as u64;
+                            if publisher.put(bytes).await.is_ok() {
+                                thread_stats.published.fetch_add(1, Ordering::Relaxed);
+                                thread_stats.published_bytes.fetch_add(n, Ordering::Relaxed);
+                            }
+                        }
+                    }
+                    drop(token);
+                    drop(subscribers);
+                    for (_, p) in publishers {
+                        let _ = p.undeclare().await;
+                    }
+                    let _ = session.close().await;
+                });
+            })
+            .map_err(|e| format!("start the Zenoh thread: {e}"))?;
+        match ready_rx.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => {
+                let _ = thread.join();
+                return Err(e);
+            }
+            Err(_) => return Err("the Zenoh thread stopped before its session opened".into()),
+        }
+        Ok(Self {
+            inbound,
+            outbound,
+            state_keys,
+            shard_key: layout.shard_key(this),
+            stats,
+            thread: Some(thread),
+        })
+    }
+
+    /// Hands a message to the Zenoh thread (never waits: a full queue drops it).
+    pub fn publish(&self, message: &ShardMessage) {
+        let key = match message {
+            ShardMessage::Vehicle(v) => match self.state_keys.get(usize::from(v.vehicle)) {
+                Some(k) => k.clone(),
+                None => return,
+            },
+            ShardMessage::Shard(_) => self.shard_key.clone(),
+        };
+        let mut bytes = Vec::with_capacity(48);
+        encode(message, &mut bytes);
+        if self.outbound.try_send((key, bytes)).is_err() {
+            self.stats.dropped_outbound.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// The counters.
+    pub fn stats(&self) -> &BusStats {
+        &self.stats
+    }
+
+    /// Closes the session (after what was handed to it is published) and waits for
+    /// its thread.
+    pub fn close(mut self) {
+        let (dummy, _) = mpsc::channel(1);
+        drop(std::mem::replace(&mut self.outbound, dummy));
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
