@@ -226,6 +226,11 @@ pub struct SitlArgs {
     /// SETUP_SIGNING or --signing-key, and its clock).
     #[arg(long, default_value = "sitl-state")]
     pub state_dir: std::path::PathBuf,
+    /// With a coordinator --config split into shards: emulate only this `[[shard]]`'s
+    /// vehicles (each still on its PX4 instance's ports), as the ground station that
+    /// flies that shard would.
+    #[arg(long)]
+    pub shard: Option<String>,
 }
 
 /// Arguments of `ringswarm analyze`.

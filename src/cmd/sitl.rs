@@ -37,7 +37,8 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("read {}", path.display()))?;
             let (config, security_key, config_placements) =
-                sitl_config(&text).map_err(|e| anyhow::anyhow!("{}:\n{e}", path.display()))?;
+                sitl_config(&text, args.shard.as_deref())
+                    .map_err(|e| anyhow::anyhow!("{}:\n{e}", path.display()))?;
             key_file = key_file.or(security_key);
             placements = config_placements;
             if let Some(n) = args
@@ -51,6 +52,9 @@ pub fn run(args: &SitlArgs) -> anyhow::Result<()> {
                 );
             }
             config
+        }
+        None if args.shard.is_some() => {
+            bail!("--shard needs a coordinator --config with [[shard]] tables")
         }
         None => config_from_flags(args)?,
     };
@@ -138,17 +142,20 @@ type Emulated = (
     Option<(Vec<Placement>, Vec<String>)>,
 );
 
-fn sitl_config(text: &str) -> Result<Emulated, String> {
+fn sitl_config(text: &str, shard: Option<&str>) -> Result<Emulated, String> {
     let is_coordinator = text
         .parse::<toml::Table>()
         .is_ok_and(|t| t.contains_key("gains"));
     if !is_coordinator {
+        if shard.is_some() {
+            return Err("--shard needs a coordinator file with [[shard]] tables".into());
+        }
         return SitlConfig::from_toml(text).map(|c| (c, None, None));
     }
     let config = crate::config::Config::from_toml(text)?;
     let (world, vehicles) = config.emulator()?;
     let placements = config.emulator_placements()?;
-    let labels = config
+    let labels: Vec<String> = config
         .vehicle
         .iter()
         .map(|v| {
@@ -160,6 +167,22 @@ fn sitl_config(text: &str) -> Result<Emulated, String> {
             .file_label()
         })
         .collect();
+    let mut rows: Vec<_> = vehicles.into_iter().zip(placements).zip(labels).collect();
+    if let Some(name) = shard {
+        let layout = config
+            .shard_layout()?
+            .ok_or("--shard needs [distributed] and [[shard]] tables in the file")?;
+        let this = layout.names.iter().position(|n| n == name).ok_or_else(|| {
+            format!(
+                "no [[shard]] named \"{name}\"; the file has {}",
+                layout.names.join(", ")
+            )
+        })?;
+        let mut owner = layout.owner.iter();
+        rows.retain(|_| owner.next() == Some(&this));
+    }
+    let (rest, labels): (Vec<_>, Vec<String>) = rows.into_iter().unzip();
+    let (vehicles, placements): (Vec<_>, Vec<_>) = rest.into_iter().unzip();
     let sitl = SitlConfig {
         world,
         faults: LinkFaults::default(),

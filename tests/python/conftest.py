@@ -34,6 +34,11 @@ def own_loopback():
 
 
 def pytest_configure(config):
+    config.addinivalue_line(
+        "markers",
+        "serial: runs after the parallel tests, alone (several coordinators and emulators in "
+        "real time: in parallel with the others, the machine's load would be the test)",
+    )
     worker = os.environ.get("PYTEST_XDIST_WORKER")
     if worker and os.environ.get("RINGSWARM_TEST_NETNS") == "1":
         own_loopback()
