@@ -39,10 +39,13 @@ export RINGSWARM_BIN="$PWD/target/debug/ringswarm"
 # (tests/python/conftest.py). Where namespaces cannot be made (not root), they run in one
 # process, one after the other.
 pytest_args=(-q -p no:cacheprovider --durations=8 tests/python)
+# The flights below run in real time: let the build's gigabytes reach the disk first, so
+# that their writeback does not slow the flights down.
+sync
 # The tests marked serial (several shards, emulators and coordinators in real time each)
 # run afterwards, alone, so that neither they nor the others fly on a loaded machine.
 if unshare -n true 2>/dev/null; then
-  RINGSWARM_TEST_NETNS=1 .venv/bin/python -m pytest "${pytest_args[@]}" -m "not serial" -n "${RINGSWARM_PYTEST_WORKERS:-6}"
+  RINGSWARM_TEST_NETNS=1 .venv/bin/python -m pytest "${pytest_args[@]}" -m "not serial" -n "${RINGSWARM_PYTEST_WORKERS:-4}"
   unshare -n bash -c 'ip link set lo up && exec .venv/bin/python -m pytest "$@"' _ "${pytest_args[@]}" -m serial -n 0
 else
   echo "python checks: network namespaces cannot be made here (unshare -n), so they run one at a time"

@@ -9,41 +9,18 @@ What is checked, from each shard's run directory:
 - a shard killed in flight makes the other apply its loss policy (hold).
 """
 
-import csv
 import os
-import re
-import signal
 import subprocess
-import time
 from pathlib import Path
 
 import pytest
+from shard_runs import PREDICTED, START, events, stop, wait_for
 
 pytestmark = pytest.mark.serial
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = os.environ.get("RINGSWARM_BIN", str(ROOT / "target" / "debug" / "ringswarm"))
 CONFIG = ROOT / "tests" / "fixtures" / "ground-diamond-shards.toml"
-START = re.compile(r"consensus started at the adopted ([0-9.]+) s \(swarm clock (\d+) µs\)")
-PREDICTED = re.compile(r"predicted final velocity \((-?[0-9.]+), (-?[0-9.]+)\) m/s")
-
-
-def events(run):
-    path = run / "events.csv"
-    if not path.exists():
-        return []
-    with open(path, newline="") as f:
-        return [row for row in csv.reader(f)][1:]
-
-
-def wait_for(predicate, timeout_s, what):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        found = predicate()
-        if found:
-            return found
-        time.sleep(0.2)
-    pytest.fail(f"not within {timeout_s} s: {what}")
 
 
 def start(tmp, extra=()):
@@ -62,18 +39,6 @@ def start(tmp, extra=()):
             out,
         )
     return sitl, shards
-
-
-def stop(process):
-    if process.poll() is None:
-        process.send_signal(signal.SIGTERM)
-        time.sleep(0.3)
-        process.send_signal(signal.SIGTERM)
-        try:
-            process.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
 
 
 def test_two_shards_adopt_one_start_and_one_prediction_and_land(tmp_path):

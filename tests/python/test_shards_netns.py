@@ -12,24 +12,20 @@ Checked from the run directories:
 Where namespaces cannot be made (not root, no `ip`), the test says so and is skipped.
 """
 
-import csv
 import os
-import re
 import shutil
-import signal
 import subprocess
 import time
 from pathlib import Path
 
 import pytest
+from shard_runs import events, predictions_of, starts_of, stop, wait_for
 
 pytestmark = pytest.mark.serial
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = os.environ.get("RINGSWARM_BIN", str(ROOT / "target" / "debug" / "ringswarm"))
 BASE = ROOT / "config" / "paper-sim1.toml"
-START = re.compile(r"consensus started at the adopted ([0-9.]+) s \(swarm clock (\d+) µs\)")
-PREDICTED = re.compile(r"predicted final velocity \((-?[0-9.]+), (-?[0-9.]+)\) m/s")
 SHARDS = ("a", "b", "c")
 
 
@@ -86,50 +82,8 @@ def config(tmp):
     return path
 
 
-def events(run):
-    path = run / "events.csv"
-    if not path.exists():
-        return []
-    with open(path, newline="") as f:
-        return list(csv.reader(f))[1:]
-
-
-def wait_for(predicate, timeout_s, what):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        found = predicate()
-        if found:
-            return found
-        time.sleep(0.2)
-    pytest.fail(f"not within {timeout_s} s: {what}")
-
-
 def in_ns(ns, args, log):
     return subprocess.Popen(["ip", "netns", "exec", ns, *args], stdout=log, stderr=subprocess.STDOUT)
-
-
-def stop(process):
-    if process.poll() is None:
-        process.send_signal(signal.SIGTERM)
-        time.sleep(0.3)
-        process.send_signal(signal.SIGTERM)
-        try:
-            process.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-
-
-def starts_of(run):
-    return [(float(m.group(1)), int(m.group(2))) for m in (START.search(r[-1]) for r in events(run)) if m]
-
-
-def predictions_of(run):
-    return [
-        (float(m.group(1)), float(m.group(2)))
-        for m in (PREDICTED.search(r[-1]) for r in events(run) if "every shard's sum" in r[-1])
-        if m
-    ]
 
 
 def test_three_shards_in_three_namespaces_agree_and_survive_one_killed(hosts, tmp_path):

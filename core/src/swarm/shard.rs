@@ -161,9 +161,16 @@ impl Peers {
         self.proposal.into_iter().chain(others).min()
     }
 
-    /// Σ over every shard, in shard order, of its sum at `start`, once all are in.
-    fn prediction(&self, start: SimTime, own: WeightedSum) -> Option<Vector2<f64>> {
+    /// The swarm's w-weighted mean position and velocity at `start`, from every shard's
+    /// sums at that instant added in shard order (this shard's own is `own`), once all
+    /// are in.
+    fn start_means(
+        &self,
+        start: SimTime,
+        own: WeightedSum,
+    ) -> Option<(Vector2<f64>, Vector2<f64>)> {
         let start_us = self.to_swarm_us(start);
+        let mut wp = Vector2::zeros();
         let mut wv = Vector2::zeros();
         let mut w = 0.0;
         for (s, r) in self.reports.iter().enumerate() {
@@ -176,10 +183,16 @@ impl Peers {
                 }
                 r.start_sum?
             };
+            wp += Vector2::new(sum.wp_m[0], sum.wp_m[1]);
             wv += Vector2::new(sum.wv_mps[0], sum.wv_mps[1]);
             w += sum.w;
         }
-        (w.abs() > 1e-12).then(|| wv / w)
+        (w.abs() > 1e-12).then(|| (wp / w, wv / w))
+    }
+
+    /// The prediction `Σ wᵢvᵢ / Σ wᵢ` at `start`, once every shard's sum is in.
+    fn prediction(&self, start: SimTime, own: WeightedSum) -> Option<Vector2<f64>> {
+        self.start_means(start, own).map(|(_, v)| v)
     }
 }
 
@@ -500,28 +513,10 @@ impl Swarm {
         let p = self.peers.as_ref()?;
         let (start, own) = p.started?;
         let target = self.predicted_final_velocity?;
-        let start_us = p.to_swarm_us(start);
-        let mut wp = Vector2::zeros();
-        let mut w = 0.0;
-        for (s, r) in p.reports.iter().enumerate() {
-            let sum = if s == p.plan.this() {
-                own
-            } else {
-                let (_, r) = r.as_ref()?;
-                if r.start_us != Some(start_us) {
-                    return None;
-                }
-                r.start_sum?
-            };
-            wp += Vector2::new(sum.wp_m[0], sum.wp_m[1]);
-            w += sum.w;
-        }
-        if w.abs() < 1e-12 {
-            return None;
-        }
+        let (mean_at_start, _) = p.start_means(start, own)?;
         let (mean_now, _) = self.shard_means(now)?;
         let elapsed = now.saturating_since(start).as_secs_f64();
-        Some(mean_now - wp / w - target * elapsed)
+        Some(mean_now - mean_at_start - target * elapsed)
     }
 
     /// After a control tick: this shard's vehicles' states others read, then its report.
