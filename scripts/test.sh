@@ -45,7 +45,7 @@ sync
 # The tests marked serial (several shards, emulators and coordinators in real time each)
 # run afterwards, alone, so that neither they nor the others fly on a loaded machine.
 if unshare -n true 2>/dev/null; then
-  RINGSWARM_TEST_NETNS=1 .venv/bin/python -m pytest "${pytest_args[@]}" -m "not serial" -n "${RINGSWARM_PYTEST_WORKERS:-4}"
+  RINGSWARM_TEST_NETNS=1 .venv/bin/python -m pytest "${pytest_args[@]}" -m "not serial" -n "${RINGSWARM_PYTEST_WORKERS:-4}" --dist loadgroup
   unshare -n bash -c 'ip link set lo up && exec .venv/bin/python -m pytest "$@"' _ "${pytest_args[@]}" -m serial -n 0
 else
   echo "python checks: network namespaces cannot be made here (unshare -n), so they run one at a time"

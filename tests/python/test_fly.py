@@ -24,6 +24,9 @@ from pymavlink import mavutil
 import ringswarm_ref as ref
 from tlog import read_tlog
 
+# One worker runs this module, so its module-scoped flight is flown once.
+pytestmark = pytest.mark.xdist_group("test_fly")
+
 ROOT = Path(__file__).resolve().parents[2]
 BIN = os.environ.get("RINGSWARM_BIN", str(ROOT / "target" / "debug" / "ringswarm"))
 CONFIG = ROOT / "tests" / "fixtures" / "ground-diamond.toml"

@@ -19,6 +19,9 @@ from pathlib import Path
 
 import pytest
 
+# One worker runs this module, so its module-scoped flight is flown once.
+pytestmark = pytest.mark.xdist_group("test_fly_networks")
+
 ROOT = Path(__file__).resolve().parents[2]
 BIN = os.environ.get("RINGSWARM_BIN", str(ROOT / "target" / "debug" / "ringswarm"))
 N, PER_NETWORK = 84, 42

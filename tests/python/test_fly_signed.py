@@ -28,6 +28,9 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink2
 
+# One worker runs this module, so its module-scoped flight is flown once.
+pytestmark = pytest.mark.xdist_group("test_fly_signed")
+
 ROOT = Path(__file__).resolve().parents[2]
 BIN = os.environ.get("RINGSWARM_BIN", str(ROOT / "target" / "debug" / "ringswarm"))
 FIXTURE = ROOT / "tests" / "fixtures" / "ground-diamond.toml"

@@ -109,9 +109,12 @@ class MirrorListener:
 
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory):
+    """One real-time flight. Chromium is started before the flight, so that a slow
+    browser start on a loaded machine cannot make the page miss the formation."""
     out = tmp_path_factory.mktemp("live") / "run"
     web_port, mirror_port = free_port(), free_port(socket.SOCK_DGRAM)
     listener = MirrorListener(mirror_port)
+    driver = browser()
     demo = subprocess.Popen(
         [BIN, "demo", "--realtime", "--scenario", str(CONFIG), "--out", str(out),
          "--web", f"127.0.0.1:{web_port}", "--mirror", f"127.0.0.1:{mirror_port}"],
@@ -119,10 +122,12 @@ def flight(tmp_path_factory):
         stderr=subprocess.PIPE,
         text=True,
     )
-    result = {"demo": demo, "out": out, "url": f"http://127.0.0.1:{web_port}/", "listener": listener}
+    result = {"demo": demo, "out": out, "url": f"http://127.0.0.1:{web_port}/",
+              "listener": listener, "driver": driver}
     try:
         yield result
     finally:
+        driver.quit()
         if demo.poll() is None:
             demo.kill()
         listener.close()
@@ -135,65 +140,62 @@ def finished(flight):
     return stdout, stderr
 
 
-def test_the_live_page_shows_every_vehicle_and_draws_them_moving(flight):
-    driver = browser()
-    try:
-        # The page is up once the flight has bound its port.
-        def opened():
-            try:
-                driver.get(flight["url"])
-                return driver.find_elements("css selector", "#vehicles tbody tr[data-sysid]")
-            except Exception:
-                return None
-        rows = wait_for("the live page", opened, timeout_s=60, every_s=0.5)
-        sysids = sorted(int(r.get_attribute("data-sysid")) for r in rows)
-        assert sysids == VEHICLES
-        drawn = lambda: driver.execute_script("return window.ringswarmView.drawn")
-        first = wait_for("every vehicle drawn", lambda: (d := drawn()) and len(d) == 4 and d)
-        first = {d["sysid"]: d for d in first}
-
-        def moved():
-            now = {d["sysid"]: d for d in drawn()}
-            return max(abs(now[s]["x_m"] - first[s]["x_m"]) + abs(now[s]["y_m"] - first[s]["y_m"])
-                       for s in now) > 1.0 and now
-        later = wait_for("the drawn positions to change by over a metre", moved, timeout_s=60)
-        assert any(abs(later[s]["x_px"] - first[s]["x_px"]) + abs(later[s]["y_px"] - first[s]["y_px"]) > 1
-                   for s in later)
-        # The table fills in: every vehicle's link phase and mode.
-        cells = driver.execute_script(
-            "return [...document.querySelectorAll('#vehicles tbody tr')].map(r => [...r.children].map(c => c.textContent))")
-        assert len(cells) == 4
-        assert all(c[2] in ("flying", "landing", "disarming", "done") for c in cells), cells
-        assert all(c[3] != "–" for c in cells), cells
-        frames = driver.execute_script("return window.ringswarmView.frames")
-        assert frames >= 2
-    finally:
-        driver.quit()
-
-
-def test_the_state_api_and_the_websocket_rate(flight):
+@pytest.mark.xdist_group("live-flight")
+def test_the_live_page_the_state_api_and_the_websocket_rate(flight):
+    """All checks of the live page in one test, on the browser started before the flight:
+    split over tests, a later one could find the flight over and the server gone."""
     import urllib.request
+    driver = flight["driver"]
+
+    # The page is up once the flight has bound its port.
+    def opened():
+        try:
+            driver.get(flight["url"])
+            return driver.find_elements("css selector", "#vehicles tbody tr[data-sysid]")
+        except Exception:
+            return None
+    rows = wait_for("the live page", opened, timeout_s=60, every_s=0.5)
+    sysids = sorted(int(r.get_attribute("data-sysid")) for r in rows)
+    assert sysids == VEHICLES
+
+    # The state API answers while the flight is on.
     state = json.loads(urllib.request.urlopen(flight["url"] + "api/state", timeout=30).read())
     assert [v["sysid"] for v in state["vehicles"]] == VEHICLES
     for v in state["vehicles"]:
         assert set(v) >= {"sysid", "network", "position_enu_m", "velocity_enu_mps", "link_phase"}
     assert "predicted_final_velocity" in state and "phase" in state
-    # The WebSocket, from the page itself: count the states a browser gets over 3 s.
-    driver = browser()
-    try:
-        driver.get(flight["url"])
-        wait_for("a first state", lambda: driver.execute_script("return window.ringswarmView.frames") > 0)
-        start = driver.execute_script("return window.ringswarmView.frames")
-        t0 = driver.execute_script("return window.ringswarmView.state.t_s")
-        time.sleep(3.0)
-        frames = driver.execute_script("return window.ringswarmView.frames") - start
-        t1 = driver.execute_script("return window.ringswarmView.state.t_s")
-    finally:
-        driver.quit()
+
+    # Every vehicle drawn, and drawn moving: from a line on the ground into the diamond.
+    drawn = lambda: driver.execute_script("return window.ringswarmView.drawn")
+    first = wait_for("every vehicle drawn", lambda: (d := drawn()) and len(d) == 4 and d)
+    first = {d["sysid"]: d for d in first}
+
+    def moved():
+        now = {d["sysid"]: d for d in drawn()}
+        return max(abs(now[s]["x_m"] - first[s]["x_m"]) + abs(now[s]["y_m"] - first[s]["y_m"])
+                   for s in now) > 1.0 and now
+    later = wait_for("the drawn positions to change by over a metre", moved, timeout_s=60)
+    assert any(abs(later[s]["x_px"] - first[s]["x_px"]) + abs(later[s]["y_px"] - first[s]["y_px"]) > 1
+               for s in later)
+    # The table fills in: every vehicle's link phase and mode.
+    cells = driver.execute_script(
+        "return [...document.querySelectorAll('#vehicles tbody tr')].map(r => [...r.children].map(c => c.textContent))")
+    assert len(cells) == 4
+    assert all(c[2] in ("flying", "landing", "disarming", "done") for c in cells), cells
+    assert all(c[3] != "–" for c in cells), cells
+
+    # The WebSocket: count the states the page gets over 3 s of flight.
+    start = driver.execute_script("return window.ringswarmView.frames")
+    t0 = driver.execute_script("return window.ringswarmView.state.t_s")
+    time.sleep(3.0)
+    frames = driver.execute_script("return window.ringswarmView.frames") - start
+    t1 = driver.execute_script("return window.ringswarmView.state.t_s")
+    assert start >= 2
     if t1 - t0 > 1.0:  # still flying: the states kept coming
         assert frames / (t1 - t0) >= 10.0, f"{frames} states in {t1 - t0:.2f} s of flight"
 
 
+@pytest.mark.xdist_group("live-flight")
 def test_the_mirror_carries_every_vehicle_and_ignores_what_comes_back(flight):
     _, stderr = finished(flight)
     listener = flight["listener"]
