@@ -697,3 +697,67 @@ fn a_coordinator_file_and_a_sitl_file_are_read_into_one_emulator_schema() {
          vehicle[0].airframe.hover_throttle must be in [0.01, 0.99], got 1.5"
     );
 }
+
+#[test]
+fn serial_vehicles_get_a_port_each_and_their_mistakes_are_named() {
+    let text = ring_config(
+        4,
+        |i| {
+            match i {
+            0 => "system_id = 1\nserial = { device = \"/dev/ttyAMA0\", baud = 921600 }".to_owned(),
+            1 => "system_id = 2\nserial = { device = \"/dev/ttyAMA0\", baud = 57600 }\nnetwork = \"a\""
+                .to_owned(),
+            2 => "system_id = 3\nserial = { device = \" \", baud = 0 }\naddress = \"127.0.0.1:14582\""
+                .to_owned(),
+            _ => "system_id = 4".to_owned(),
+        }
+        },
+        "[[network]]\nname = \"a\"\nbind = \"0.0.0.0:14550\"\n",
+    );
+    let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
+    for needle in [
+        "vehicle[1].network: a vehicle on a serial port is reached over that port only",
+        "vehicle[1].serial.device \"/dev/ttyAMA0\" is vehicle[0]'s too: a serial port reaches one vehicle",
+        "vehicle[2].address: a vehicle on a serial port is reached over that port only",
+        "vehicle[2].serial.device is empty",
+        "vehicle[2].serial.baud must be 1200..=4000000 bits per second, got 0",
+    ] {
+        assert!(err.contains(needle), "{needle} not in:\n{err}");
+    }
+    // A sound one: its own port, reached at the serial peer; the emulator serves it on
+    // a pseudo-terminal linked at the device path.
+    let text = ring_config(
+        2,
+        |i| match i {
+            0 => "system_id = 1\nserial = { device = \"/tmp/ringswarm-tty-1\", baud = 921600 }"
+                .to_owned(),
+            _ => "system_id = 2".to_owned(),
+        },
+        "",
+    );
+    let config = Config::from_toml(&text).unwrap();
+    config.validate().unwrap();
+    let plan = config.transport_plan().unwrap();
+    assert_eq!(
+        plan.sockets[plan.routes[0].socket].endpoint,
+        ringswarm::link::router::Endpoint::Serial {
+            device: "/tmp/ringswarm-tty-1".to_owned(),
+            baud: 921_600
+        }
+    );
+    assert_eq!(
+        plan.routes[0].address,
+        Some(ringswarm::link::router::SERIAL_PEER)
+    );
+    assert_eq!(
+        plan.sockets[plan.routes[1].socket].udp_bind(),
+        Some("0.0.0.0:14541".parse().unwrap())
+    );
+    let placements = config.emulator_placements().unwrap();
+    assert_eq!(
+        placements[0],
+        ringswarm_sitl::udp::Placement::Serial {
+            device: "/tmp/ringswarm-tty-1".into()
+        }
+    );
+}

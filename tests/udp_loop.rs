@@ -6,15 +6,15 @@ use std::time::Duration;
 use nalgebra::Vector2;
 use ringswarm::consensus::{CouplingGains, RingDigraph};
 use ringswarm::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel};
-use ringswarm::driver::udp::{DriverCommand, run_swarm};
+use ringswarm::driver::udp::{DriverCommand, Port, run_swarm};
 use ringswarm::frame::{CommonFrame, Geodetic};
-use ringswarm::link::router::{RoutePlan, Router, SocketPlan, TransportPlan};
+use ringswarm::link::router::{Endpoint, RoutePlan, Router, SocketPlan, TransportPlan};
 use ringswarm::swarm::{EndAction, LossPolicy, Swarm, SwarmSetup};
 use ringswarm::vehicle::{LinkConfig, Phase};
 use ringswarm_sitl::autopilot::{LinkId, Vehicle, VehicleConfig};
 use ringswarm_sitl::fleet::{FleetVehicle, spawn_shards};
 use ringswarm_sitl::profile::Profile;
-use ringswarm_sitl::udp::{LinkFaults, LinkSocket, SimClock};
+use ringswarm_sitl::udp::{LinkFaults, LinkPort, LinkSocket, SimClock};
 use ringswarm_sitl::world::World;
 use ringswarm_wire::time::SimTime;
 use tokio::net::UdpSocket;
@@ -39,7 +39,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
             .iter()
             .zip(&networks)
             .map(|(name, s)| SocketPlan {
-                bind: s.local_addr().unwrap(),
+                endpoint: Endpoint::Udp(s.local_addr().unwrap()),
                 network: Some((*name).to_owned()),
             })
             .collect(),
@@ -59,7 +59,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         let default_peer = if quiet {
             nowhere.local_addr().unwrap()
         } else {
-            plan.sockets[network].bind
+            plan.sockets[network].udp_bind().unwrap()
         };
         let mut cfg = VehicleConfig::new(system_id, Profile::x500());
         cfg.start.pos_world_ned_m.y = 5.0 * i as f64;
@@ -70,7 +70,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
             vehicle,
             links: vec![LinkSocket {
                 id: LinkId::Offboard,
-                socket,
+                port: LinkPort::Udp(socket),
                 default_peer,
                 faults: LinkFaults::default(),
             }],
@@ -117,7 +117,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
     let (command_tx, command_rx) = watch::channel(DriverCommand::Fly);
     let swarm_task = tokio::spawn(run_swarm(
         Swarm::new(setup),
-        networks.into(),
+        networks.into_iter().map(Port::from).collect(),
         Router::new(&plan),
         command_rx,
         move |swarm: &Swarm, now: SimTime| {

@@ -27,7 +27,6 @@ use std::time::Duration;
 use mio::{Events, Interest, Poll, Token};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use tokio::net::UdpSocket;
 use tokio::sync::{mpsc, watch};
 use tokio::time::MissedTickBehavior;
 
@@ -36,8 +35,9 @@ use crate::delay_line::DelayLine;
 use crate::key_writer::{KeyStore, KeyWriter};
 use crate::keystore::StoredKey;
 use crate::link_faults::LinkFaults;
+use crate::pty::PtyLink;
 use crate::time::SimTime;
-use crate::udp::{LinkSocket, Partner, Placement, SimClock};
+use crate::udp::{LinkPort, LinkSocket, Partner, Placement, SimClock};
 use crate::world::World;
 
 /// What a test (or an operator) can do to a running vehicle.
@@ -121,10 +121,16 @@ struct Delayed {
     bytes: Vec<u8>,
 }
 
+/// One link's socket or serial line, registered with the shard's poller.
+enum Port {
+    Udp(mio::net::UdpSocket),
+    Pty(PtyLink),
+}
+
 /// A vehicle while the shard runs.
 struct Slot {
     vehicle: Vehicle,
-    sockets: Vec<mio::net::UdpSocket>,
+    sockets: Vec<Port>,
     ids: Vec<LinkId>,
     default_peers: Vec<SocketAddr>,
     partners: Vec<Partner>,
@@ -140,6 +146,8 @@ struct Slot {
     alive: bool,
     /// Datagrams the socket could not take at once.
     dropped_sends: u64,
+    /// Frames read from a serial line, reused from read to read.
+    serial_frames: Vec<Vec<u8>>,
     /// How long before the shard's start the vehicle booted: vehicles started together
     /// would send every stream in the same millisecond (a thousand datagrams at once);
     /// PX4 instances boot apart, and so do these.
@@ -180,11 +188,8 @@ async fn run_fleet(
         let faults: Vec<LinkFaults> = v.links.iter().map(|l| l.faults).collect();
         let mut vehicle = v.vehicle;
         let sysid = vehicle.system_id();
-        let sockets = match polled_sockets(
-            &poll,
-            slots.len(),
-            v.links.into_iter().map(|l| l.socket),
-        ) {
+        let sockets = match polled_sockets(&poll, slots.len(), v.links.into_iter().map(|l| l.port))
+        {
             Ok(sockets) => sockets,
             Err(e) => {
                 tracing::error!(sysid, error = %e, "its sockets cannot be polled: the vehicle does not run");
@@ -209,6 +214,7 @@ async fn run_fleet(
             status: v.status,
             alive: true,
             dropped_sends: 0,
+            serial_frames: Vec::new(),
             boot_offset,
         });
     }
@@ -293,15 +299,27 @@ fn token(slot: usize, link: usize) -> Token {
 fn polled_sockets(
     poll: &Poll,
     slot: usize,
-    sockets: impl Iterator<Item = UdpSocket>,
-) -> io::Result<Vec<mio::net::UdpSocket>> {
+    ports: impl Iterator<Item = LinkPort>,
+) -> io::Result<Vec<Port>> {
     let mut polled = Vec::new();
-    for (link, socket) in sockets.enumerate() {
-        // Non-blocking, as tokio leaves it.
-        let mut socket = mio::net::UdpSocket::from_std(socket.into_std()?);
-        poll.registry()
-            .register(&mut socket, token(slot, link), Interest::READABLE)?;
-        polled.push(socket);
+    for (link, port) in ports.enumerate() {
+        match port {
+            LinkPort::Udp(socket) => {
+                // Non-blocking, as tokio leaves it.
+                let mut socket = mio::net::UdpSocket::from_std(socket.into_std()?);
+                poll.registry()
+                    .register(&mut socket, token(slot, link), Interest::READABLE)?;
+                polled.push(Port::Udp(socket));
+            }
+            LinkPort::Pty(pty) => {
+                poll.registry().register(
+                    &mut mio::unix::SourceFd(&pty.raw_fd()),
+                    token(slot, link),
+                    Interest::READABLE,
+                )?;
+                polled.push(Port::Pty(pty));
+            }
+        }
     }
     Ok(polled)
 }
@@ -477,9 +495,15 @@ impl Slot {
         if link >= self.sockets.len() {
             return Read::Drained(0);
         }
+        if let Port::Pty(_) = self.sockets[link] {
+            return self.receive_serial(now, link, buf);
+        }
         let mut taken = 0;
         while taken < READS_PER_TICK {
-            let (n, from) = match self.sockets[link].recv_from(buf) {
+            let Port::Udp(socket) = &mut self.sockets[link] else {
+                return Read::Drained(taken);
+            };
+            let (n, from) = match socket.recv_from(buf) {
                 Ok(got) => got,
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => return Read::Drained(taken),
                 // ICMP port unreachable from an earlier send (nobody listening at the
@@ -495,6 +519,32 @@ impl Slot {
             self.flush(now);
         }
         Read::More(taken)
+    }
+
+    /// Reads a serial line: what is waiting, up to [`READS_PER_TICK`] reads, each whole
+    /// frame handed to the vehicle as a datagram from the line's one peer.
+    fn receive_serial(&mut self, now: SimTime, link: usize, buf: &mut [u8]) -> Read {
+        let Some(Port::Pty(pty)) = self.sockets.get_mut(link) else {
+            return Read::Drained(0);
+        };
+        let mut frames = std::mem::take(&mut self.serial_frames);
+        frames.clear();
+        let result = pty.receive(buf, READS_PER_TICK, |frame| frames.push(frame.to_vec()));
+        let peer = self.default_peers[link];
+        let taken = frames.len();
+        for frame in frames.drain(..) {
+            self.inbound(now, link, peer, &frame);
+            self.flush(now);
+        }
+        self.serial_frames = frames;
+        match result {
+            Ok(false) => Read::Drained(taken),
+            Ok(true) => Read::More(taken),
+            Err(e) => {
+                tracing::warn!(sysid = self.vehicle.system_id(), error = %e, "serial read failed");
+                Read::More(taken)
+            }
+        }
     }
 
     /// Hands a datagram to the vehicle (or holds its copies back, under a latency
@@ -588,7 +638,11 @@ impl Slot {
 
     fn send(&mut self, link: usize, bytes: &[u8]) {
         let to = self.partners[link].addr();
-        match self.sockets[link].send_to(bytes, to) {
+        let sent = match &mut self.sockets[link] {
+            Port::Udp(socket) => socket.send_to(bytes, to).map(|_| ()),
+            Port::Pty(pty) => pty.send(bytes),
+        };
+        match sent {
             Ok(_) => {}
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => self.dropped_sends += 1,
             Err(e) => {
@@ -615,7 +669,7 @@ mod tests {
         let peer: SocketAddr = "127.0.0.1:9".parse().unwrap();
         let slot = Slot {
             vehicle,
-            sockets: vec![socket],
+            sockets: vec![Port::Udp(socket)],
             ids: vec![LinkId::Offboard],
             default_peers: vec![peer],
             partners: vec![Partner::new(peer)],
@@ -628,6 +682,7 @@ mod tests {
             status,
             alive: true,
             dropped_sends: 0,
+            serial_frames: Vec::new(),
             boot_offset: Duration::ZERO,
         };
         let flood = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();

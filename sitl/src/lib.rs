@@ -15,6 +15,7 @@
 //! - [`codec`], [`time`]: MAVLink framing and simulated time, from `ringswarm-wire`.
 //! - [`autopilot`]: the sans-IO vehicle machine with PX4's wire behaviour.
 //! - [`config_file`]: the TOML configuration of `ringswarm sitl --config`.
+//! - [`pty`]: a vehicle served on a pseudo-terminal, as an autopilot on a serial port.
 //! - [`udp`]: the tokio driver, one socket per link on PX4's ports, with fault injection
 //!   ([`link_faults`] and [`delay_line`], also used by the coordinator's lockstep driver).
 //! - [`params`], [`world`]: parameter table, geodetic world.
@@ -35,6 +36,7 @@ pub mod params;
 pub mod physics;
 pub mod position_control;
 pub mod profile;
+pub mod pty;
 pub mod trajectory;
 pub mod udp;
 pub mod world;

@@ -8,7 +8,8 @@
 
 use ringswarm_wire::px4;
 use std::io;
-use std::net::{IpAddr, SocketAddr};
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::path::PathBuf;
 
 use tokio::net::UdpSocket;
 use tokio::time::Instant;
@@ -16,15 +17,39 @@ use tokio::time::Instant;
 pub use crate::link_faults::LinkFaults;
 
 use crate::autopilot::LinkId;
+use crate::pty::PtyLink;
 use crate::time::SimTime;
+
+/// What carries one link.
+pub enum LinkPort {
+    /// A UDP socket, already bound.
+    Udp(UdpSocket),
+    /// A serial line on a pseudo-terminal.
+    Pty(PtyLink),
+}
+
+impl LinkPort {
+    /// Where it is, for the operator: the bound address, or the device path and its
+    /// pseudo-terminal.
+    pub fn describe(&self) -> String {
+        match self {
+            LinkPort::Udp(socket) => socket
+                .local_addr()
+                .map_or("udp ?".to_owned(), |a| format!("udp {a}")),
+            LinkPort::Pty(pty) => {
+                format!("serial {} -> {}", pty.device().display(), pty.far_name())
+            }
+        }
+    }
+}
 
 /// One link of a vehicle: its socket, where it sends until a peer talks to it, and its
 /// faults.
 pub struct LinkSocket {
     /// Which of the vehicle's MAVLink instances this is.
     pub id: LinkId,
-    /// The socket, already bound.
-    pub socket: UdpSocket,
+    /// The socket or serial line.
+    pub port: LinkPort,
     /// Where the link sends until a peer talks to it.
     pub default_peer: SocketAddr,
     /// Faults on this link, both directions.
@@ -110,7 +135,7 @@ impl SimClock {
 }
 
 /// Where one emulated vehicle's links are.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Placement {
     /// Offboard and GCS links on the given ports (PX4 SITL's layout).
     Ports(PortPlan),
@@ -122,6 +147,12 @@ pub enum Placement {
         /// Where it sends until someone talks to it.
         peer: SocketAddr,
     },
+    /// One offboard link on a serial line: a pseudo-terminal linked at `device`, as a
+    /// flight controller's TELEM port on a companion computer's cable.
+    Serial {
+        /// The path the coordinator opens.
+        device: PathBuf,
+    },
 }
 
 impl Placement {
@@ -130,23 +161,33 @@ impl Placement {
     /// # Errors
     /// The bind error, with the address that is in use.
     pub async fn bind(&self, faults: LinkFaults) -> io::Result<Vec<LinkSocket>> {
-        let link = |id, socket, default_peer| LinkSocket {
+        let link = |id, port, default_peer| LinkSocket {
             id,
-            socket,
+            port,
             default_peer,
             faults,
         };
-        match *self {
+        match self {
             Placement::Ports(plan) => {
-                let [offboard, gcs] = bind(&plan).await?;
+                let [offboard, gcs] = bind(plan).await?;
                 Ok(vec![
-                    link(LinkId::Offboard, offboard, plan.offboard_peer),
-                    link(LinkId::Gcs, gcs, plan.gcs_peer),
+                    link(
+                        LinkId::Offboard,
+                        LinkPort::Udp(offboard),
+                        plan.offboard_peer,
+                    ),
+                    link(LinkId::Gcs, LinkPort::Udp(gcs), plan.gcs_peer),
                 ])
             }
             Placement::Network { bind, peer } => {
-                let socket = bind_one(bind).await?;
-                Ok(vec![link(LinkId::Offboard, socket, peer)])
+                let socket = bind_one(*bind).await?;
+                Ok(vec![link(LinkId::Offboard, LinkPort::Udp(socket), *peer)])
+            }
+            Placement::Serial { device } => {
+                let pty = PtyLink::open(device)?;
+                // A serial line has one peer: no address to send to.
+                let peer = SocketAddr::new(IpAddr::V4(Ipv4Addr::UNSPECIFIED), 0);
+                Ok(vec![link(LinkId::Offboard, LinkPort::Pty(pty), peer)])
             }
         }
     }

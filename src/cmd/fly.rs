@@ -17,8 +17,9 @@ use crate::cli::{FlyArgs, LiveArgs};
 use crate::config::Config;
 use crate::driver::Observer;
 use crate::driver::mirror::Mirrors;
-use crate::driver::udp::{DriverCommand, ShardTransport, run_swarm};
-use crate::link::router::{Router, TransportPlan};
+use crate::driver::serial::SerialLine;
+use crate::driver::udp::{DriverCommand, Port, ShardTransport, run_swarm};
+use crate::link::router::{Endpoint, Router, TransportPlan};
 use crate::record::metrics::Summary;
 use crate::record::{Recorder, RowText, RunSetup};
 use crate::security::FlightSigning;
@@ -277,7 +278,7 @@ const WEB_GOODBYE: Duration = Duration::from_millis(300);
 pub(crate) async fn bind_all(
     transport: &TransportPlan,
     local: impl Fn(usize) -> bool,
-) -> anyhow::Result<Vec<UdpSocket>> {
+) -> anyhow::Result<Vec<Port>> {
     let mut sockets = Vec::with_capacity(transport.sockets.len());
     for (s, plan) in transport.sockets.iter().enumerate() {
         if !local(s) {
@@ -286,10 +287,23 @@ pub(crate) async fn bind_all(
             let unused = UdpSocket::bind((std::net::Ipv4Addr::LOCALHOST, 0))
                 .await
                 .context("bind a placeholder socket for another shard's vehicle")?;
-            sockets.push(unused);
+            sockets.push(Port::Udp(unused));
             continue;
         }
-        let bind = plan.bind;
+        let bind = match &plan.endpoint {
+            Endpoint::Udp(bind) => *bind,
+            Endpoint::Serial { device, baud } => {
+                let vehicle = transport
+                    .routes
+                    .iter()
+                    .position(|r| r.socket == s)
+                    .map_or(0, |i| i + 1);
+                let line = SerialLine::open(device, *baud)
+                    .with_context(|| format!("vehicle {vehicle}'s serial port"))?;
+                sockets.push(Port::Serial(line));
+                continue;
+            }
+        };
         let socket = UdpSocket::bind(bind).await.with_context(|| match &plan.network {
             Some(name) => format!("bind {bind} for network \"{name}\" (another ground station on that port?)"),
             None => format!(
@@ -300,7 +314,7 @@ pub(crate) async fn bind_all(
         if plan.network.is_some() {
             grow_receive_buffer(&socket, bind);
         }
-        sockets.push(socket);
+        sockets.push(Port::Udp(socket));
     }
     Ok(sockets)
 }

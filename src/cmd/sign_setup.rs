@@ -35,7 +35,14 @@ pub fn run(args: &SignSetupArgs) -> anyhow::Result<()> {
     let transport = config.transport_plan().map_err(anyhow::Error::msg)?;
     let mut sockets = Vec::new();
     for plan in &transport.sockets {
-        let socket = UdpSocket::bind(plan.bind).with_context(|| format!("bind {}", plan.bind))?;
+        let Some(bind) = plan.udp_bind() else {
+            bail!(
+                "{}: a vehicle is on a serial port; sign-setup sends keys over UDP only \
+                 (set the key of a serial vehicle from its own computer)",
+                args.config.display()
+            );
+        };
+        let socket = UdpSocket::bind(bind).with_context(|| format!("bind {bind}"))?;
         socket
             .set_nonblocking(true)
             .context("a non-blocking socket")?;

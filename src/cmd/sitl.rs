@@ -16,7 +16,7 @@ use ringswarm_sitl::fleet::{
 };
 use ringswarm_sitl::keystore::{self, StoredKey};
 use ringswarm_sitl::profile::Profile;
-use ringswarm_sitl::udp::{LinkFaults, LinkSocket, Placement, SimClock, px4_ports};
+use ringswarm_sitl::udp::{LinkFaults, LinkPort, LinkSocket, Placement, SimClock, px4_ports};
 use ringswarm_sitl::world::World;
 use ringswarm_wire::signing::{SigningKey, timestamp_now};
 use tokio::io::AsyncBufReadExt;
@@ -369,17 +369,15 @@ fn describe_links(links: &[LinkSocket]) -> String {
     links
         .iter()
         .map(|l| {
-            let at = l
-                .socket
-                .local_addr()
-                .map_or("?".to_owned(), |a| a.to_string());
-            match l.id {
-                LinkId::Offboard => format!(
-                    "offboard/API link udp {at} -> {} (MAVSDK: udpin://0.0.0.0:{})",
+            let at = l.port.describe();
+            match (l.id, &l.port) {
+                (_, LinkPort::Pty(_)) => format!("offboard/API link {at}"),
+                (LinkId::Offboard, LinkPort::Udp(_)) => format!(
+                    "offboard/API link {at} -> {} (MAVSDK: udpin://0.0.0.0:{})",
                     l.default_peer,
                     l.default_peer.port()
                 ),
-                LinkId::Gcs => format!("GCS link udp {at} -> {}", l.default_peer),
+                (LinkId::Gcs, LinkPort::Udp(_)) => format!("GCS link {at} -> {}", l.default_peer),
             }
         })
         .collect::<Vec<_>>()

@@ -2,6 +2,7 @@
 //! vehicles, and the lockstep link faults (built with the `emulator` feature only).
 
 use std::net::{IpAddr, SocketAddr};
+use std::path::PathBuf;
 
 use nalgebra::Vector3;
 use ringswarm_sitl::autopilot::VehicleConfig;
@@ -15,6 +16,7 @@ use ringswarm_wire::time::SimTime;
 use super::validate::Problems;
 use super::{Config, FaultKindName, LockstepFaults};
 use crate::control::enu_to_ned;
+use crate::link::router::Endpoint;
 
 /// How `[emulator]`'s link faults are named in messages (loss, latency, jitter, and the
 /// duplication it does not offer).
@@ -179,7 +181,15 @@ impl Config {
             let Some(socket) = plan.sockets.get(route.socket) else {
                 return Err(format!("vehicle[{i}]: no coordinator socket"));
             };
-            let coordinator = reach(socket.bind);
+            let coordinator = match &socket.endpoint {
+                Endpoint::Udp(bind) => reach(*bind),
+                Endpoint::Serial { device, .. } => {
+                    out.push(Placement::Serial {
+                        device: PathBuf::from(device),
+                    });
+                    continue;
+                }
+            };
             out.push(match (&socket.network, route.address) {
                 (Some(_), address) => Placement::Network {
                     bind: address.unwrap_or(SocketAddr::new(coordinator.ip(), 0)),

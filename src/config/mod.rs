@@ -571,6 +571,18 @@ pub struct NetworkSection {
     pub bind: SocketAddr,
 }
 
+/// `[[vehicle]] serial = { device, baud }`: the autopilot on a serial port.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SerialSection {
+    /// The device (`/dev/ttyAMA0`, `/dev/serial/by-id/…`, or the path `ringswarm sitl`
+    /// links to the pseudo-terminal it serves the vehicle on).
+    pub device: String,
+    /// Line rate, bits per second (PX4's TELEM ports: 57600 for a radio, 921600 for a
+    /// companion computer).
+    pub baud: u32,
+}
+
 /// `[[vehicle]]`.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -588,6 +600,9 @@ pub struct VehicleSection {
     /// Where the coordinator's socket for it is bound (default 0.0.0.0:14540+i, the
     /// port PX4 SITL sends its offboard link to); not on a network.
     pub bind: Option<SocketAddr>,
+    /// A serial port to its autopilot instead of UDP (companion mode: a shard on the
+    /// vehicle's own computer, a cable to the flight controller's TELEM port).
+    pub serial: Option<SerialSection>,
     /// Emulator profile (`ideal`, `x500`).
     #[serde(default = "default_profile")]
     pub profile: String,

@@ -240,6 +240,10 @@ impl Config {
                 }
             }
         }
+        if problems.is_empty() {
+            // Judged on a split that is otherwise sound: names unique, endpoints parsed.
+            problems.extend(mesh_problems(shards));
+        }
         for (i, o) in owner.iter().enumerate() {
             if o.is_none() {
                 let v = &self.vehicle[i];
@@ -299,6 +303,67 @@ impl Config {
     }
 }
 
+/// `(protocol, host, port)` of an endpoint that [`endpoint_problem`] passed.
+fn endpoint_parts(endpoint: &str) -> Option<(&str, &str, &str)> {
+    let (protocol, address) = endpoint.split_once('/')?;
+    let (host, port) = address.rsplit_once(':')?;
+    Some((
+        protocol,
+        host.trim_start_matches('[').trim_end_matches(']'),
+        port,
+    ))
+}
+
+/// Whether a shard connecting to `connect` reaches one listening on `listen`: same
+/// protocol and port, and the same host or a listener on every address.
+fn reaches(connect: &str, listen: &str) -> bool {
+    match (endpoint_parts(connect), endpoint_parts(listen)) {
+        (Some((cp, ch, cport)), Some((lp, lh, lport))) => {
+            cp == lp && cport == lport && (ch == lh || lh == "0.0.0.0" || lh == "::")
+        }
+        _ => false,
+    }
+}
+
+/// Every pair of shards must reach each other: Zenoh peers pass on data one hop only,
+/// never for a third peer. A pair is joined when one connects to where the other
+/// listens, or when both listen and a third shard joined to both introduces them
+/// (Zenoh's gossip). With no endpoint anywhere, multicast scouting finds every shard.
+fn mesh_problems(shards: &[ShardSection]) -> Vec<String> {
+    if shards
+        .iter()
+        .all(|s| s.listen.is_empty() && s.connect.is_empty())
+    {
+        return Vec::new();
+    }
+    let n = shards.len();
+    let direct = |a: usize, b: usize| {
+        let one_way = |x: &ShardSection, y: &ShardSection| {
+            x.connect
+                .iter()
+                .any(|c| y.listen.iter().any(|l| reaches(c, l)))
+        };
+        one_way(&shards[a], &shards[b]) || one_way(&shards[b], &shards[a])
+    };
+    let mut problems = Vec::new();
+    for a in 0..n {
+        for b in a + 1..n {
+            let introduced = !shards[a].listen.is_empty()
+                && !shards[b].listen.is_empty()
+                && (0..n).any(|c| c != a && c != b && direct(a, c) && direct(b, c));
+            if !direct(a, b) && !introduced {
+                problems.push(format!(
+                    "shards \"{}\" and \"{}\" cannot reach each other over Zenoh: one must \
+                     connect to where the other listens, or both listen and a third shard \
+                     joined to both introduces them (Zenoh peers relay nothing for others)",
+                    shards[a].name, shards[b].name
+                ));
+            }
+        }
+    }
+    problems
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -324,13 +389,42 @@ listen = ["tcp/0.0.0.0:7447"]
 [[shard]]
 name = "b"
 vehicles = [{ system_id = 3 }, { system_id = 4 }]
+listen = ["tcp/0.0.0.0:7447"]
 connect = ["tcp/10.0.0.1:7447"]
 
 [[shard]]
 name = "c"
 vehicles = [{ system_id = 5 }, { system_id = 6 }]
+listen = ["tcp/0.0.0.0:7447"]
 connect = ["tcp/10.0.0.1:7447"]
 "#;
+
+    #[test]
+    fn shards_that_cannot_reach_each_other_are_named() {
+        // b and c connect to a and listen nowhere: a relays nothing between them.
+        let star = THREE.replace("listen = [\"tcp/0.0.0.0:7447\"]\nconnect", "connect");
+        let err = Config::from_toml(&file(&star))
+            .unwrap()
+            .shard_layout()
+            .unwrap_err();
+        assert_eq!(
+            err,
+            "shards \"b\" and \"c\" cannot reach each other over Zenoh: one must connect to \
+             where the other listens, or both listen and a third shard joined to both \
+             introduces them (Zenoh peers relay nothing for others)"
+        );
+        // c connecting to b's port as well joins them directly.
+        let meshed = star.replace(
+            "vehicles = [{ system_id = 3 }, { system_id = 4 }]\n",
+            "vehicles = [{ system_id = 3 }, { system_id = 4 }]\nlisten = [\"tcp/0.0.0.0:7448\"]\n",
+        );
+        let meshed = meshed.replace(
+            "vehicles = [{ system_id = 5 }, { system_id = 6 }]\nconnect = [\"tcp/10.0.0.1:7447\"]",
+            "vehicles = [{ system_id = 5 }, { system_id = 6 }]\nconnect = [\"tcp/10.0.0.1:7447\", \"tcp/10.0.0.2:7448\"]",
+        );
+        let layout = Config::from_toml(&file(&meshed)).unwrap().shard_layout();
+        assert!(layout.is_ok(), "{layout:?}");
+    }
 
     #[test]
     fn a_file_split_in_three_gives_each_shard_its_plan_and_keys() {

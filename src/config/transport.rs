@@ -8,7 +8,7 @@ use ringswarm_wire::px4;
 
 use super::Config;
 use super::validate::Problems;
-use crate::link::router::{RoutePlan, SocketPlan, TransportPlan};
+use crate::link::router::{Endpoint, RoutePlan, SERIAL_PEER, SocketPlan, TransportPlan};
 
 /// Whether two bind/listen addresses take the same port on a common interface
 /// (`0.0.0.0` overlaps every address of its family).
@@ -48,13 +48,18 @@ impl Config {
                 p.push(format!("network[{j}].name \"{}\" is used twice", n.name));
             }
             sockets.push(SocketPlan {
-                bind: n.bind,
+                endpoint: Endpoint::Udp(n.bind),
                 network: Some(n.name.clone()),
             });
         }
         let mut routes = Vec::new();
         let mut listening = Vec::new();
+        let mut devices = HashMap::new();
         for (i, v) in self.vehicle.iter().enumerate() {
+            if let Some(serial) = &v.serial {
+                routes.push(serial_route(i, v, serial, &mut sockets, &mut devices, p));
+                continue;
+            }
             let route = match &v.network {
                 Some(name) => {
                     if v.bind.is_some() {
@@ -84,7 +89,7 @@ impl Config {
                         continue;
                     };
                     sockets.push(SocketPlan {
-                        bind,
+                        endpoint: Endpoint::Udp(bind),
                         network: None,
                     });
                     RoutePlan {
@@ -106,29 +111,34 @@ impl Config {
                 vehicle_of(&routes, k)
             ),
         };
-        for (a, sa) in sockets.iter().enumerate() {
-            for (b, sb) in sockets.iter().enumerate().skip(a + 1) {
-                if overlaps(sa.bind, sb.bind) {
+        let udp: Vec<(usize, &SocketPlan, SocketAddr)> = sockets
+            .iter()
+            .enumerate()
+            .filter_map(|(k, s)| s.udp_bind().map(|bind| (k, s, bind)))
+            .collect();
+        for (n, &(a, sa, bind_a)) in udp.iter().enumerate() {
+            for &(b, sb, bind_b) in udp.iter().skip(n + 1) {
+                if overlaps(bind_a, bind_b) {
                     p.push(format!(
                         "{} and {} both bind port {} ({} and {})",
                         describe(sa, a),
                         describe(sb, b),
-                        sa.bind.port(),
-                        sa.bind,
-                        sb.bind
+                        bind_a.port(),
+                        bind_a,
+                        bind_b
                     ));
                 }
             }
             // A vehicle on another host listens on its own interface, not ours.
-            let here = |l: &SocketAddr| l.ip().is_loopback() || l.ip() == sa.bind.ip();
+            let here = |l: &SocketAddr| l.ip().is_loopback() || l.ip() == bind_a.ip();
             if let Some(&(i, address)) = listening
                 .iter()
-                .find(|(_, l)| here(l) && overlaps(sa.bind, *l))
+                .find(|(_, l)| here(l) && overlaps(bind_a, *l))
             {
                 p.push(format!(
                     "{} binds {}, where vehicle[{i}] listens ({address}){}",
                     describe(sa, a),
-                    sa.bind,
+                    bind_a,
                     if sa.network.is_none() && self.network.is_empty() {
                         ": PX4 SITL's ports collide from the 41st vehicle on; put the \
                          vehicles on a [[network]]"
@@ -169,6 +179,61 @@ impl Config {
                 ));
             }
         }
+    }
+}
+
+/// The lowest and highest line rates taken (PX4's TELEM ports run 9600 … 3 000 000).
+const BAUD_RANGE: std::ops::RangeInclusive<u32> = 1200..=4_000_000;
+
+/// Vehicle `i`'s route over its serial port (a socket of its own), pushing what is wrong
+/// with it: a network, address or bind beside it, an empty device, a device another
+/// vehicle uses, a line rate out of [`BAUD_RANGE`].
+fn serial_route(
+    i: usize,
+    v: &super::VehicleSection,
+    serial: &super::SerialSection,
+    sockets: &mut Vec<SocketPlan>,
+    devices: &mut HashMap<String, usize>,
+    p: &mut Problems,
+) -> RoutePlan {
+    for (set, key) in [
+        (v.network.is_some(), "network"),
+        (v.address.is_some(), "address"),
+        (v.bind.is_some(), "bind"),
+    ] {
+        if set {
+            p.push(format!(
+                "vehicle[{i}].{key}: a vehicle on a serial port is reached over that port only"
+            ));
+        }
+    }
+    if serial.device.trim().is_empty() {
+        p.push(format!("vehicle[{i}].serial.device is empty"));
+    } else if let Some(other) = devices.insert(serial.device.clone(), i) {
+        p.push(format!(
+            "vehicle[{i}].serial.device \"{}\" is vehicle[{other}]'s too: a serial port reaches one vehicle",
+            serial.device
+        ));
+    }
+    if !BAUD_RANGE.contains(&serial.baud) {
+        p.push(format!(
+            "vehicle[{i}].serial.baud must be {}..={} bits per second, got {}",
+            BAUD_RANGE.start(),
+            BAUD_RANGE.end(),
+            serial.baud
+        ));
+    }
+    sockets.push(SocketPlan {
+        endpoint: Endpoint::Serial {
+            device: serial.device.clone(),
+            baud: serial.baud,
+        },
+        network: None,
+    });
+    RoutePlan {
+        socket: sockets.len() - 1,
+        address: Some(SERIAL_PEER),
+        system_id: v.system_id,
     }
 }
 

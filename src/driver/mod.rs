@@ -4,6 +4,8 @@
 //!   encoded MAVLink frames in between, seeded latency and loss. Deterministic.
 //! - [`udp`]: tokio, a socket per vehicle or per MAVLink network, for real PX4 or
 //!   `ringswarm sitl` vehicles.
+//! - [`serial`]: a coordinator socket that is a serial port to one vehicle (companion
+//!   mode), read and written by threads of its own.
 //! - [`mirror`]: every datagram of a UDP flight copied to extra addresses, read-only.
 //! - [`shards`]: several shards of one swarm in one process, in lockstep with the
 //!   vehicles, their messages on a bus with seeded latency and loss. Deterministic.
@@ -19,6 +21,7 @@ pub mod listening;
 #[cfg(feature = "emulator")]
 pub mod lockstep;
 pub mod mirror;
+pub mod serial;
 #[cfg(feature = "emulator")]
 pub mod shards;
 pub mod signals;

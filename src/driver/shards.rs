@@ -64,6 +64,8 @@ pub struct ShardedLockstep {
     bus_rng: ChaCha8Rng,
     /// When each shard is down (its process gone): it neither runs nor hears anything.
     down: Vec<Vec<(SimTime, SimTime)>>,
+    /// Pairs of shards that cannot reach each other, and when (a broken mesh).
+    cuts: Vec<(usize, usize, SimTime, SimTime)>,
     counts: BusCounts,
     scratch: Vec<u8>,
 }
@@ -120,6 +122,7 @@ impl ShardedLockstep {
             bus_rng: ChaCha8Rng::seed_from_u64(bus.seed),
             bus_conditions: bus,
             down: vec![Vec::new(); count],
+            cuts: Vec::new(),
             counts: BusCounts::default(),
             scratch: Vec::new(),
         })
@@ -152,6 +155,18 @@ impl ShardedLockstep {
         if let Some(d) = self.down.get_mut(s) {
             d.push((from, until));
         }
+    }
+
+    /// Cuts the bus between shards `a` and `b` (both ways) over `[from, until)`: each
+    /// still hears the others, as a mesh with one broken link.
+    pub fn cut(&mut self, a: usize, b: usize, from: SimTime, until: SimTime) {
+        self.cuts.push((a, b, from, until));
+    }
+
+    fn is_cut(&self, from: usize, to: usize) -> bool {
+        self.cuts.iter().any(|&(a, b, t0, t1)| {
+            ((a, b) == (from, to) || (a, b) == (to, from)) && self.now >= t0 && self.now < t1
+        })
     }
 
     fn is_down(&self, s: usize) -> bool {
@@ -219,6 +234,11 @@ impl ShardedLockstep {
                 ShardMessage::Shard(_) => true,
             };
             if !reads {
+                continue;
+            }
+            if self.is_cut(from, to) {
+                self.counts.sent += 1;
+                self.counts.lost += 1;
                 continue;
             }
             let mut arrived = false;

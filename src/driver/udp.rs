@@ -19,9 +19,30 @@ use tokio::task::JoinSet;
 use tokio::time::Instant;
 
 use super::listening::{Listening, STALL};
+use super::serial::{SerialLine, SerialWriter};
 use super::{Intake, Observer};
-use crate::link::router::Router;
+use crate::link::router::{Router, SERIAL_PEER};
 use crate::swarm::Swarm;
+
+/// One coordinator socket: UDP, or a serial port to one vehicle.
+pub enum Port {
+    /// A bound UDP socket.
+    Udp(UdpSocket),
+    /// An open serial port.
+    Serial(SerialLine),
+}
+
+impl From<UdpSocket> for Port {
+    fn from(socket: UdpSocket) -> Self {
+        Port::Udp(socket)
+    }
+}
+
+/// A running coordinator socket.
+enum Running {
+    Udp(Arc<UdpSocket>),
+    Serial(SerialWriter),
+}
 
 /// What carries a shard's messages to the other shards (Zenoh, `zenoh_bus`).
 pub trait ShardTransport {
@@ -115,7 +136,38 @@ fn has_waiting(socket: &UdpSocket) -> bool {
     socket2::SockRef::from(socket).peek(&mut byte).is_ok()
 }
 
-/// Runs `swarm` over `sockets` (bound as `router`'s plan says) until the swarm has
+/// Starts serial port `socket`'s threads: its frames reach the swarm as datagrams from
+/// [`SERIAL_PEER`], one batch per read, until the swarm's loop has ended.
+///
+/// # Errors
+/// The port's threads could not be started.
+fn serial_reader(
+    socket: usize,
+    line: SerialLine,
+    tx: mpsc::Sender<Batch>,
+) -> io::Result<SerialWriter> {
+    line.spawn(move |frames| {
+        if frames.is_empty() {
+            return !tx.is_closed();
+        }
+        let mut batch = Batch {
+            socket,
+            full: false,
+            datagrams: Vec::with_capacity(frames.len()),
+            bytes: Vec::new(),
+        };
+        for frame in frames.drain(..) {
+            let start = batch.bytes.len();
+            batch.bytes.extend_from_slice(&frame);
+            batch
+                .datagrams
+                .push((SERIAL_PEER, start..start + frame.len()));
+        }
+        tx.blocking_send(batch).is_ok()
+    })
+}
+
+/// Runs `swarm` over `sockets` (bound or opened as `router`'s plan says) until the swarm has
 /// landed every vehicle, or `commands` says [`DriverCommand::Stop`]; returns the swarm
 /// and the observer. The observer sees every datagram (a network datagram once per
 /// vehicle frame in it) and the swarm after every change, with the time since start.
@@ -127,7 +179,7 @@ fn has_waiting(socket: &UdpSocket) -> bool {
 /// while).
 pub async fn run_swarm<O: Observer>(
     mut swarm: Swarm,
-    sockets: Vec<UdpSocket>,
+    sockets: Vec<Port>,
     mut router: Router,
     mut commands: watch::Receiver<DriverCommand>,
     mut observer: O,
@@ -140,11 +192,19 @@ pub async fn run_swarm<O: Observer>(
             .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX)),
     );
     let now = || SimTime::from_micros(start.elapsed().as_micros() as u64);
-    let sockets: Vec<Arc<UdpSocket>> = sockets.into_iter().map(Arc::new).collect();
     let (tx, mut rx) = mpsc::channel::<Batch>(RECEIVE_QUEUE);
     let mut receivers = JoinSet::new();
-    for (s, socket) in sockets.iter().enumerate() {
-        let (socket, tx) = (Arc::clone(socket), tx.clone());
+    let mut running = Vec::with_capacity(sockets.len());
+    for (s, port) in sockets.into_iter().enumerate() {
+        let socket = match port {
+            Port::Udp(socket) => Arc::new(socket),
+            Port::Serial(line) => {
+                running.push(Running::Serial(serial_reader(s, line, tx.clone())?));
+                continue;
+            }
+        };
+        running.push(Running::Udp(Arc::clone(&socket)));
+        let tx = tx.clone();
         receivers.spawn(async move {
             loop {
                 let batch = receive_batch(s, &socket).await?;
@@ -163,7 +223,7 @@ pub async fn run_swarm<O: Observer>(
     }
     let mut pieces = Vec::new();
     let mut unsent = vec![0u64; swarm.links().len()];
-    let mut listening = Listening::new(sockets.len());
+    let mut listening = Listening::new(running.len());
     drop(tx);
     loop {
         // Timers to the next whole millisecond (as the lockstep driver steps): a thousand
@@ -234,7 +294,10 @@ pub async fn run_swarm<O: Observer>(
         }
         // How far behind its sockets the loop is: silence is judged up to there.
         let t = now();
-        let sockets_waiting = late > STALL && sockets.iter().any(|s| has_waiting(s));
+        let sockets_waiting = late > STALL
+            && running
+                .iter()
+                .any(|s| matches!(s, Running::Udp(s) if has_waiting(s)));
         if let Some(ended) = listening.settle(t, rx.is_empty(), sockets_waiting) {
             tracing::warn!(
                 behind_ms = ended.max_lag.as_millis() as u64,
@@ -252,11 +315,15 @@ pub async fn run_swarm<O: Observer>(
             };
             observer.datagram(now(), i, true, &bytes);
             match router.destination(i) {
-                Some((socket, to)) => {
-                    if let Err(err) = sockets[socket].send_to(&bytes, to).await {
-                        tracing::warn!(vehicle = i, error = %err, "send failed");
+                Some((socket, to)) => match running.get_mut(socket) {
+                    Some(Running::Udp(socket)) => {
+                        if let Err(err) = socket.send_to(&bytes, to).await {
+                            tracing::warn!(vehicle = i, error = %err, "send failed");
+                        }
                     }
-                }
+                    Some(Running::Serial(line)) => line.send(&bytes),
+                    None => unsent[i] += 1,
+                },
                 // A network vehicle not heard from yet: nowhere to send.
                 None => unsent[i] += 1,
             }
@@ -278,6 +345,18 @@ pub async fn run_swarm<O: Observer>(
             datagrams = n,
             "not sent: the vehicle's address was not known yet"
         );
+    }
+    for (s, port) in running.iter().enumerate() {
+        if let Running::Serial(line) = port
+            && line.dropped() + line.failed() > 0
+        {
+            tracing::info!(
+                socket = s,
+                dropped = line.dropped(),
+                failed = line.failed(),
+                "frames not written to the serial port"
+            );
+        }
     }
     receivers.abort_all();
     while let Some(joined) = receivers.join_next().await {

@@ -233,6 +233,45 @@ pub fn frame_system_id(frame: &[u8]) -> Option<u8> {
     }
 }
 
+/// Whether a complete raw frame (as [`raw_frames`] or a stream framer cuts it) holds
+/// together: its checksum matches for a known message. `None` for a message this dialect
+/// does not know (its checksum cannot be checked), `Some(false)` for a bad checksum.
+pub fn frame_checksum_ok(frame: &[u8]) -> Option<bool> {
+    let (v2, header_len) = match frame.first() {
+        Some(&STX_V2) => (true, V2_HEADER_LEN),
+        Some(&STX_V1) => (false, 6),
+        _ => return Some(false),
+    };
+    let total = frame_len(frame)?;
+    if frame.len() < total {
+        return Some(false);
+    }
+    let msgid = if v2 {
+        u32::from_le_bytes([frame[7], frame[8], frame[9], 0])
+    } else {
+        u32::from(frame[5])
+    };
+    let crc_at = header_len + usize::from(frame[1]);
+    let received = u16::from_le_bytes([frame[crc_at], frame[crc_at + 1]]);
+    if checksum(&frame[1..crc_at], MavMessage::extra_crc(msgid)) == received {
+        Some(true)
+    } else if MavMessage::default_message_from_id(msgid).is_some() {
+        Some(false)
+    } else {
+        None
+    }
+}
+
+/// The length of the frame whose start byte is `bytes[0]`, once its header is there.
+pub(crate) fn frame_len_at(bytes: &[u8]) -> Option<usize> {
+    frame_len(bytes)
+}
+
+/// Whether `byte` starts a MAVLink 1 or 2 frame.
+pub(crate) fn is_start_byte(byte: u8) -> bool {
+    byte == STX_V1 || byte == STX_V2
+}
+
 /// Header length and total length of the frame starting at `bytes[0]` (an STX), once
 /// the header is there.
 fn frame_len(bytes: &[u8]) -> Option<usize> {

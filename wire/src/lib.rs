@@ -16,4 +16,5 @@ pub mod codec;
 pub mod geo;
 pub mod px4;
 pub mod signing;
+pub mod stream;
 pub mod time;

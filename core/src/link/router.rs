@@ -26,13 +26,43 @@ use ringswarm_wire::time::SimTime;
 /// How long a learned address must stay silent before another takes its place.
 pub const RELEARN_AFTER: Duration = Duration::from_secs(2);
 
+/// Where one coordinator socket is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Endpoint {
+    /// A UDP socket bound at this address.
+    Udp(SocketAddr),
+    /// A serial port to one vehicle (a companion computer's cable to its autopilot): a
+    /// byte stream, read as if each frame were a datagram from [`SERIAL_PEER`].
+    Serial {
+        /// The device (`/dev/ttyAMA0`, `/dev/serial/by-id/…`).
+        device: String,
+        /// Its line rate, bits per second.
+        baud: u32,
+    },
+}
+
+/// The "address" every frame read from a serial port comes from, and where its vehicle
+/// is sent to: a serial port has one peer.
+pub const SERIAL_PEER: SocketAddr =
+    SocketAddr::new(std::net::IpAddr::V4(std::net::Ipv4Addr::UNSPECIFIED), 0);
+
 /// One coordinator socket.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SocketPlan {
-    /// Where it is bound.
-    pub bind: SocketAddr,
+    /// Where it is.
+    pub endpoint: Endpoint,
     /// The network's name, for a network socket.
     pub network: Option<String>,
+}
+
+impl SocketPlan {
+    /// Where a UDP socket is bound; `None` for a serial port.
+    pub fn udp_bind(&self) -> Option<SocketAddr> {
+        match self.endpoint {
+            Endpoint::Udp(bind) => Some(bind),
+            Endpoint::Serial { .. } => None,
+        }
+    }
 }
 
 /// How vehicle `i` is reached.
@@ -226,7 +256,7 @@ mod tests {
     /// Two networks whose system ids overlap (1 and 2 on each) and one own socket.
     fn plan() -> TransportPlan {
         let network = |name: &str, port| SocketPlan {
-            bind: addr(port),
+            endpoint: Endpoint::Udp(addr(port)),
             network: Some(name.to_owned()),
         };
         TransportPlan {
@@ -234,7 +264,7 @@ mod tests {
                 network("a", 14550),
                 network("b", 14551),
                 SocketPlan {
-                    bind: addr(14540),
+                    endpoint: Endpoint::Udp(addr(14540)),
                     network: None,
                 },
             ],

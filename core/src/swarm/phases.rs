@@ -55,6 +55,10 @@ impl Swarm {
             matches!(phase, Phase::Lost | Phase::Overridden | Phase::VehicleHold)
                 || (phase == Phase::Flying && self.law.states[i].is_none())
         }) || self.others_lost(now).is_some();
+        if !all_flying {
+            // This shard no longer vouches for a start: the others wait for it.
+            self.withdraw_start();
+        }
         if self.phase == SwarmPhase::Handshake && !all_flying && self.handshake_over(now) {
             return;
         }

@@ -13,7 +13,12 @@
 //!   the loss policy applies (hold, or land).
 //! - **One start for all.** A shard that sees every vehicle flying proposes to start
 //!   consensus [`ShardPlan::start_lead`] later; the swarm adopts the earliest proposal
-//!   of the round (a round starts with the flight, and again with each hold). Each
+//!   of the round (a round starts with the flight, and again with each hold). A shard
+//!   reports the start it adopts only while it sees every vehicle flying itself, and
+//!   starts only once every other shard reports that same start: a shard that cannot
+//!   hear a third one (a broken mesh), or sees a vehicle down, holds every shard back,
+//!   so no shard flies consensus while another does not. A start acknowledged late is
+//!   started late, at the first tick after the last acknowledgement. Each
 //!   shard takes its own vehicles' `Σ wᵢ vᵢ` at the first control tick at or after the
 //!   adopted instant and publishes it; once every shard's sum for that instant is in,
 //!   each adds them in shard order: the same prediction, bit for bit, in every shard.
@@ -32,6 +37,10 @@ use crate::distributed::{
     MemberPhase, ShardMessage, ShardPlan, ShardReport, VehicleReport, WeightedSum,
 };
 use crate::vehicle::Phase;
+
+/// How long after the start a shard's report must show that it started too: a few
+/// control ticks of any rate the config allows.
+const AGREEMENT_SETTLED: Duration = Duration::from_millis(100);
 
 /// Messages kept for the driver at most: one that does not poll loses the oldest.
 const OUTBOX_CAPACITY: usize = 1 << 16;
@@ -62,8 +71,13 @@ pub(super) struct Peers {
     pub(super) remote: Vec<Option<RemoteVehicle>>,
     /// This shard's proposal in the current round.
     proposal: Option<SimTime>,
+    /// The start this shard adopts and vouches for (it sees every vehicle flying).
+    agreed: Option<SimTime>,
     /// When the current round started: proposals before it belong to an earlier one.
     round_since: SimTime,
+    /// A start that came without the agreement of every shard is void, and so is every
+    /// proposal up to it.
+    void_until: Option<SimTime>,
     /// The start adopted in the current round, and this shard's sum at it.
     started: Option<(SimTime, WeightedSum)>,
     /// Whether the prediction of the current round was made.
@@ -93,7 +107,9 @@ impl Peers {
             reports: vec![None; shards],
             remote: vec![None; n],
             proposal: None,
+            agreed: None,
             round_since: SimTime::ZERO,
+            void_until: None,
             started: None,
             predicted: false,
             now_sum: WeightedSum::default(),
@@ -146,6 +162,9 @@ impl Peers {
                     "shard {s} flies {} of its {} vehicles",
                     r.flying, r.vehicles
                 )),
+                Some((_, r)) if self.started_without(r) => Some(format!(
+                    "shard {s} did not start consensus at the adopted instant"
+                )),
                 _ => None,
             }
         })
@@ -158,7 +177,34 @@ impl Peers {
                 .map(|us| self.local_time_of(us))
                 .filter(|t| *t >= self.round_since)
         });
-        self.proposal.into_iter().chain(others).min()
+        self.proposal
+            .into_iter()
+            .chain(others)
+            .filter(|t| self.void_until.is_none_or(|v| *t > v))
+            .min()
+    }
+
+    /// Whether `r`, sent well after this shard started consensus, shows that its shard
+    /// did not start at the same instant (it missed the agreement): the swarm is split,
+    /// and the shards that started hold until all agree again.
+    fn started_without(&self, r: &ShardReport) -> bool {
+        let Some((start, _)) = self.started else {
+            return false;
+        };
+        let start_us = self.to_swarm_us(start);
+        !r.ended
+            && r.sent_us > start_us.saturating_add(AGREEMENT_SETTLED.as_micros() as u64)
+            && r.start_us != Some(start_us)
+    }
+
+    /// Whether every other shard's latest report vouches for `start`.
+    fn all_agree(&self, start: SimTime) -> bool {
+        let start_us = self.to_swarm_us(start);
+        self.reports.iter().enumerate().all(|(s, r)| {
+            s == self.plan.this()
+                || r.as_ref()
+                    .is_some_and(|(_, r)| r.start_us == Some(start_us))
+        })
     }
 
     /// The swarm's w-weighted mean position and velocity at `start`, from every shard's
@@ -393,6 +439,8 @@ impl Swarm {
         if let Some(p) = self.peers.as_mut() {
             p.round_since = now;
             p.proposal = None;
+            p.agreed = None;
+            p.void_until = None;
             p.started = None;
             p.predicted = false;
         }
@@ -404,10 +452,35 @@ impl Swarm {
         let Some(p) = self.peers.as_mut() else {
             return true;
         };
-        if p.proposal.is_none() {
+        if p.proposal
+            .is_none_or(|t| p.void_until.is_some_and(|v| t <= v))
+        {
             p.proposal = Some(now + p.plan.start_lead());
         }
-        p.adopted_start().is_some_and(|t| now >= t)
+        p.agreed = p.adopted_start();
+        match p.agreed {
+            Some(t) if now >= t => {
+                if p.all_agree(t) {
+                    return true;
+                }
+                // The instant came without every shard's word: void, and propose anew.
+                p.void_until = Some(now);
+                p.proposal = Some(now + p.plan.start_lead());
+                p.agreed = p.adopted_start();
+                false
+            }
+            _ => false,
+        }
+    }
+
+    /// Not every vehicle flies in this shard's view: it vouches for no start (its
+    /// proposal stays, for when they fly again).
+    pub(super) fn withdraw_start(&mut self) {
+        if let Some(p) = self.peers.as_mut()
+            && p.started.is_none()
+        {
+            p.agreed = None;
+        }
     }
 
     /// Consensus starts on this tick: this shard's sum at the adopted instant, and the
@@ -582,7 +655,7 @@ impl Swarm {
             phase,
             SwarmPhase::Handshake | SwarmPhase::Holding(_) | SwarmPhase::Consensus(_)
         );
-        let start = p.started.map(|(t, _)| t).or(p.proposal);
+        let start = p.started.map(|(t, _)| t).or(p.agreed);
         let report = ShardReport {
             shard: u16::try_from(p.plan.this()).unwrap_or(u16::MAX),
             sent_us: p.to_swarm_us(now),
