@@ -7,6 +7,27 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# What the Python checks need (Debian's chromium, the venv's packages) downloads and
+# installs while Rust compiles: it waits on the network and the disk, the build on the
+# two cores. Its output goes to a log, shown if it fails.
+setup_log="$(mktemp)"
+python_setup() {
+  set -e
+  if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then
+    echo "== browser for the live view's tests: Debian's chromium and its chromedriver"
+    sudo=""
+    if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+    $sudo apt-get update -q
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q --no-install-recommends chromium chromium-driver
+  fi
+  if [ ! -x .venv/bin/python ]; then
+    python3 -m venv .venv
+  fi
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
+}
+python_setup >"$setup_log" 2>&1 &
+setup_pid=$!
+
 echo "== cargo fmt --check"
 cargo fmt --all --check
 echo "== cargo clippy"
@@ -19,19 +40,13 @@ echo "== cargo test"
 cargo test --workspace --locked
 cargo build --workspace --locked --bins
 
-echo "== browser for the live view's tests: Debian's chromium and its chromedriver"
-if ! command -v chromium >/dev/null || ! command -v chromedriver >/dev/null; then
-  sudo=""
-  if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
-  $sudo apt-get update -q
-  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q --no-install-recommends chromium chromium-driver
+echo "== python checks: chromium and the venv (set up during the build)"
+if ! wait "$setup_pid"; then
+  cat "$setup_log"
+  echo "the Python checks' setup failed (above)"
+  exit 1
 fi
-
-echo "== python checks"
-if [ ! -x .venv/bin/python ]; then
-  python3 -m venv .venv
-fi
-.venv/bin/python -m pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
+cat "$setup_log"
 export RINGSWARM_BIN="$PWD/target/debug/ringswarm"
 # Most of these tests wait on real time (flights over UDP, MAVSDK's examples), so they run
 # in parallel, on pytest-xdist's workers. They use PX4's fixed ports (14540, 14550, …), so

@@ -45,7 +45,7 @@ pub enum Command {
     /// SETUP_SIGNING over its link (vehicles must be disarmed); says which took it.
     SignSetup(SignSetupArgs),
     /// Replay a run directory of `fly` or `demo` in a browser (play, pause, speed, a time
-    /// slider) until Ctrl-C.
+    /// slider) until Ctrl-C; or, with --zenoh, watch a distributed swarm live.
     View(ViewArgs),
 }
 
@@ -71,7 +71,17 @@ pub const DEFAULT_WEB: &str = "127.0.0.1:8080";
 #[derive(Debug, Args)]
 pub struct ViewArgs {
     /// The run directory (with setup.json, the vehicle CSVs, events.csv, summary.json).
-    pub run_dir: std::path::PathBuf,
+    #[arg(required_unless_present = "zenoh", conflicts_with = "zenoh")]
+    pub run_dir: Option<std::path::PathBuf>,
+    /// Watch a distributed swarm live instead, from its shards' Zenoh traffic, through
+    /// the endpoint ENDPOINT of a shard (`tcp/10.0.0.1:7447`; repeatable: Zenoh peers
+    /// relay nothing for others, so give every shard that does not listen). Flies and
+    /// commands nothing. Needs --config.
+    #[arg(long, value_name = "ENDPOINT", requires = "config")]
+    pub zenoh: Vec<String>,
+    /// The swarm's file (its [distributed] and [[shard]] split), with --zenoh.
+    #[arg(long)]
+    pub config: Option<std::path::PathBuf>,
     /// Where to serve the page (HOST:PORT or PORT).
     #[arg(long, value_name = "ADDR", default_value = DEFAULT_WEB, value_parser = parse_web_addr)]
     pub web: std::net::SocketAddr,

@@ -319,6 +319,11 @@ pub fn bandwidth_text(b: &BandwidthCheck, time_scale: f64) -> String {
             crate::consensus::ATTITUDE_RATIO,
             b.attitude_bandwidth_rps
         ),
+        "hop between shards" => format!(
+            "{} / hop between shards {} ms",
+            crate::consensus::HOP_PRODUCT,
+            b.hop_s * 1e3
+        ),
         _ => format!(
             "{} × control rate {} Hz",
             crate::consensus::SAMPLING_PRODUCT,

@@ -352,3 +352,53 @@ fn no_shard_starts_while_two_shards_cannot_hear_each_other() {
     let predicted = one_prediction(&flight);
     assert!(predicted.iter().all(|v| v.is_finite()));
 }
+
+/// paper-sim1 split in three with `hop_ms` between shards (and a start lead over two
+/// hops): the formation error at 55 s and the phase then.
+fn fly_with_hop(hop_ms: f64) -> (f64, &'static str) {
+    // The start is agreed over two hops (a proposal out, the word back): the lead
+    // must exceed them.
+    let lead = std::time::Duration::from_secs_f64((2.5 * hop_ms + 50.0) / 1000.0);
+    let config = config();
+    let setup = config.validate().unwrap();
+    let shards = (0..3)
+        .map(|s| {
+            let plan = ShardPlan::new(s, 3, THREE.to_vec(), &setup.ring, Watch::All)
+                .unwrap()
+                .with_start_lead(lead);
+            Swarm::new_shard(setup.clone(), plan).unwrap()
+        })
+        .collect();
+    let bus = bus_ms(hop_ms, 0.0, 0.0);
+    let flight =
+        ShardedLockstep::new(shards, vehicles(&config), LinkConditions::default(), bus).unwrap();
+    let (flight, finite) = run(flight, 55);
+    assert!(finite, "{hop_ms} ms");
+    let formation = formation_error_m(flight.vehicles(), &offsets());
+    (formation, flight.shards()[0].phase().name())
+}
+
+/// The bandwidth gate's hop limit (`ω·τ ≤ HOP_PRODUCT`, core/src/consensus/bandwidth.rs)
+/// sits below the onset measured here, on paper-sim1's fastest mode ω = 34.8 1/s:
+///
+/// | hop (ms) | ω·τ | formation at 55 s |
+/// |---|---|---|
+/// | 20, 40, 60 | 0.70, 1.39, 2.09 | 4.6–4.7 mm |
+/// | 70, 80 | 2.44, 2.78 | 6.7, 5.6 mm |
+/// | 90 | 3.13 | 24 mm |
+/// | 100 | 3.48 | 139 m: the guard stops the swarm |
+#[test]
+fn the_gate_s_hop_limit_sits_below_the_onset_of_trouble() {
+    let omega = 34.8;
+    let inside_ms = 1000.0 * ringswarm::consensus::HOP_PRODUCT / omega * 0.97;
+    let (formation, phase) = fly_with_hop(inside_ms);
+    assert!(
+        formation < 0.01 && phase == "consensus",
+        "{inside_ms} ms: {formation} m, {phase}"
+    );
+    let (formation, phase) = fly_with_hop(100.0);
+    assert!(
+        formation > 1.0 && phase != "consensus",
+        "100 ms: {formation} m, {phase}"
+    );
+}

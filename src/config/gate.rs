@@ -3,7 +3,8 @@
 
 use super::Config;
 use crate::consensus::{
-    BandwidthCheck, CouplingGains, RingDigraph, RingSpectrum, check_bandwidth, fastest_mode_per_s,
+    BandwidthCheck, CouplingGains, RingDigraph, RingSpectrum, check_bandwidth_with_hop,
+    fastest_mode_per_s,
 };
 use crate::swarm::SwarmSetup;
 
@@ -34,11 +35,23 @@ impl Config {
         gains: CouplingGains,
     ) -> Result<BandwidthCheck, String> {
         let mu = spectrum.nonzero_up_to_conjugation();
-        Ok(check_bandwidth(
+        Ok(check_bandwidth_with_hop(
             fastest_mode_per_s(&mu, gains),
             self.slowest_attitude_bandwidth_rps()?,
             self.swarm.control_rate_hz,
+            self.hop_s(),
         ))
+    }
+
+    /// The one-way delay between shards the gate allows for (s): `[distributed] hop_ms`
+    /// when the swarm is split into two shards or more, else 0.
+    fn hop_s(&self) -> f64 {
+        match &self.distributed {
+            Some(d) if self.shard.len() >= 2 && d.hop_ms.is_finite() && d.hop_ms > 0.0 => {
+                d.hop_ms / 1000.0
+            }
+            _ => 0.0,
+        }
     }
 
     /// The slowest vehicle's attitude bandwidth: `attitude_bandwidth_rps`, or its

@@ -24,7 +24,9 @@ use crate::swarm::{EndAction, LossPolicy, SetpointKind};
 #[cfg(feature = "emulator")]
 pub use emulator::EMULATOR_FAULT_NAMES;
 pub use gate::warn_if_too_fast;
-pub use shards::{DistributedSection, ShardLayout, ShardSection, ShardVehicle, WatchName};
+pub use shards::{
+    DistributedSection, ShardLayout, ShardSection, ShardVehicle, WatchName, endpoint_problem,
+};
 pub(crate) use validate::show;
 pub use validate::{MAX_DISTANCE_M, MAX_DURATION_S, MAX_GAIN, MAX_SPEED_MPS};
 

@@ -27,10 +27,18 @@ pub struct DistributedSection {
     /// (ms, default 200): more than the longest hop between shards.
     #[serde(default = "default_start_lead_ms")]
     pub start_lead_ms: f64,
+    /// The one-way delay between shards the flight must stand (ms, default 20): the
+    /// bandwidth gate limits the law's speed by it and recommends a time scale.
+    #[serde(default = "default_hop_ms")]
+    pub hop_ms: f64,
 }
 
 fn default_start_lead_ms() -> f64 {
     200.0
+}
+
+fn default_hop_ms() -> f64 {
+    20.0
 }
 
 /// `all` or `neighbours`.
@@ -121,7 +129,7 @@ fn key_safe(name: &str) -> bool {
 }
 
 /// The problems of one Zenoh endpoint (`<protocol>/<address>`), if any.
-fn endpoint_problem(endpoint: &str) -> Option<String> {
+pub fn endpoint_problem(endpoint: &str) -> Option<String> {
     const PROTOCOLS: [&str; 2] = ["tcp", "udp"];
     let Some((protocol, address)) = endpoint.split_once('/') else {
         return Some(format!(
@@ -174,10 +182,24 @@ impl Config {
                 d.swarm
             ));
         }
-        if !(d.start_lead_ms.is_finite() && (1.0..=10_000.0).contains(&d.start_lead_ms)) {
+        let lead_ok = d.start_lead_ms.is_finite() && (1.0..=10_000.0).contains(&d.start_lead_ms);
+        if !lead_ok {
             problems.push(format!(
                 "distributed.start_lead_ms must be in [1, 10000] ms, got {}",
                 super::show(d.start_lead_ms)
+            ));
+        }
+        if !(d.hop_ms.is_finite() && (0.0..=5_000.0).contains(&d.hop_ms)) {
+            problems.push(format!(
+                "distributed.hop_ms must be in [0, 5000] ms, got {}",
+                super::show(d.hop_ms)
+            ));
+        } else if lead_ok && d.start_lead_ms <= 2.0 * d.hop_ms {
+            problems.push(format!(
+                "distributed.start_lead_ms ({} ms) must exceed two hops (2 × hop_ms = {} ms): \
+                 a start is proposed and vouched for across them",
+                super::show(d.start_lead_ms),
+                super::show(2.0 * d.hop_ms)
             ));
         }
         if self.target.is_some() {

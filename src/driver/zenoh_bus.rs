@@ -107,127 +107,42 @@ impl ZenohBus {
             layout.swarm,
             layout.names.get(this).map_or("", String::as_str)
         );
-        let mut config = zenoh::Config::default();
         let listen = layout.listen.get(this).cloned().unwrap_or_default();
         let connect = layout.connect.get(this).cloned().unwrap_or_default();
-        let json = |v: &Vec<String>| serde_json::to_string(v).unwrap_or_else(|_| "[]".into());
-        let mut settings = vec![("mode", "\"peer\"".to_owned())];
-        if !listen.is_empty() {
-            settings.push(("listen/endpoints", json(&listen)));
-        }
-        if !connect.is_empty() {
-            settings.push(("connect/endpoints", json(&connect)));
-        }
-        if !(listen.is_empty() && connect.is_empty()) {
-            // Endpoints given: the shards find each other there, not by multicast.
-            settings.push(("scouting/multicast/enabled", "false".to_owned()));
-        }
-        for (key, value) in settings {
-            config
-                .insert_json5(key, &value)
-                .map_err(|e| format!("zenoh config {key} = {value}: {e}"))?;
-        }
-        let (in_tx, inbound) = mpsc::channel::<Vec<u8>>(INBOUND_QUEUE);
-        let (outbound, mut out_rx) = mpsc::channel::<(String, Vec<u8>)>(OUTBOUND_QUEUE);
-        let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
-        let stats = Arc::new(BusStats::default());
-        let thread_stats = Arc::clone(&stats);
-        let thread = std::thread::Builder::new()
-            .name("zenoh-bus".into())
-            .spawn(move || {
-                let runtime = match tokio::runtime::Builder::new_multi_thread()
-                    .worker_threads(1)
-                    .enable_all()
-                    .build()
-                {
-                    Ok(r) => r,
-                    Err(e) => {
-                        let _ =
-                            ready_tx.send(Err(format!("start the Zenoh thread's runtime: {e}")));
-                        return;
-                    }
-                };
-                runtime.block_on(async move {
-                    let session = match zenoh::open(config).await {
-                        Ok(s) => s,
-                        Err(e) => {
-                            let _ = ready_tx.send(Err(format!("open the Zenoh session: {e}")));
-                            return;
-                        }
-                    };
-                    let mut subscribers = Vec::new();
-                    for key in watched.iter().chain(std::iter::once(&reports)) {
-                        let tx = in_tx.clone();
-                        let stats = Arc::clone(&thread_stats);
-                        let declared = session
-                            .declare_subscriber(key.as_str())
-                            .callback(move |sample| {
-                                stats.received.fetch_add(1, Ordering::Relaxed);
-                                let bytes = sample.payload().to_bytes().into_owned();
-                                if tx.try_send(bytes).is_err() {
-                                    stats.dropped_inbound.fetch_add(1, Ordering::Relaxed);
-                                }
-                            })
-                            .await;
-                        match declared {
-                            Ok(s) => subscribers.push(s),
-                            Err(e) => {
-                                let _ = ready_tx.send(Err(format!("subscribe to {key}: {e}")));
-                                return;
-                            }
-                        }
-                    }
-                    let token = match session.liveliness().declare_token(alive.as_str()).await {
-                        Ok(t) => t,
-                        Err(e) => {
-                            let _ = ready_tx.send(Err(format!("declare {alive}: {e}")));
-                            return;
-                        }
-                    };
-                    let _ = ready_tx.send(Ok(()));
-                    let mut publishers = std::collections::HashMap::new();
-                    while let Some((key, bytes)) = out_rx.recv().await {
-                        if !publishers.contains_key(&key) {
-                            match session.declare_publisher(key.clone()).await {
-                                Ok(p) => {
-                                    publishers.insert(key.clone(), p);
-                                }
-                                Err(e) => {
-                                    tracing::warn!(key, error = %e, "zenoh publisher refused");
-                                    continue;
-                                }
-                            }
-                        }
-                        if let Some(publisher) = publishers.get(&key) {
-                            let n = bytes.len() as u64;
-                            if publisher.put(bytes).await.is_ok() {
-                                thread_stats.published.fetch_add(1, Ordering::Relaxed);
-                                thread_stats.published_bytes.fetch_add(n, Ordering::Relaxed);
-                            }
-                        }
-                    }
-                    drop(token);
-                    drop(subscribers);
-                    for (_, p) in publishers {
-                        let _ = p.undeclare().await;
-                    }
-                    let _ = session.close().await;
-                });
-            })
-            .map_err(|e| format!("start the Zenoh thread: {e}"))?;
-        match ready_rx.recv() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => {
-                let _ = thread.join();
-                return Err(e);
-            }
-            Err(_) => return Err("the Zenoh thread stopped before its session opened".into()),
-        }
+        let config = peer_config(&listen, &connect)?;
+        let subscriptions = watched
+            .into_iter()
+            .chain(std::iter::once(reports))
+            .collect();
+        let (thread, inbound, outbound, stats) = start_session(config, subscriptions, Some(alive))?;
         Ok(Self {
             inbound,
             outbound,
             state_keys,
             shard_key: layout.shard_key(this),
+            stats,
+            thread: Some(thread),
+        })
+    }
+
+    /// A session that only reads: every vehicle state and every shard report of the
+    /// swarm `layout` names, through `connect` (a shard's listen endpoint), with no
+    /// liveliness token (a viewer is no shard). For `ringswarm view --zenoh`.
+    ///
+    /// # Errors
+    /// As [`ZenohBus::open`].
+    pub fn watch(layout: &ShardLayout, connect: &[String]) -> Result<Self, String> {
+        let config = peer_config(&[], connect)?;
+        let subscriptions = vec![
+            format!("ringswarm/{}/state/**", layout.swarm),
+            format!("ringswarm/{}/shard/*", layout.swarm),
+        ];
+        let (thread, inbound, outbound, stats) = start_session(config, subscriptions, None)?;
+        Ok(Self {
+            inbound,
+            outbound,
+            state_keys: Vec::new(),
+            shard_key: String::new(),
             stats,
             thread: Some(thread),
         })
@@ -263,4 +178,152 @@ impl ZenohBus {
             let _ = thread.join();
         }
     }
+}
+
+/// A peer session's configuration: its listen and connect endpoints; multicast scouting
+/// only when neither is given.
+///
+/// # Errors
+/// A setting Zenoh refuses, named.
+fn peer_config(listen: &[String], connect: &[String]) -> Result<zenoh::Config, String> {
+    let mut config = zenoh::Config::default();
+    let json = |v: &[String]| serde_json::to_string(v).unwrap_or_else(|_| "[]".into());
+    let mut settings = vec![("mode", "\"peer\"".to_owned())];
+    if !listen.is_empty() {
+        settings.push(("listen/endpoints", json(listen)));
+    }
+    if !connect.is_empty() {
+        settings.push(("connect/endpoints", json(connect)));
+    }
+    if !(listen.is_empty() && connect.is_empty()) {
+        // Endpoints given: the shards find each other there, not by multicast.
+        settings.push(("scouting/multicast/enabled", "false".to_owned()));
+    }
+    for (key, value) in settings {
+        config
+            .insert_json5(key, &value)
+            .map_err(|e| format!("zenoh config {key} = {value}: {e}"))?;
+    }
+    Ok(config)
+}
+
+/// What a running session hands back: its thread, the payloads it receives, where to
+/// hand it `(key, payload)` to publish, and its counters.
+type Session = (
+    JoinHandle<()>,
+    mpsc::Receiver<Vec<u8>>,
+    mpsc::Sender<(String, Vec<u8>)>,
+    Arc<BusStats>,
+);
+
+/// Opens a session with `config` on a thread of its own, subscribes to `subscriptions`,
+/// declares the liveliness token `alive` if any, and publishes what it is handed until
+/// the sender is dropped. Returns once the session is open.
+///
+/// # Errors
+/// The session, a subscription or the token refused, named.
+fn start_session(
+    config: zenoh::Config,
+    subscriptions: Vec<String>,
+    alive: Option<String>,
+) -> Result<Session, String> {
+    let (in_tx, inbound) = mpsc::channel::<Vec<u8>>(INBOUND_QUEUE);
+    let (outbound, mut out_rx) = mpsc::channel::<(String, Vec<u8>)>(OUTBOUND_QUEUE);
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
+    let stats = Arc::new(BusStats::default());
+    let thread_stats = Arc::clone(&stats);
+    let thread = std::thread::Builder::new()
+        .name("zenoh-bus".into())
+        .spawn(move || {
+            let runtime = match tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(1)
+                .enable_all()
+                .build()
+            {
+                Ok(r) => r,
+                Err(e) => {
+                    let _ = ready_tx.send(Err(format!("start the Zenoh thread's runtime: {e}")));
+                    return;
+                }
+            };
+            runtime.block_on(async move {
+                let session = match zenoh::open(config).await {
+                    Ok(s) => s,
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(format!("open the Zenoh session: {e}")));
+                        return;
+                    }
+                };
+                let mut subscribers = Vec::new();
+                for key in &subscriptions {
+                    let tx = in_tx.clone();
+                    let stats = Arc::clone(&thread_stats);
+                    let declared = session
+                        .declare_subscriber(key.as_str())
+                        .callback(move |sample| {
+                            stats.received.fetch_add(1, Ordering::Relaxed);
+                            let bytes = sample.payload().to_bytes().into_owned();
+                            if tx.try_send(bytes).is_err() {
+                                stats.dropped_inbound.fetch_add(1, Ordering::Relaxed);
+                            }
+                        })
+                        .await;
+                    match declared {
+                        Ok(s) => subscribers.push(s),
+                        Err(e) => {
+                            let _ = ready_tx.send(Err(format!("subscribe to {key}: {e}")));
+                            return;
+                        }
+                    }
+                }
+                let token = match &alive {
+                    Some(alive) => match session.liveliness().declare_token(alive.as_str()).await {
+                        Ok(t) => Some(t),
+                        Err(e) => {
+                            let _ = ready_tx.send(Err(format!("declare {alive}: {e}")));
+                            return;
+                        }
+                    },
+                    None => None,
+                };
+                let _ = ready_tx.send(Ok(()));
+                let mut publishers = std::collections::HashMap::new();
+                while let Some((key, bytes)) = out_rx.recv().await {
+                    if !publishers.contains_key(&key) {
+                        match session.declare_publisher(key.clone()).await {
+                            Ok(p) => {
+                                publishers.insert(key.clone(), p);
+                            }
+                            Err(e) => {
+                                tracing::warn!(key, error = %e, "zenoh publisher refused");
+                                continue;
+                            }
+                        }
+                    }
+                    if let Some(publisher) = publishers.get(&key) {
+                        let n = bytes.len() as u64;
+                        if publisher.put(bytes).await.is_ok() {
+                            thread_stats.published.fetch_add(1, Ordering::Relaxed);
+                            thread_stats.published_bytes.fetch_add(n, Ordering::Relaxed);
+                        }
+                    }
+                }
+                drop(token);
+                drop(subscribers);
+                for (_, p) in publishers {
+                    let _ = p.undeclare().await;
+                }
+                let _ = session.close().await;
+            });
+        })
+        .map_err(|e| format!("start the Zenoh thread: {e}"))?;
+    match ready_rx.recv() {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => {
+            let _ = thread.join();
+            return Err(e);
+        }
+        Err(_) => return Err("the Zenoh thread stopped before its session opened".into()),
+    }
+    Ok((thread, inbound, outbound, stats))
 }

@@ -1,7 +1,9 @@
 //! The live view and the replay in a browser: what the swarm looks like at an instant
-//! ([`state`]), a run directory replayed ([`replay`]) and the web server ([`server`]).
+//! ([`state`]), a run directory replayed ([`replay`]), a distributed swarm watched from its shards'
+//! messages ([`distributed`]) and the web server ([`server`]).
 //! See `docs/live-view.md` for the page and the API.
 
+pub mod distributed;
 pub mod replay;
 pub mod server;
 pub mod state;

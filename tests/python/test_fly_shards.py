@@ -6,11 +6,17 @@ What is checked, from each shard's run directory:
 - both adopt one consensus start, the same instant on the swarm clock (Unix µs), and
   both predict the same final velocity: every vehicle starts at rest, so (0, 0);
 - both fly their own vehicles to the end and land them (exit code 0);
-- a shard killed in flight makes the other apply its loss policy (hold).
+- a shard killed in flight makes the other apply its loss policy (hold);
+- `ringswarm view --zenoh` (flying nothing) shows the whole swarm from the shards'
+  traffic: every vehicle, the phase, the prediction, the formation closing, and a
+  killed shard falling silent.
 """
 
+import json
 import os
+import socket
 import subprocess
+import urllib.request
 from pathlib import Path
 
 import pytest
@@ -90,3 +96,48 @@ def test_a_killed_shard_makes_the_other_hold(tmp_path):
         for process, _ in shards.values():
             stop(process)
         stop(sitl)
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_view_zenoh_shows_the_whole_swarm_from_the_shards_traffic(tmp_path):
+    port = free_port()
+    log = open(tmp_path / "view.log", "w")
+    view = subprocess.Popen(
+        [BIN, "view", "--config", str(CONFIG), "--zenoh", "tcp/127.0.0.1:7447",
+         "--zenoh", "tcp/127.0.0.1:7448", "--web", f"127.0.0.1:{port}"],
+        stdout=log, stderr=subprocess.STDOUT)
+    sitl, shards = start(tmp_path, ("--duration-s", "30"))
+
+    def state():
+        try:
+            return json.loads(urllib.request.urlopen(f"http://127.0.0.1:{port}/api/state", timeout=5).read())
+        except OSError:
+            return None
+
+    try:
+        flying = wait_for(
+            lambda: (st := state()) and st["phase"] == "consensus"
+            and all(v["position_enu_m"] for v in st["vehicles"]) and st,
+            60, "the viewer showing the swarm in consensus")
+        assert [v["sysid"] for v in flying["vehicles"]] == [1, 2, 3, 4]
+        assert all(v["link_phase"] == "flying" for v in flying["vehicles"]), flying["vehicles"]
+        # Every vehicle starts at rest: the shards' start sums predict (0, 0).
+        assert flying["predicted_final_velocity"] == [0.0, 0.0]
+        assert any("adopts the start" in e["text"] for e in flying["events"])
+        # The diamond closes (the shards' own runs measure 7 cm at the end).
+        wait_for(lambda: (st := state()) and st["formation_error_m"] is not None
+                 and st["formation_error_m"] < 0.5, 40, "the formation closing in the viewer")
+        shards["b"][0].kill()
+        wait_for(lambda: (st := state()) and any('shard "b" silent' in e["text"] for e in st["events"]),
+                 15, "the viewer saying shard b fell silent")
+    finally:
+        for process, _ in shards.values():
+            stop(process)
+        stop(sitl)
+        stop(view)
+    assert "watching swarm" in (tmp_path / "view.log").read_text()

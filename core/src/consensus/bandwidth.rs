@@ -15,8 +15,16 @@
 //!   the ideal frame with the paper's gains: 60 Hz (`ω·T = 0.58`) flies, 50 Hz (`0.70`)
 //!   limit-cycles; 0.5 keeps about 15 % below the onset.
 //!
+//! - **Hop between shards** (a swarm split into shards, docs/distributed.md): `ω·τ ≤`
+//!   [`HOP_PRODUCT`] (`τ` the one-way delay between shards). The neighbour states that
+//!   cross it are carried forward by their age, which keeps much of the delay's phase
+//!   lag out of the loop; what is left was measured in lockstep on paper-sim1 split in
+//!   three (`ω = 34.8 1/s`, tests/lockstep_shards.rs): up to `ω·τ = 2.8` the formation
+//!   closes to 7 mm, at 3.1 to 24 mm, at 3.5 the divergence guard stops the swarm.
+//!   2.5 keeps about 20 % below the onset.
+//!
 //! Scaling time by `c` (`α·c²`, `β·c`) scales every mode by `c` and keeps stability and the
-//! final velocity, so the gate recommends the largest `c ≤ 1` that meets both limits.
+//! final velocity, so the gate recommends the largest `c ≤ 1` that meets every limit.
 
 use nalgebra::Complex;
 use serde::Serialize;
@@ -27,6 +35,8 @@ use super::stability::{CouplingGains, closed_loop_eigenvalues};
 pub const ATTITUDE_RATIO: f64 = 1.5;
 /// Largest product of the fastest mode and the control period.
 pub const SAMPLING_PRODUCT: f64 = 0.5;
+/// Largest product of the fastest mode and the one-way delay between shards.
+pub const HOP_PRODUCT: f64 = 2.5;
 
 /// `max |s|` over the closed-loop eigenvalues of the non-zero `μ` (1/s).
 pub fn fastest_mode_per_s(nonzero_eigs: &[Complex<f64>], gains: CouplingGains) -> f64 {
@@ -45,9 +55,11 @@ pub struct BandwidthCheck {
     pub attitude_bandwidth_rps: f64,
     /// The control rate it was compared with (Hz).
     pub control_rate_hz: f64,
+    /// The one-way delay between shards it was compared with (s; 0 for one process).
+    pub hop_s: f64,
     /// The largest fastest mode the airframe and rate allow (1/s).
     pub allowed_per_s: f64,
-    /// Which limit that is: `"attitude"` or `"control rate"`.
+    /// Which limit that is: `"attitude"`, `"control rate"` or `"hop between shards"`.
     pub limited_by: &'static str,
     /// The largest time scale, relative to the one flown, that fits (≤ 1 keeps it).
     pub scale_that_fits: f64,
@@ -56,19 +68,44 @@ pub struct BandwidthCheck {
 }
 
 /// Checks gains whose fastest mode is `fastest_mode_per_s` against an attitude bandwidth
-/// (rad/s) and a control rate (Hz).
+/// (rad/s) and a control rate (Hz), in one process.
 pub fn check_bandwidth(
     fastest_mode_per_s: f64,
     attitude_bandwidth_rps: f64,
     control_rate_hz: f64,
 ) -> BandwidthCheck {
+    check_bandwidth_with_hop(
+        fastest_mode_per_s,
+        attitude_bandwidth_rps,
+        control_rate_hz,
+        0.0,
+    )
+}
+
+/// As [`check_bandwidth`], for a swarm split into shards `hop_s` apart (one way; 0: no
+/// hop limit).
+pub fn check_bandwidth_with_hop(
+    fastest_mode_per_s: f64,
+    attitude_bandwidth_rps: f64,
+    control_rate_hz: f64,
+    hop_s: f64,
+) -> BandwidthCheck {
     let attitude = ATTITUDE_RATIO * attitude_bandwidth_rps;
     let rate = SAMPLING_PRODUCT * control_rate_hz;
-    let (allowed, limited_by) = if attitude <= rate {
-        (attitude, "attitude")
+    let hop = if hop_s > 0.0 {
+        HOP_PRODUCT / hop_s
     } else {
-        (rate, "control rate")
+        f64::INFINITY
     };
+    let (allowed, limited_by) = [
+        (attitude, "attitude"),
+        (rate, "control rate"),
+        (hop, "hop between shards"),
+    ]
+    .into_iter()
+    .fold((f64::INFINITY, "attitude"), |best, l| {
+        if l.0 < best.0 { l } else { best }
+    });
     let scale = if fastest_mode_per_s > 0.0 {
         allowed / fastest_mode_per_s
     } else {
@@ -78,6 +115,7 @@ pub fn check_bandwidth(
         fastest_mode_per_s,
         attitude_bandwidth_rps,
         control_rate_hz,
+        hop_s,
         allowed_per_s: allowed,
         limited_by,
         scale_that_fits: scale,
@@ -123,5 +161,27 @@ mod tests {
         let slow = check_bandwidth(omega, 40.0, 50.0);
         assert!(!slow.fits && slow.limited_by == "control rate");
         assert!((slow.scale_that_fits - 25.0 / omega).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_hop_between_shards_limits_the_speed_when_it_is_the_tightest() {
+        let omega = paper_fastest(1.0, 5.0);
+        // The ideal frame at 250 Hz (limits 60 and 125 1/s): 20 ms between shards allows
+        // 2.5 / 0.02 = 125 1/s, not tighter than the attitude's 60: fits.
+        let lan = check_bandwidth_with_hop(omega, 40.0, 250.0, 0.020);
+        assert!(lan.fits && lan.limited_by == "attitude", "{lan:?}");
+        // 100 ms (a radio mesh): 25 1/s, the tightest; the scale that fits is 25/ω.
+        let radio = check_bandwidth_with_hop(omega, 40.0, 250.0, 0.100);
+        assert!(
+            !radio.fits && radio.limited_by == "hop between shards",
+            "{radio:?}"
+        );
+        assert!((radio.scale_that_fits - 25.0 / omega).abs() < 1e-12);
+        assert_eq!(radio.hop_s, 0.1);
+        // No hop: as in one process.
+        assert_eq!(
+            check_bandwidth_with_hop(omega, 6.5, 50.0, 0.0),
+            check_bandwidth(omega, 6.5, 50.0)
+        );
     }
 }

@@ -14,7 +14,8 @@ mod stability;
 mod velocity;
 
 pub use bandwidth::{
-    ATTITUDE_RATIO, BandwidthCheck, SAMPLING_PRODUCT, check_bandwidth, fastest_mode_per_s,
+    ATTITUDE_RATIO, BandwidthCheck, HOP_PRODUCT, SAMPLING_PRODUCT, check_bandwidth,
+    check_bandwidth_with_hop, fastest_mode_per_s,
 };
 pub use design::{GainDesign, recommend_gains};
 pub use graph::{Edge, Neighbours, RingDigraph};

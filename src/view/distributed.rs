@@ -1,0 +1,433 @@
+//! A distributed swarm seen from outside: what `ringswarm view --zenoh` shows, built from
+//! the shards' messages alone (no vehicle is flown or commanded). Pure: the driver hands
+//! it each message with the Unix time it came, and asks for the [`ViewState`] at an
+//! instant.
+//!
+//! - Each vehicle is its newest [`VehicleReport`]: position and velocity, its shard's
+//!   link phase, and its age (the age at its shard's tick plus the hop since).
+//! - The phase is the shards': `handshake` until every shard reports the same start,
+//!   `consensus` once every shard took its sums at it, `holding` when a shard reports a
+//!   lost vehicle, `ended` when every shard's flight is over.
+//! - The prediction is what every shard computes: the start sums added in shard order.
+//! - The mean velocity is every shard's latest `Σ wᵢvᵢ` over `Σ wᵢ`.
+
+use nalgebra::Vector2;
+
+use crate::distributed::{MemberPhase, ShardMessage, ShardReport, VehicleReport};
+use crate::swarm::SwarmSetup;
+use crate::view::state::{EventView, PairView, VehicleView, ViewState, formation_targets};
+
+/// A shard silent this long (µs) is reported as such once.
+const SILENT_AFTER_US: u64 = 1_500_000;
+
+/// What is known of a distributed swarm.
+#[derive(Debug, Clone)]
+pub struct SwarmWatch {
+    sysids: Vec<u8>,
+    networks: Vec<Option<String>>,
+    offsets_m: Vec<Vector2<f64>>,
+    w: Vec<f64>,
+    altitude_m: f64,
+    shard_names: Vec<String>,
+    /// Each vehicle's newest report and when it came (Unix µs).
+    vehicles: Vec<Option<(u64, VehicleReport)>>,
+    /// Each shard's newest report and when it came (Unix µs).
+    reports: Vec<Option<(u64, ShardReport)>>,
+    /// Whether each shard was last said to be silent.
+    silent: Vec<bool>,
+    /// The start last logged (swarm clock µs).
+    logged_start: Option<u64>,
+    /// The first message's arrival (Unix µs): the view's time zero.
+    first_us: Option<u64>,
+    events: Vec<EventView>,
+    refused: u64,
+}
+
+impl SwarmWatch {
+    /// A watch of the swarm `setup` describes, split into the shards `shard_names`.
+    pub fn new(setup: &SwarmSetup, shard_names: Vec<String>) -> Self {
+        let n = setup.links.len();
+        let shards = shard_names.len();
+        Self {
+            sysids: setup.links.iter().map(|l| l.system_id).collect(),
+            networks: setup.links.iter().map(|l| l.network.clone()).collect(),
+            offsets_m: setup.offsets_m.clone(),
+            w: (0..n).map(|i| setup.ring.w(i)).collect(),
+            altitude_m: setup.altitude_m,
+            shard_names,
+            vehicles: vec![None; n],
+            reports: vec![None; shards],
+            silent: vec![false; shards],
+            logged_start: None,
+            first_us: None,
+            events: Vec::new(),
+            refused: 0,
+        }
+    }
+
+    /// Messages refused: a vehicle or shard index out of range.
+    pub fn refused(&self) -> u64 {
+        self.refused
+    }
+
+    fn t_s(&self, us: u64) -> f64 {
+        us.saturating_sub(self.first_us.unwrap_or(us)) as f64 * 1e-6
+    }
+
+    fn log(&mut self, now_us: u64, warning: bool, text: String) {
+        self.events.push(EventView {
+            t_s: self.t_s(now_us),
+            sysid: None,
+            network: None,
+            warning,
+            text,
+        });
+    }
+
+    /// A message that came at `now_us` (Unix µs).
+    pub fn handle(&mut self, now_us: u64, message: &ShardMessage) {
+        self.first_us.get_or_insert(now_us);
+        match message {
+            ShardMessage::Vehicle(v) => match self.vehicles.get_mut(usize::from(v.vehicle)) {
+                Some(slot) => {
+                    if slot
+                        .as_ref()
+                        .is_none_or(|(_, old)| old.sent_us <= v.sent_us)
+                    {
+                        *slot = Some((now_us, *v));
+                    }
+                }
+                None => self.refused += 1,
+            },
+            ShardMessage::Shard(r) => {
+                let s = usize::from(r.shard);
+                let Some(slot) = self.reports.get_mut(s) else {
+                    self.refused += 1;
+                    return;
+                };
+                let first = slot.is_none();
+                if slot
+                    .as_ref()
+                    .is_some_and(|(_, old)| old.sent_us > r.sent_us)
+                {
+                    return;
+                }
+                *slot = Some((now_us, r.clone()));
+                let name = self.shard_names[s].clone();
+                if first || self.silent[s] {
+                    self.silent[s] = false;
+                    self.log(now_us, false, format!("shard \"{name}\" heard"));
+                }
+                if let Some(start) = self.agreed_start()
+                    && self.logged_start != Some(start)
+                {
+                    self.logged_start = Some(start);
+                    self.log(
+                        now_us,
+                        false,
+                        format!("every shard adopts the start at swarm clock {start} µs"),
+                    );
+                }
+            }
+        }
+    }
+
+    /// Notes shards silent for [`SILENT_AFTER_US`] at `now_us`, once each time.
+    pub fn tick(&mut self, now_us: u64) {
+        for s in 0..self.reports.len() {
+            let silent = self.reports[s]
+                .as_ref()
+                .is_some_and(|(at, r)| !r.ended && now_us.saturating_sub(*at) > SILENT_AFTER_US);
+            if silent && !self.silent[s] {
+                self.silent[s] = true;
+                let name = self.shard_names[s].clone();
+                self.log(now_us, true, format!("shard \"{name}\" silent"));
+            }
+        }
+    }
+
+    /// The start every shard reports, when they all report one.
+    fn agreed_start(&self) -> Option<u64> {
+        let mut starts = self
+            .reports
+            .iter()
+            .map(|r| r.as_ref().and_then(|(_, r)| r.start_us));
+        let first = starts.next()??;
+        starts.all(|s| s == Some(first)).then_some(first)
+    }
+
+    /// `Σ wᵢvᵢ / Σ wᵢ` of every shard's sums at the agreed start, added in shard order
+    /// (as every shard adds them).
+    fn prediction(&self) -> Option<Vector2<f64>> {
+        let start = self.agreed_start()?;
+        let mut wv = Vector2::zeros();
+        let mut w = 0.0;
+        for r in &self.reports {
+            let (_, r) = r.as_ref()?;
+            if r.start_us != Some(start) {
+                return None;
+            }
+            let sum = r.start_sum?;
+            wv += Vector2::new(sum.wv_mps[0], sum.wv_mps[1]);
+            w += sum.w;
+        }
+        (w.abs() > 1e-12).then(|| wv / w)
+    }
+
+    fn mean_velocity(&self) -> Option<Vector2<f64>> {
+        let mut wv = Vector2::zeros();
+        let mut w = 0.0;
+        for r in &self.reports {
+            let (_, r) = r.as_ref()?;
+            wv += Vector2::new(r.now_sum.wv_mps[0], r.now_sum.wv_mps[1]);
+            w += r.now_sum.w;
+        }
+        (w.abs() > 1e-12).then(|| wv / w)
+    }
+
+    fn phase(&self) -> &'static str {
+        let reports: Vec<&ShardReport> = self.reports.iter().flatten().map(|(_, r)| r).collect();
+        if reports.len() < self.reports.len() {
+            return "handshake";
+        }
+        if reports.iter().all(|r| r.ended) {
+            "ended"
+        } else if reports.iter().any(|r| r.lost > 0) {
+            "holding"
+        } else if self.prediction().is_some() {
+            "consensus"
+        } else {
+            "handshake"
+        }
+    }
+
+    /// The swarm as known at `now_us` (Unix µs).
+    pub fn state(&self, now_us: u64) -> ViewState {
+        let xy: Vec<Option<Vector2<f64>>> = self
+            .vehicles
+            .iter()
+            .map(|v| {
+                v.map(|(_, r)| Vector2::new(f64::from(r.pos_enu_m[0]), f64::from(r.pos_enu_m[1])))
+            })
+            .collect();
+        let targets = formation_targets(&xy, &self.offsets_m, &self.w);
+        let formation_error_m = targets.as_ref().and_then(|(_, t)| {
+            xy.iter()
+                .zip(t)
+                .map(|(p, t)| p.map(|p| (p - t).norm()))
+                .collect::<Option<Vec<f64>>>()
+                .map(|e| e.into_iter().fold(0.0, f64::max))
+        });
+        let altitude_error_m = self
+            .vehicles
+            .iter()
+            .map(|v| v.map(|(_, r)| (f64::from(r.pos_enu_m[2]) - self.altitude_m).abs()))
+            .collect::<Option<Vec<f64>>>()
+            .map(|e| e.into_iter().fold(0.0, f64::max));
+        let predicted = self.prediction();
+        let mean = self.mean_velocity();
+        let vehicles = self
+            .vehicles
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let f3 = |a: [f32; 3]| a.map(f64::from);
+                let report = v.map(|(_, r)| r);
+                VehicleView {
+                    sysid: self.sysids[i],
+                    network: self.networks[i].clone(),
+                    position_enu_m: report.map(|r| f3(r.pos_enu_m)),
+                    velocity_enu_mps: report.map(|r| f3(r.vel_enu_mps)),
+                    target_enu_m: targets.as_ref().map(|(_, t)| t[i].into()),
+                    link_phase: report
+                        .map_or("unknown", |r| member_name(r.phase))
+                        .to_owned(),
+                    mode: None,
+                    armed: None,
+                    telemetry_age_ms: report.map(|r| {
+                        (now_us.saturating_sub(r.sent_us) + u64::from(r.age_us)) as f64 * 1e-3
+                    }),
+                    speed_mps: report.map(|r| {
+                        Vector2::new(f64::from(r.vel_enu_mps[0]), f64::from(r.vel_enu_mps[1]))
+                            .norm()
+                    }),
+                    saturated: None,
+                    constrained: None,
+                }
+            })
+            .collect();
+        ViewState {
+            t_s: self.t_s(now_us),
+            phase: self.phase().to_owned(),
+            predicted_final_velocity: predicted.map(Into::into),
+            mean_velocity_enu_mps: mean.map(Into::into),
+            velocity_error_mps: mean.zip(predicted).map(|(m, p)| (m - p).norm()),
+            formation_error_m,
+            altitude_error_m,
+            altitude_target_m: self.altitude_m,
+            formation_centre_enu_m: targets.as_ref().map(|(c, _)| (*c).into()),
+            closest_pair: closest_pair(&xy).map(|(i, j, d)| PairView {
+                vehicles: [i, j],
+                sysids: [self.sysids[i], self.sysids[j]],
+                distance_m: d,
+            }),
+            active_pairs: Vec::new(),
+            vehicles,
+            events: self.events[self
+                .events
+                .len()
+                .saturating_sub(crate::view::state::RECENT_EVENTS)..]
+                .to_vec(),
+            events_total: self.events.len(),
+        }
+    }
+}
+
+/// The link phase a shard reports, in the words of the page.
+fn member_name(phase: MemberPhase) -> &'static str {
+    phase.name()
+}
+
+/// The two known vehicles closest to each other horizontally (m).
+fn closest_pair(xy: &[Option<Vector2<f64>>]) -> Option<(usize, usize, f64)> {
+    let mut best: Option<(usize, usize, f64)> = None;
+    for (i, a) in xy.iter().enumerate() {
+        for (j, b) in xy.iter().enumerate().skip(i + 1) {
+            if let (Some(a), Some(b)) = (a, b) {
+                let d = (a - b).norm();
+                if best.is_none_or(|(_, _, bd)| d < bd) {
+                    best = Some((i, j, d));
+                }
+            }
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::distributed::WeightedSum;
+
+    fn setup() -> SwarmSetup {
+        let text = std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml"),
+        )
+        .expect("paper-sim1.toml");
+        crate::config::Config::from_toml(&text)
+            .expect("parses")
+            .validate()
+            .expect("validates")
+    }
+
+    fn vehicle(i: u16, sent_us: u64, pos: [f32; 3], vel: [f32; 3]) -> ShardMessage {
+        ShardMessage::Vehicle(VehicleReport {
+            vehicle: i,
+            sent_us,
+            age_us: 10_000,
+            phase: MemberPhase::Flying,
+            landed: false,
+            pos_enu_m: pos,
+            vel_enu_mps: vel,
+        })
+    }
+
+    fn report(
+        shard: u16,
+        sent_us: u64,
+        start: Option<(u64, WeightedSum)>,
+        now: WeightedSum,
+    ) -> ShardMessage {
+        ShardMessage::Shard(ShardReport {
+            shard,
+            sent_us,
+            vehicles: 2,
+            flying: 2,
+            lost: 0,
+            ended: false,
+            start_us: start.map(|(t, _)| t),
+            start_sum: start.map(|(_, s)| s),
+            now_sum: now,
+        })
+    }
+
+    #[test]
+    fn the_prediction_is_the_start_sums_in_shard_order_and_the_phase_follows_the_shards() {
+        let setup = setup();
+        let names = ["a", "b", "c"].map(str::to_owned).to_vec();
+        let mut watch = SwarmWatch::new(&setup, names);
+        let sum = |wv: [f64; 2], w: f64| WeightedSum {
+            wp_m: [0.0, 0.0],
+            wv_mps: wv,
+            w,
+        };
+        let t0 = 1_000_000_000;
+        // Before every shard is heard: handshake, nothing predicted.
+        watch.handle(t0, &report(0, t0, None, sum([1.0, 0.0], 1.0)));
+        assert_eq!(watch.state(t0).phase, "handshake");
+        // Every shard with its sums at one start: (1·1 + 4·2 + 0) / (1 + 2 + 3) etc.
+        let start = Some(t0 + 200_000);
+        for (s, (wv, w)) in [([1.0, 0.0], 1.0), ([4.0, 2.0], 2.0), ([0.0, 4.0], 3.0)]
+            .into_iter()
+            .enumerate()
+        {
+            let at = t0 + 300_000 + s as u64;
+            watch.handle(
+                at,
+                &report(s as u16, at, start.map(|t| (t, sum(wv, w))), sum(wv, w)),
+            );
+        }
+        let state = watch.state(t0 + 400_000);
+        assert_eq!(state.phase, "consensus");
+        let p = state.predicted_final_velocity.expect("predicted");
+        assert_eq!(p, [5.0 / 6.0, 6.0 / 6.0]);
+        assert_eq!(state.mean_velocity_enu_mps, Some(p));
+        assert_eq!(state.velocity_error_mps, Some(0.0));
+        assert!(
+            state
+                .events
+                .iter()
+                .any(|e| e.text.contains("adopts the start"))
+        );
+        // A shard silent for 1.5 s is said so, once.
+        watch.tick(t0 + 2_000_000);
+        watch.tick(t0 + 2_100_000);
+        assert_eq!(
+            watch
+                .state(t0 + 2_100_000)
+                .events
+                .iter()
+                .filter(|e| e.warning)
+                .count(),
+            3
+        );
+    }
+
+    #[test]
+    fn vehicles_take_their_newest_report_and_their_age_counts_the_hop() {
+        let setup = setup();
+        let mut watch = SwarmWatch::new(&setup, ["a", "b", "c"].map(str::to_owned).to_vec());
+        let t0 = 5_000_000;
+        watch.handle(
+            t0 + 30_000,
+            &vehicle(1, t0 + 20_000, [3.0, 4.0, 50.0], [1.0, 0.0, 0.0]),
+        );
+        // An older report that comes late changes nothing.
+        watch.handle(
+            t0 + 31_000,
+            &vehicle(1, t0, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
+        );
+        watch.handle(t0, &vehicle(99, t0, [0.0; 3], [0.0; 3]));
+        let state = watch.state(t0 + 50_000);
+        let v = &state.vehicles[1];
+        assert_eq!(v.sysid, setup.links[1].system_id);
+        assert_eq!(v.position_enu_m, Some([3.0, 4.0, 50.0]));
+        assert_eq!(v.link_phase, "flying");
+        // 30 ms since its shard sent it, plus 10 ms old at its shard's tick.
+        assert_eq!(v.telemetry_age_ms, Some(40.0));
+        assert_eq!(v.speed_mps, Some(1.0));
+        assert!(state.vehicles[0].position_enu_m.is_none());
+        assert_eq!(state.formation_error_m, None, "not every vehicle known");
+        assert_eq!(watch.refused(), 1);
+    }
+}
