@@ -2,6 +2,11 @@
 //! processes on loopback, a ring of N ideal quadrotors on MAVLink networks of 250, 50 Hz
 //! control with LOCAL_POSITION_NED and ATTITUDE_QUATERNION at 50 Hz.
 //!
+//! `cargo bench --bench realtime -- shards S N` flies the ring of N split into S shards
+//! (`fly --shard`, each reading its ring neighbours from the others over Zenoh on
+//! loopback) against one emulator, and prints one row per shard: CPU, late ticks, the
+//! age of its own vehicles' states and of the other shards' ones it flies on.
+//!
 //! `cargo bench --bench realtime [-- [dense] N ...]` (default 64 250 500 1000; `dense`:
 //! the ring packed so that the safety filter's constraints bind) prints, per N: CPU
 //! per vehicle-tick of each process over a steady window, control ticks started over half
@@ -30,6 +35,19 @@ const RATE_HZ: f64 = 50.0;
 const DATAGRAMS_PER_TICK: f64 = 3.0;
 
 fn main() {
+    if let Some(at) = std::env::args().position(|a| a == "shards") {
+        let numbers: Vec<usize> = std::env::args()
+            .skip(at + 1)
+            .filter_map(|a| a.parse().ok())
+            .collect();
+        let (shards, n) = match numbers.as_slice() {
+            [s, n, ..] => (*s, *n),
+            [s] => (*s, 1000),
+            [] => (4, 1000),
+        };
+        sharded(n, shards);
+        return;
+    }
     let cases: Vec<usize> = std::env::args()
         .skip(1)
         .filter_map(|a| a.parse().ok())
@@ -321,4 +339,160 @@ fn udp_floor_us() -> f64 {
         }
     }
     start.elapsed().as_secs_f64() * 1e6 / f64::from(rounds * 64)
+}
+
+/// The ring of `n` split into `shards` contiguous shards, each listening on loopback and
+/// connecting to every shard before it; `watch = "neighbours"` (each shard reads only the
+/// ring neighbours of its own vehicles), so the safety filter is off.
+fn sharded_ring(n: usize, shards: usize) -> String {
+    let mut text = ring(n, RATE_HZ);
+    text.push_str(
+        "[safety]\nenabled = false\n[distributed]\nswarm = \"bench\"\nwatch = \"neighbours\"\n",
+    );
+    let per = n.div_ceil(shards);
+    for s in 0..shards {
+        let vehicles: Vec<String> = (s * per..((s + 1) * per).min(n))
+            .map(|i| {
+                format!(
+                    "{{ system_id = {}, network = \"n{}\" }}",
+                    i % 250 + 1,
+                    i / 250
+                )
+            })
+            .collect();
+        let connect: Vec<String> = (0..s)
+            .map(|t| format!("\"tcp/127.0.0.1:{}\"", 7500 + t))
+            .collect();
+        text.push_str(&format!(
+            "[[shard]]\nname = \"s{s}\"\nvehicles = [{}]\nlisten = [\"tcp/127.0.0.1:{}\"]\nconnect = [{}]\n",
+            vehicles.join(", "),
+            7500 + s,
+            connect.join(", ")
+        ));
+    }
+    text
+}
+
+/// One emulator for the whole ring, `shards` coordinators: the steady window's CPU and
+/// each shard's summary.
+fn sharded(n: usize, shards: usize) {
+    let run = || -> Result<(), String> {
+        let bin = env!("CARGO_BIN_EXE_ringswarm");
+        let dir =
+            std::env::temp_dir().join(format!("ringswarm-realtime-shards-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let config = dir.join("ring.toml");
+        std::fs::write(&config, sharded_ring(n, shards)).map_err(|e| e.to_string())?;
+        let mut sitl = Running(
+            Command::new("nice")
+                .args(["-n", "10", bin, "sitl", "--config"])
+                .arg(&config)
+                .arg("--state-dir")
+                .arg(dir.join("state"))
+                .stdin(Stdio::null())
+                .stdout(Stdio::piped())
+                .stderr(Stdio::null())
+                .spawn()
+                .map_err(|e| format!("start sitl: {e}"))?,
+        );
+        let stdout = sitl.0.stdout.take().ok_or("no sitl stdout")?;
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if line.starts_with("Ctrl-C stops") {
+                    let _ = ready_tx.send(());
+                }
+            }
+        });
+        ready_rx
+            .recv_timeout(Duration::from_secs(60))
+            .map_err(|_| "sitl did not start")?;
+        let mut flies = Vec::new();
+        for s in 0..shards {
+            flies.push(Running(
+                Command::new(bin)
+                    .args(["fly", "--config"])
+                    .arg(&config)
+                    .args(["--shard", &format!("s{s}"), "--out"])
+                    .arg(dir.join(format!("run-s{s}")))
+                    .stdin(Stdio::null())
+                    .stdout(Stdio::null())
+                    .stderr(Stdio::null())
+                    .spawn()
+                    .map_err(|e| format!("start shard s{s}: {e}"))?,
+            ));
+        }
+        std::thread::sleep(WARM_UP);
+        let cpu = |flies: &[Running]| -> Result<Vec<f64>, String> {
+            flies.iter().map(|f| cpu_s(f.0.id())).collect()
+        };
+        let before = (cpu_s(sitl.0.id())?, cpu(&flies)?);
+        let start = Instant::now();
+        std::thread::sleep(WINDOW);
+        let after = (cpu_s(sitl.0.id())?, cpu(&flies)?);
+        let window_s = start.elapsed().as_secs_f64();
+        for _ in 0..2 {
+            for f in &flies {
+                interrupt(f.0.id());
+            }
+            std::thread::sleep(Duration::from_millis(500));
+        }
+        for f in &mut flies {
+            let waited = Instant::now();
+            while f.0.try_wait().map_err(|e| e.to_string())?.is_none() {
+                if waited.elapsed() > Duration::from_secs(120) {
+                    return Err("a shard did not stop".into());
+                }
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        }
+        interrupt(sitl.0.id());
+        let per_tick =
+            |cpu_s: f64, vehicles: usize| cpu_s * 1e6 / (vehicles as f64 * RATE_HZ * window_s);
+        println!(
+            "{n} vehicles in {shards} shards, one emulator: emulator {:.2} µs/vehicle-tick\n",
+            per_tick(after.0 - before.0, n)
+        );
+        println!(
+            "| shard | vehicles | coordinator µs/vehicle-tick | late ticks (> T/2) | tick lateness p99 / max (ms) | own state age p50 / p99 (ms) | other shards' state age p50 / p99 (ms) | phase at the end |"
+        );
+        println!("|---|---|---|---|---|---|---|---|");
+        let per = n.div_ceil(shards);
+        for s in 0..shards {
+            let vehicles = ((s + 1) * per).min(n) - s * per;
+            let text = std::fs::read_to_string(dir.join(format!("run-s{s}")).join("summary.json"))
+                .map_err(|e| format!("shard s{s}'s summary.json: {e}"))?;
+            let summary: serde_json::Value =
+                serde_json::from_str(&text).map_err(|e| e.to_string())?;
+            let t = &summary["timing"];
+            let q = |h: &serde_json::Value| {
+                format!(
+                    "{} / {}",
+                    show(h["p50_ms"].as_f64()),
+                    show(h["p99_ms"].as_f64())
+                )
+            };
+            println!(
+                "| s{s} | {vehicles} | {:.2} | {} of {} | {} / {} | {} | {} | {} |",
+                per_tick(after.1[s] - before.1[s], vehicles),
+                t["late_ticks"].as_u64().unwrap_or(0),
+                t["lateness"]["samples"].as_u64().unwrap_or(0),
+                show(t["lateness"]["p99_ms"].as_f64()),
+                show(t["lateness"]["max_ms"].as_f64()),
+                q(&t["state_age"]),
+                q(&t["remote_state_age"]),
+                summary["final_phase"].as_str().unwrap_or("?"),
+            );
+        }
+        if std::env::var_os("RINGSWARM_BENCH_KEEP").is_some() {
+            eprintln!("run directories kept in {}", dir.display());
+        } else {
+            let _ = std::fs::remove_dir_all(&dir);
+        }
+        Ok(())
+    };
+    if let Err(e) = run() {
+        println!("{n} vehicles in {shards} shards: failed: {e}");
+    }
 }

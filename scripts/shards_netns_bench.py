@@ -8,11 +8,17 @@ Each flight is `ringswarm sitl` plus `ringswarm fly` (one pair per namespace for
 shards), consensus for `--duration-s`, then landing. Prints one table row per flight
 (and per shard) from the run directories' summary.json: the prediction, the velocity
 error, the formation error at the end of consensus, the late control ticks and the age
-of the states the law flew on. Needs root (namespaces) and iproute2.
+of the states the law flew on. The formation is measured from each vehicle's own
+coordinator (its CSV, fresh telemetry), at one instant after the consensus start adopted by
+every shard: a shard's own summary counts the other shards' vehicles at their last
+reported (older) positions. Needs root (namespaces) and iproute2.
 """
 
 import argparse
+import csv
 import json
+import math
+import re
 import os
 import subprocess
 import sys
@@ -90,6 +96,43 @@ def run_pairs(binary, pairs, duration_s, tmp):
         e.wait(timeout=30)
 
 
+def start_of(run):
+    """The local time (s) of the run's consensus start, from its events."""
+    with open(run / "events.csv", newline="") as f:
+        for r in csv.reader(f):
+            if "consensus started" in r[-1]:
+                adopted = re.search(r"adopted ([0-9.]+) s", r[-1])
+                return float(adopted.group(1)) if adopted else float(r[0])
+    return None
+
+
+def position_at(run, sysid, t):
+    """Vehicle `sysid`'s (x, y) at local time `t`, from its CSV (linear between rows)."""
+    with open(run / f"vehicle-{sysid}.csv", newline="") as f:
+        rows = [(float(r["t_s"]), float(r["x_m"]), float(r["y_m"])) for r in csv.DictReader(f)]
+    for a, b in zip(rows, rows[1:]):
+        if b[0] >= t:
+            k = (t - a[0]) / max(b[0] - a[0], 1e-9)
+            return (a[1] + k * (b[1] - a[1]), a[2] + k * (b[2] - a[2]))
+    return None
+
+
+def true_formation(runs_of, after_s):
+    """Largest distance of a vehicle's p - d from their mean, `after_s` after the start,
+    each vehicle taken from the run that flew it (`runs_of`: sysid -> run)."""
+    any_run = next(iter(runs_of.values()))
+    offsets = [v["offset_enu_m"] for v in json.loads((any_run / "setup.json").read_text())["vehicles"]]
+    q = []
+    for sysid, d in enumerate(offsets, start=1):
+        run = runs_of[sysid]
+        p = position_at(run, sysid, start_of(run) + after_s)
+        if p is None:
+            return None
+        q.append((p[0] - d[0], p[1] - d[1]))
+    cx, cy = sum(x for x, _ in q) / len(q), sum(y for _, y in q) / len(q)
+    return max(math.hypot(x - cx, y - cy) for x, y in q)
+
+
 def row(name, out):
     s = json.loads((out / "summary.json").read_text())
     p, t = s.get("predicted_final_velocity"), s["timing"]
@@ -98,9 +141,10 @@ def row(name, out):
     err = f"{100 * err:.3f} %" if err is not None else "–"
     form = s.get("formation_error_m")
     form = f"{form:.3f} m" if form is not None else "–"
-    age = t["state_age"]
+    age, remote = t["state_age"], t.get("remote_state_age") or {}
+    hop = (f"{remote['p50_ms']:.1f} / {remote['p99_ms']:.1f}" if remote.get("p50_ms") is not None else "–")
     return (f"| {name} | {pred} | {err} | {form} | {t['late_ticks']} | "
-            f"{t['lateness']['p99_ms']:.2f} | {age['p50_ms']:.1f} / {age['p99_ms']:.1f} |")
+            f"{t['lateness']['p99_ms']:.2f} | {age['p50_ms']:.1f} / {age['p99_ms']:.1f} | {hop} |")
 
 
 def main():
@@ -123,12 +167,20 @@ def main():
             subprocess.run(["ip", "netns", "del", ns], capture_output=True)
     print(f"paper-sim1, {args.duration_s:.0f} s of consensus in real time, {args.bin} at {commit}, "
           f"{os.cpu_count()} cores ({time.strftime('%Y-%m-%d')})\n")
-    print("| flight | prediction (m/s) | velocity error | formation at the end | late ticks | "
-          "tick lateness p99 (ms) | state age p50 / p99 (ms) |")
-    print("|---|---|---|---|---|---|---|")
+    print("| flight | prediction (m/s) | velocity error | formation at the end (its summary) | late ticks | "
+          "tick lateness p99 (ms) | state age p50 / p99 (ms) | other shards' states p50 / p99 (ms) |")
+    print("|---|---|---|---|---|---|---|---|")
     print(row("one process", tmp / "one"))
     for s in SHARDS:
         print(row(f"shard {s} of 3, own namespace", tmp / f"shard-{s}"))
+    owner = {i: tmp / f"shard-{SHARDS[(i - 1) // 2]}" for i in range(1, 7)}
+    checks = [t for t in (10.0, 20.0, 30.0, args.duration_s - 1.0) if t < args.duration_s]
+    print("\nformation from each vehicle's own coordinator, seconds after the adopted start:\n")
+    print("| flight | " + " | ".join(f"{t:.0f} s" for t in checks) + " |")
+    print("|---|" + "---|" * len(checks))
+    for name, runs_of in [("one process", {i: tmp / "one" for i in range(1, 7)}), ("3 shards", owner)]:
+        cells = [true_formation(runs_of, t) for t in checks]
+        print(f"| {name} | " + " | ".join("–" if c is None else f"{c:.3f} m" for c in cells) + " |")
     print(f"\nrun directories: {tmp}")
 
 

@@ -339,7 +339,7 @@ impl Recorder {
             let row = rows::Row {
                 t_s: now.as_secs_f64(),
                 swarm_phase: phase,
-                link_phase: link.phase().name(),
+                link_phase: swarm.vehicle_phase(i).name(),
                 state_enu: [
                     s.pos_enu_m.x,
                     s.pos_enu_m.y,

@@ -287,6 +287,18 @@ impl Swarm {
             .is_none_or(|p| p.plan.is_local(i) || p.plan.is_watched(i))
     }
 
+    /// Vehicle `i`'s link phase as this shard knows it: its own link's, or, for a
+    /// vehicle another shard flies, that shard's report of it (`discovering` until one
+    /// comes). What a run directory and the live view show.
+    pub fn vehicle_phase(&self, i: usize) -> Phase {
+        self.member_phase(i)
+    }
+
+    /// Whether vehicle `i` is flown by this process (always, without shards).
+    pub fn is_flown_here(&self, i: usize) -> bool {
+        !self.is_remote(i)
+    }
+
     /// Vehicle `i`'s link phase: its link's, or its shard's report of it.
     pub(super) fn member_phase(&self, i: usize) -> Phase {
         match self.peers.as_ref() {

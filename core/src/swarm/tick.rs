@@ -27,6 +27,11 @@ impl Swarm {
         for i in 0..self.links.len() {
             if self.is_remote(i) {
                 self.law.states[i] = self.remote_fresh_state(i, now);
+                if self.law.states[i].is_some()
+                    && let Some(at) = self.remote_measured(i)
+                {
+                    self.timing.remote_state_age(at, now);
+                }
                 continue;
             }
             if self.links[i].phase() == Phase::Flying

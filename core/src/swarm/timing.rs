@@ -112,6 +112,7 @@ pub struct TickTiming {
     period: Duration,
     lateness: Histogram,
     state_age: Histogram,
+    remote_state_age: Histogram,
     /// Ticks that started more than half a period late (counted exactly).
     late: u64,
     /// When the latest tick started (scheduled time, s), and how late.
@@ -125,6 +126,7 @@ impl TickTiming {
             period,
             lateness: Histogram::new(),
             state_age: Histogram::new(),
+            remote_state_age: Histogram::new(),
             late: 0,
             worst: None,
         }
@@ -143,6 +145,13 @@ impl TickTiming {
     /// A vehicle's position, reported at `at`, used at `now`.
     pub fn state_age(&mut self, at: SimTime, now: SimTime) {
         self.state_age.record(now.saturating_since(at));
+    }
+
+    /// Another shard's vehicle's position, measured at `at` (its shard's arrival, on
+    /// this shard's clock), used at `now`: the hop between shards and the ticks on
+    /// both sides.
+    pub fn remote_state_age(&mut self, at: SimTime, now: SimTime) {
+        self.remote_state_age.record(now.saturating_since(at));
     }
 
     /// The figures so far.
@@ -166,6 +175,7 @@ impl TickTiming {
             },
             lateness: quantiles(&self.lateness),
             state_age: quantiles(&self.state_age),
+            remote_state_age: quantiles(&self.remote_state_age),
         }
     }
 }
@@ -200,6 +210,10 @@ pub struct TimingReport {
     /// arrival, not its timestamp: it includes the time on the wire after the vehicle
     /// sent it only as far as the coordinator can see it).
     pub state_age: Quantiles,
+    /// With shards: the age of each other shard's vehicle's position at each tick it is
+    /// flown on, from its arrival at its own shard (the hop between shards and the
+    /// ticks on both sides); no samples in one process.
+    pub remote_state_age: Quantiles,
 }
 
 #[cfg(test)]
