@@ -77,6 +77,14 @@ class MirrorListener:
 
     def __init__(self, port):
         self.conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=251)
+        # Python reads slower than four vehicles' traffic arrives while Chromium draws on
+        # the same cores: a large receive buffer keeps the kernel from dropping what the
+        # listener has not read yet (what is checked is the mirror, not this thread).
+        # SO_RCVBUFFORCE (Linux, root) passes net.core.rmem_max; SO_RCVBUF is capped by it.
+        try:
+            self.conn.port.setsockopt(socket.SOL_SOCKET, 33, 8 << 20)
+        except OSError:
+            self.conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
         self.telemetry = Counter()
         self.attitude_targets = Counter()
         self.sent_back = 0
