@@ -141,40 +141,7 @@ fn run_case(n: usize, dense: bool) -> Result<CaseResult, String> {
     };
     std::fs::write(&config, text).map_err(|e| e.to_string())?;
 
-    // The emulator stands for the vehicles' own computers: on this shared machine it
-    // runs at a lower priority (nice 10), so that the coordinator's schedule is what is
-    // measured, not the scheduler's choice between the two.
-    let mut sitl = Running(
-        Command::new("nice")
-            .args(["-n", "10", bin, "sitl", "--config"])
-            .arg(&config)
-            .arg("--state-dir")
-            .arg(dir.join("state"))
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .map_err(|e| format!("start sitl: {e}"))?,
-    );
-    let lines = Arc::new(Mutex::new(Vec::<(Instant, String)>::new()));
-    let stdout = sitl.0.stdout.take().ok_or("no sitl stdout")?;
-    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
-    {
-        let lines = Arc::clone(&lines);
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if line.starts_with("Ctrl-C stops") {
-                    let _ = ready_tx.send(());
-                }
-                if let Ok(mut l) = lines.lock() {
-                    l.push((Instant::now(), line));
-                }
-            }
-        });
-    }
-    ready_rx
-        .recv_timeout(Duration::from_secs(60))
-        .map_err(|_| "sitl did not start")?;
+    let (sitl, lines) = start_sitl(bin, &config, &dir)?;
     let out = dir.join("run");
     let fly = Running(
         Command::new(bin)
@@ -260,6 +227,52 @@ fn run_case(n: usize, dense: bool) -> Result<CaseResult, String> {
         setpoint_rates,
         udp_drops: udp_after.saturating_sub(udp_before),
     })
+}
+
+/// The emulator's stdout lines, each with when it came.
+type Lines = Arc<Mutex<Vec<(Instant, String)>>>;
+
+/// Starts `ringswarm sitl --config config` and waits until it serves; its stdout lines,
+/// each with when it came, are collected as it runs. The emulator stands for the
+/// vehicles' own computers: on this shared machine it runs at a lower priority (nice 10),
+/// so that the coordinators' schedule is what is measured, not the scheduler's choice.
+fn start_sitl(
+    bin: &str,
+    config: &std::path::Path,
+    dir: &std::path::Path,
+) -> Result<(Running, Lines), String> {
+    let mut sitl = Running(
+        Command::new("nice")
+            .args(["-n", "10", bin, "sitl", "--config"])
+            .arg(config)
+            .arg("--state-dir")
+            .arg(dir.join("state"))
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .map_err(|e| format!("start sitl: {e}"))?,
+    );
+    let lines: Lines = Arc::new(Mutex::new(Vec::new()));
+    let stdout = sitl.0.stdout.take().ok_or("no sitl stdout")?;
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    {
+        let lines = Arc::clone(&lines);
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if line.starts_with("Ctrl-C stops") {
+                    let _ = ready_tx.send(());
+                }
+                if let Ok(mut l) = lines.lock() {
+                    l.push((Instant::now(), line));
+                }
+            }
+        });
+    }
+    ready_rx
+        .recv_timeout(Duration::from_secs(60))
+        .map_err(|_| "sitl did not start")?;
+    Ok((sitl, lines))
 }
 
 /// `(lowest, mean)` from a fleet line's "setpoints L Hz lowest, M Hz mean".
@@ -377,6 +390,13 @@ fn sharded_ring(n: usize, shards: usize) -> String {
 /// each shard's summary.
 fn sharded(n: usize, shards: usize) {
     let run = || -> Result<(), String> {
+        // The ring's networks hold 250 vehicles each, and one host's shards cannot bind
+        // the same network's socket: each shard takes whole networks.
+        if shards == 0 || n % shards != 0 || (n / shards) % 250 != 0 {
+            return Err(format!(
+                "each shard must take whole networks of 250 vehicles on one host: {n} vehicles in {shards} shards do not split so"
+            ));
+        }
         let bin = env!("CARGO_BIN_EXE_ringswarm");
         let dir =
             std::env::temp_dir().join(format!("ringswarm-realtime-shards-{}", std::process::id()));
@@ -384,30 +404,7 @@ fn sharded(n: usize, shards: usize) {
         std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         let config = dir.join("ring.toml");
         std::fs::write(&config, sharded_ring(n, shards)).map_err(|e| e.to_string())?;
-        let mut sitl = Running(
-            Command::new("nice")
-                .args(["-n", "10", bin, "sitl", "--config"])
-                .arg(&config)
-                .arg("--state-dir")
-                .arg(dir.join("state"))
-                .stdin(Stdio::null())
-                .stdout(Stdio::piped())
-                .stderr(Stdio::null())
-                .spawn()
-                .map_err(|e| format!("start sitl: {e}"))?,
-        );
-        let stdout = sitl.0.stdout.take().ok_or("no sitl stdout")?;
-        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if line.starts_with("Ctrl-C stops") {
-                    let _ = ready_tx.send(());
-                }
-            }
-        });
-        ready_rx
-            .recv_timeout(Duration::from_secs(60))
-            .map_err(|_| "sitl did not start")?;
+        let (sitl, _) = start_sitl(bin, &config, &dir)?;
         let mut flies = Vec::new();
         for s in 0..shards {
             flies.push(Running(

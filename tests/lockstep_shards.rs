@@ -132,6 +132,18 @@ fn one_prediction(flight: &ShardedLockstep) -> Vector2<f64> {
     first
 }
 
+/// Each shard's consensus start; a shard not in consensus fails, with its events.
+fn consensus_starts(flight: &ShardedLockstep) -> Vec<SimTime> {
+    flight
+        .shards()
+        .iter()
+        .map(|s| match s.phase() {
+            SwarmPhase::Consensus(t) => t,
+            other => panic!("{}: {:#?}", other.name(), global_events(s)),
+        })
+        .collect()
+}
+
 const THREE: [usize; 6] = [0, 0, 1, 1, 2, 2];
 
 #[test]
@@ -266,14 +278,7 @@ fn a_paused_shard_rejoins_and_every_shard_restarts_consensus_at_one_instant() {
     );
     let (flight, finite) = run(flight, 30);
     assert!(finite);
-    let starts: Vec<SimTime> = flight
-        .shards()
-        .iter()
-        .map(|s| match s.phase() {
-            SwarmPhase::Consensus(t) => t,
-            other => panic!("{}", other.name()),
-        })
-        .collect();
+    let starts = consensus_starts(&flight);
     assert!(starts.iter().all(|t| *t == starts[0]), "{starts:?}");
     // Measured: 22.104 s.
     assert!(
@@ -333,14 +338,7 @@ fn no_shard_starts_while_two_shards_cannot_hear_each_other() {
     );
     let (flight, finite) = run(flight, 13);
     assert!(finite);
-    let starts: Vec<SimTime> = flight
-        .shards()
-        .iter()
-        .map(|s| match s.phase() {
-            SwarmPhase::Consensus(t) => t,
-            other => panic!("{}: {:#?}", other.name(), global_events(s)),
-        })
-        .collect();
+    let starts = consensus_starts(&flight);
     assert!(starts.iter().all(|t| *t == starts[0]), "{starts:?}");
     // A start that comes without every shard's word is void and proposed anew 200 ms
     // ahead, so the first proposal after the cut that every shard vouches for wins:

@@ -13,7 +13,7 @@
 
 use nalgebra::Vector2;
 
-use crate::distributed::{MemberPhase, ShardMessage, ShardReport, VehicleReport};
+use crate::distributed::{ShardMessage, ShardReport, VehicleReport};
 use crate::swarm::SwarmSetup;
 use crate::view::state::{EventView, PairView, VehicleView, ViewState, formation_targets};
 
@@ -239,9 +239,7 @@ impl SwarmWatch {
                     position_enu_m: report.map(|r| f3(r.pos_enu_m)),
                     velocity_enu_mps: report.map(|r| f3(r.vel_enu_mps)),
                     target_enu_m: targets.as_ref().map(|(_, t)| t[i].into()),
-                    link_phase: report
-                        .map_or("unknown", |r| member_name(r.phase))
-                        .to_owned(),
+                    link_phase: report.map_or("unknown", |r| r.phase.name()).to_owned(),
                     mode: None,
                     armed: None,
                     telemetry_age_ms: report.map(|r| {
@@ -283,11 +281,6 @@ impl SwarmWatch {
     }
 }
 
-/// The link phase a shard reports, in the words of the page.
-fn member_name(phase: MemberPhase) -> &'static str {
-    phase.name()
-}
-
 /// The two known vehicles closest to each other horizontally (m).
 fn closest_pair(xy: &[Option<Vector2<f64>>]) -> Option<(usize, usize, f64)> {
     let mut best: Option<(usize, usize, f64)> = None;
@@ -307,7 +300,7 @@ fn closest_pair(xy: &[Option<Vector2<f64>>]) -> Option<(usize, usize, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::distributed::WeightedSum;
+    use crate::distributed::{MemberPhase, WeightedSum};
 
     fn setup() -> SwarmSetup {
         let text = std::fs::read_to_string(

@@ -262,11 +262,6 @@ pub fn frame_checksum_ok(frame: &[u8]) -> Option<bool> {
     }
 }
 
-/// The length of the frame whose start byte is `bytes[0]`, once its header is there.
-pub(crate) fn frame_len_at(bytes: &[u8]) -> Option<usize> {
-    frame_len(bytes)
-}
-
 /// Whether `byte` starts a MAVLink 1 or 2 frame.
 pub(crate) fn is_start_byte(byte: u8) -> bool {
     byte == STX_V1 || byte == STX_V2
@@ -274,7 +269,7 @@ pub(crate) fn is_start_byte(byte: u8) -> bool {
 
 /// Header length and total length of the frame starting at `bytes[0]` (an STX), once
 /// the header is there.
-fn frame_len(bytes: &[u8]) -> Option<usize> {
+pub(crate) fn frame_len(bytes: &[u8]) -> Option<usize> {
     let v2 = bytes[0] == STX_V2;
     let header_len = if v2 { 10 } else { 6 };
     if bytes.len() < header_len {

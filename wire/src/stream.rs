@@ -9,7 +9,7 @@
 //! A frame of a message this dialect does not know cannot be checked; it is handed out
 //! as framed, and the link counts it as unknown.
 
-use crate::codec::{MAX_FRAME_LEN, frame_checksum_ok, frame_len_at, is_start_byte};
+use crate::codec::{MAX_FRAME_LEN, frame_checksum_ok, frame_len, is_start_byte};
 
 /// Bytes kept waiting for the rest of a frame: two whole frames' worth.
 const KEPT: usize = 2 * MAX_FRAME_LEN;
@@ -57,7 +57,7 @@ impl StreamFramer {
             self.skipped_bytes += start as u64;
             self.at += start;
             let rest = &self.buf[self.at..];
-            let len = frame_len_at(rest)?;
+            let len = frame_len(rest)?;
             if rest.len() < len {
                 return None;
             }
