@@ -392,7 +392,7 @@ fn sharded(n: usize, shards: usize) {
     let run = || -> Result<(), String> {
         // The ring's networks hold 250 vehicles each, and one host's shards cannot bind
         // the same network's socket: each shard takes whole networks.
-        if shards == 0 || n % shards != 0 || (n / shards) % 250 != 0 {
+        if shards == 0 || !n.is_multiple_of(shards) || !(n / shards).is_multiple_of(250) {
             return Err(format!(
                 "each shard must take whole networks of 250 vehicles on one host: {n} vehicles in {shards} shards do not split so"
             ));
