@@ -33,6 +33,19 @@ def predicted():
     return [sum(w) / sum(w), sum(a * b for a, b in zip(w, north)) / sum(w)]
 
 
+def recorded_prediction(run_dir):
+    """Σ wᵢvᵢ / Σ wᵢ of each vehicle's velocity on its first consensus row (ENU: vx east,
+    vy north), in the ring's agent order (agent i is system id i % 42 + 1 on network i // 42)."""
+    w = [1.0 if i % 2 == 0 else 2.0 for i in range(N)]
+    east = north = 0.0
+    for i in range(N):
+        with open(run_dir / f"vehicle-n{i // PER_NETWORK}-{i % PER_NETWORK + 1}.csv") as f:
+            row = next(r for r in csv.DictReader(f) if r["swarm_phase"] == "consensus")
+        east += w[i] * float(row["vx_mps"])
+        north += w[i] * float(row["vy_mps"])
+    return [east / sum(w), north / sum(w)]
+
+
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("networks")
@@ -74,10 +87,14 @@ def test_every_vehicle_of_both_networks_flew_the_law(run_dir):
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["vehicles"] == N
     assert summary["failure"] is None
-    # The prediction is Σ wᵢvᵢ of the velocities at the start of consensus; the vehicles
-    # hold their start velocities through the handshake to within 2e-5 m/s (measured with
-    # the machine shared by other tests: a longer handshake lets the last digits drift).
-    assert summary["predicted_final_velocity"] == pytest.approx(predicted(), abs=1e-4)
+    # The prediction is Σ wᵢvᵢ / Σ wᵢ of the velocities at the start of consensus. Recomputed
+    # from the vehicles' own records (velocities written to 1e-4 m/s), it matches to the
+    # rounding of the file.
+    assert summary["predicted_final_velocity"] == pytest.approx(recorded_prediction(run_dir), abs=1e-4)
+    # The vehicles hold their configured velocities through the handshake, but in real time
+    # on a loaded machine the hold drifts: 5.3e-4 m/s was seen on CI with other tests
+    # running beside it. 0.005 m/s is a tenth of the smallest configured component.
+    assert summary["predicted_final_velocity"] == pytest.approx(predicted(), abs=0.005)
     got = summary["achieved_final_velocity"]
     assert abs(got[0] - predicted()[0]) < 0.02 and abs(got[1] - predicted()[1]) < 0.02, got
 
