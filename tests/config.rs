@@ -768,23 +768,23 @@ fn the_gate_counts_the_hop_between_shards_and_the_lead_must_exceed_two_hops() {
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1-shards.toml"),
     )
     .unwrap();
-    // 20 ms (the default): 2.5 / 0.02 = 125 1/s, looser than the ideal frame's attitude
+    // 20 ms (the default): 3.5 / 0.02 = 175 1/s, looser than the ideal frame's attitude
     // limit (1.5 × 40 = 60 1/s): the paper's 34.8 1/s fits, limited by attitude.
     let config = Config::from_toml(&base).unwrap();
     let b = config.bandwidth_check().unwrap();
     assert!(b.fits && b.limited_by == "attitude", "{b:?}");
     assert_eq!(b.hop_s, 0.02);
-    // 100 ms: 25 1/s, the tightest; the time scale that fits is 25 / 34.8.
+    // 140 ms: 25 1/s, the tightest; the time scale that fits is 25 / 34.8.
     let slow = base.replace(
         "swarm = \"paper-sim1\"",
-        "swarm = \"paper-sim1\"\nhop_ms = 100\nstart_lead_ms = 250",
+        "swarm = \"paper-sim1\"\nhop_ms = 140\nstart_lead_ms = 350",
     );
     let config = Config::from_toml(&slow).unwrap();
     config.validate().unwrap();
     let b = config.bandwidth_check().unwrap();
     assert!(!b.fits && b.limited_by == "hop between shards", "{b:?}");
     assert!((b.scale_that_fits - 25.0 / b.fastest_mode_per_s).abs() < 1e-12);
-    assert!(ringswarm::report::bandwidth_text(&b, 1.0).contains("2.5 / hop between shards 100 ms"));
+    assert!(ringswarm::report::bandwidth_text(&b, 1.0).contains("3.5 / hop between shards 140 ms"));
     // A start lead within two hops cannot be vouched for in time.
     let short = base.replace(
         "swarm = \"paper-sim1\"",

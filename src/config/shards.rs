@@ -18,11 +18,16 @@ use crate::distributed::{ShardPlan, Watch};
 pub struct DistributedSection {
     /// The swarm's name: every key is under `ringswarm/<swarm>/`.
     pub swarm: String,
-    /// Which other shards' vehicles a shard reads: `all` (default) or `neighbours` (the
-    /// ring in-neighbours of its own vehicles only; needs `[safety] enabled = false`,
-    /// since the safety filter would not see the other shards' vehicles).
+    /// Which other shards' vehicles a shard reads: `all` (default); `horizon` (the ring
+    /// in-neighbours of its own vehicles and every vehicle within its safety filter's
+    /// horizon, by tile); or `neighbours` (the ring in-neighbours only; needs
+    /// `[safety] enabled = false`, since the safety filter would not see the other
+    /// shards' vehicles).
     #[serde(default)]
     pub watch: WatchName,
+    /// The side of the tiles states are published in (m, default 100; 1 to 100 000).
+    #[serde(default = "default_tile_m")]
+    pub tile_m: f64,
     /// How long after a shard sees every vehicle flying it proposes to start consensus
     /// (ms, default 200): more than the longest hop between shards.
     #[serde(default = "default_start_lead_ms")]
@@ -41,13 +46,19 @@ fn default_hop_ms() -> f64 {
     20.0
 }
 
-/// `all` or `neighbours`.
+fn default_tile_m() -> f64 {
+    crate::distributed::DEFAULT_TILE_M
+}
+
+/// `all`, `horizon` or `neighbours`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum WatchName {
     /// Every vehicle.
     #[default]
     All,
+    /// The ring in-neighbours and every vehicle within the safety filter's horizon.
+    Horizon,
     /// The ring in-neighbours of the shard's own vehicles.
     Neighbours,
 }
@@ -94,19 +105,42 @@ pub struct ShardLayout {
     pub connect: Vec<Vec<String>>,
     /// What a shard reads.
     pub watch: Watch,
+    /// The side of the tiles states are published in (m).
+    pub tile_m: f64,
     /// The start proposal's lead.
     pub start_lead: Duration,
 }
 
 impl ShardLayout {
-    /// The key a vehicle's state is published under:
-    /// `ringswarm/<swarm>/state/<network>/<sysid>`, `-` for a vehicle without a network.
-    pub fn state_key(&self, network: Option<&str>, system_id: u8) -> String {
+    /// The key prefix of a vehicle's state: `ringswarm/<swarm>/state/<network>/<sysid>`,
+    /// `-` for a vehicle without a network. The state is published under this prefix
+    /// and the tile of its position ([`Self::state_key`]).
+    pub fn state_prefix(&self, network: Option<&str>, system_id: u8) -> String {
         format!(
             "ringswarm/{}/state/{}/{system_id}",
             self.swarm,
             network.unwrap_or("-")
         )
+    }
+
+    /// The key a vehicle's state is published under: its [`Self::state_prefix`] and the
+    /// tile its position is in (`e<east>n<north>`, `tile_m` squares of the common frame;
+    /// `far` for a position outside the tiles' range).
+    pub fn state_key(&self, prefix: &str, pos_enu_m: [f32; 3]) -> String {
+        let pos = nalgebra::Vector2::new(f64::from(pos_enu_m[0]), f64::from(pos_enu_m[1]));
+        let tile = crate::distributed::Tile::of(pos, self.tile_m)
+            .map_or_else(|| "far".to_owned(), |t| t.chunk());
+        format!("{prefix}/{tile}")
+    }
+
+    /// What a shard subscribes to for a watched vehicle: its state in any tile.
+    pub fn watched_key(&self, prefix: &str) -> String {
+        format!("{prefix}/*")
+    }
+
+    /// What a shard subscribes to for a tile it reads: every vehicle's state in it.
+    pub fn tile_key(&self, tile: crate::distributed::Tile) -> String {
+        format!("ringswarm/{}/state/*/*/{}", self.swarm, tile.chunk())
     }
 
     /// The key a shard's report is published under: `ringswarm/<swarm>/shard/<name>`.
@@ -189,6 +223,12 @@ impl Config {
                 super::show(d.start_lead_ms)
             ));
         }
+        if !(d.tile_m.is_finite() && (1.0..=100_000.0).contains(&d.tile_m)) {
+            problems.push(format!(
+                "distributed.tile_m must be in [1, 100000] m, got {}",
+                super::show(d.tile_m)
+            ));
+        }
         if !(d.hop_ms.is_finite() && (0.0..=5_000.0).contains(&d.hop_ms)) {
             problems.push(format!(
                 "distributed.hop_ms must be in [0, 5000] ms, got {}",
@@ -210,7 +250,7 @@ impl Config {
         }
         if d.watch == WatchName::Neighbours && self.safety.enabled {
             problems.push(
-                "distributed.watch = \"neighbours\" leaves the safety filter blind to other shards' vehicles that are not ring neighbours: use watch = \"all\", or set [safety] enabled = false".to_owned(),
+                "distributed.watch = \"neighbours\" leaves the safety filter blind to other shards' vehicles that are not ring neighbours: use watch = \"horizon\" or \"all\", or set [safety] enabled = false".to_owned(),
             );
         }
         let mut seen_names: HashMap<&str, usize> = HashMap::new();
@@ -287,8 +327,10 @@ impl Config {
             connect: shards.iter().map(|s| s.connect.clone()).collect(),
             watch: match d.watch {
                 WatchName::All => Watch::All,
+                WatchName::Horizon => Watch::Horizon,
                 WatchName::Neighbours => Watch::Neighbours,
             },
+            tile_m: d.tile_m,
             start_lead: Duration::from_secs_f64(d.start_lead_ms / 1000.0),
         }))
     }
@@ -320,7 +362,10 @@ impl Config {
             ring,
             layout.watch,
         )
-        .map(|p| p.with_start_lead(layout.start_lead))
+        .map(|p| {
+            p.with_start_lead(layout.start_lead)
+                .with_tile_m(layout.tile_m)
+        })
         .map_err(|e| e.to_string())
     }
 }
@@ -453,7 +498,22 @@ connect = ["tcp/10.0.0.1:7447"]
         let config = Config::from_toml(&file(THREE)).unwrap();
         let layout = config.shard_layout().unwrap().unwrap();
         assert_eq!(layout.owner, vec![0, 0, 1, 1, 2, 2]);
-        assert_eq!(layout.state_key(None, 3), "ringswarm/paper/state/-/3");
+        let prefix = layout.state_prefix(None, 3);
+        assert_eq!(prefix, "ringswarm/paper/state/-/3");
+        // Tiles of 100 m: (−50, 250) is in tile (−1, 2).
+        assert_eq!(
+            layout.state_key(&prefix, [-50.0, 250.0, 30.0]),
+            "ringswarm/paper/state/-/3/e-1n2"
+        );
+        assert_eq!(
+            layout.state_key(&prefix, [f32::NAN, 0.0, 0.0]),
+            "ringswarm/paper/state/-/3/far"
+        );
+        assert_eq!(layout.watched_key(&prefix), "ringswarm/paper/state/-/3/*");
+        assert_eq!(
+            layout.tile_key(crate::distributed::Tile { east: 4, north: -2 }),
+            "ringswarm/paper/state/*/*/e4n-2"
+        );
         assert_eq!(layout.shard_key(2), "ringswarm/paper/shard/c");
         let setup = config.validate().unwrap();
         let plan = config.shard_plan("b", &setup.ring).unwrap();
@@ -536,6 +596,29 @@ vehicles = []
             .unwrap()
             .unwrap();
         assert_eq!(layout.watch, Watch::Neighbours);
+        let horizon = THREE.replace(
+            "swarm = \"paper\"",
+            "swarm = \"paper\"\nwatch = \"horizon\"\ntile_m = 50",
+        );
+        let config = Config::from_toml(&file(&horizon)).unwrap();
+        let layout = config.shard_layout().unwrap().unwrap();
+        assert_eq!((layout.watch, layout.tile_m), (Watch::Horizon, 50.0));
+        let setup = config.validate().unwrap();
+        assert_eq!(config.shard_plan("a", &setup.ring).unwrap().tile_m(), 50.0);
+        for bad in ["0.5", "nan", "1e6"] {
+            let text = THREE.replace(
+                "swarm = \"paper\"",
+                &format!("swarm = \"paper\"\ntile_m = {bad}"),
+            );
+            let err = Config::from_toml(&file(&text))
+                .unwrap()
+                .shard_layout()
+                .unwrap_err();
+            assert!(
+                err.contains("distributed.tile_m must be in [1, 100000] m, got"),
+                "{err}"
+            );
+        }
         // No split: one process, as before.
         assert_eq!(
             Config::from_toml(&file("")).unwrap().shard_layout(),

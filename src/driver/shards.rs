@@ -228,9 +228,9 @@ impl ShardedLockstep {
                 continue;
             }
             let reads = match message {
-                ShardMessage::Vehicle(v) => self.shards[to]
-                    .shard_plan()
-                    .is_some_and(|p| p.is_watched(usize::from(v.vehicle))),
+                // As its Zenoh subscriptions would: a watched neighbour, or a state
+                // in a tile it reads.
+                ShardMessage::Vehicle(v) => self.shards[to].shard_reads(v),
                 ShardMessage::Shard(_) => true,
             };
             if !reads {

@@ -50,6 +50,8 @@ pub trait ShardTransport {
     fn inbound(&mut self) -> &mut mpsc::Receiver<Vec<u8>>;
     /// Sends one message to the shards that read it (never waits).
     fn publish(&mut self, message: &crate::distributed::ShardMessage);
+    /// Reads the tiles the swarm's horizon holds (`watch = "horizon"`), from now on.
+    fn follow(&mut self, tiles: &crate::distributed::TileInterest);
     /// Sends what is queued and closes.
     fn close(self: Box<Self>);
 }
@@ -332,6 +334,9 @@ pub async fn run_swarm<O: Observer>(
         if let Some(s) = shards.as_mut() {
             while let Some(message) = swarm.poll_shard_message() {
                 s.publish(&message);
+            }
+            if let Some(tiles) = swarm.shard_tiles() {
+                s.follow(tiles);
             }
         }
         observer.swarm(&swarm, now());

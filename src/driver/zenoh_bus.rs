@@ -3,10 +3,12 @@
 //! and read through channels.
 //!
 //! - Publishes each [`ShardMessage`] the swarm makes: a vehicle's state under
-//!   `ringswarm/<swarm>/state/<network>/<sysid>`, the shard's report under
-//!   `ringswarm/<swarm>/shard/<name>`.
-//! - Subscribes to the state keys of the remote vehicles its plan watches, and to every
-//!   shard's report (`ringswarm/<swarm>/shard/*`).
+//!   `ringswarm/<swarm>/state/<network>/<sysid>/<tile>` (the tile its position is in),
+//!   the shard's report under `ringswarm/<swarm>/shard/<name>`.
+//! - Subscribes to the state keys of the remote vehicles its plan watches (any tile),
+//!   to every shard's report (`ringswarm/<swarm>/shard/*`), and, under
+//!   `watch = "horizon"`, to the tiles its swarm reads
+//!   (`ringswarm/<swarm>/state/*/*/<tile>`), declared again as they move.
 //! - Declares the liveliness token `ringswarm/<swarm>/alive/<name>` while it runs: any
 //!   Zenoh peer (`ringswarm view --zenoh`, a monitor) sees which shards are up.
 //!
@@ -14,6 +16,7 @@
 //! arrives while the coordinator's queue is full is dropped and counted: the next tick's
 //! replaces it.
 
+use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::thread::JoinHandle;
@@ -21,13 +24,30 @@ use std::thread::JoinHandle;
 use tokio::sync::mpsc;
 
 use crate::config::ShardLayout;
-use crate::distributed::{ShardMessage, ShardPlan, encode};
+use crate::distributed::{ShardMessage, ShardPlan, TileInterest, encode};
 
 /// Payloads waiting for the coordinator's loop at most.
 const INBOUND_QUEUE: usize = 4096;
 
-/// Messages waiting for the Zenoh thread at most.
+/// Orders waiting for the Zenoh thread at most.
 const OUTBOUND_QUEUE: usize = 65_536;
+
+/// The publisher slot of the shard's report (vehicles use their ring index).
+const REPORT_SLOT: usize = usize::MAX;
+
+/// What the coordinator asks of the Zenoh thread.
+#[derive(Debug)]
+enum Order {
+    /// Put `bytes` under `key` through slot `slot`'s publisher (declared again when
+    /// the key moves: a vehicle entering another tile).
+    Publish {
+        slot: usize,
+        key: String,
+        bytes: Vec<u8>,
+    },
+    /// Hold exactly these subscriptions besides the fixed ones.
+    Follow(Vec<String>),
+}
 
 /// Counters of a bus.
 #[derive(Debug, Default)]
@@ -42,15 +62,20 @@ pub struct BusStats {
     pub dropped_inbound: AtomicU64,
     /// Messages not published because the Zenoh thread's queue was full.
     pub dropped_outbound: AtomicU64,
+    /// Subscriptions declared after the start (tiles entering the horizon).
+    pub subscribed: AtomicU64,
 }
 
 /// The coordinator's side of the bus.
 pub struct ZenohBus {
     /// Payloads from other shards.
     pub inbound: mpsc::Receiver<Vec<u8>>,
-    outbound: mpsc::Sender<(String, Vec<u8>)>,
-    state_keys: Vec<String>,
+    outbound: mpsc::Sender<Order>,
+    layout: ShardLayout,
+    state_prefixes: Vec<String>,
     shard_key: String,
+    /// The tiles' generation last declared.
+    following: Option<u64>,
     stats: Arc<BusStats>,
     thread: Option<JoinHandle<()>>,
 }
@@ -72,6 +97,10 @@ impl crate::driver::udp::ShardTransport for ZenohBus {
         ZenohBus::publish(self, message);
     }
 
+    fn follow(&mut self, tiles: &TileInterest) {
+        ZenohBus::follow(self, tiles);
+    }
+
     fn close(self: Box<Self>) {
         ZenohBus::close(*self);
     }
@@ -91,15 +120,15 @@ impl ZenohBus {
         vehicles: &[(Option<String>, u8)],
     ) -> Result<Self, String> {
         let this = plan.this();
-        let state_keys: Vec<String> = vehicles
+        let state_prefixes: Vec<String> = vehicles
             .iter()
-            .map(|(network, id)| layout.state_key(network.as_deref(), *id))
+            .map(|(network, id)| layout.state_prefix(network.as_deref(), *id))
             .collect();
-        let watched: Vec<String> = state_keys
+        let watched: Vec<String> = state_prefixes
             .iter()
             .enumerate()
             .filter(|(i, _)| plan.is_watched(*i))
-            .map(|(_, k)| k.clone())
+            .map(|(_, k)| layout.watched_key(k))
             .collect();
         let reports = format!("ringswarm/{}/shard/*", layout.swarm);
         let alive = format!(
@@ -118,8 +147,10 @@ impl ZenohBus {
         Ok(Self {
             inbound,
             outbound,
-            state_keys,
+            layout: layout.clone(),
+            state_prefixes,
             shard_key: layout.shard_key(this),
+            following: None,
             stats,
             thread: Some(thread),
         })
@@ -141,8 +172,10 @@ impl ZenohBus {
         Ok(Self {
             inbound,
             outbound,
-            state_keys: Vec::new(),
+            layout: layout.clone(),
+            state_prefixes: Vec::new(),
             shard_key: String::new(),
+            following: None,
             stats,
             thread: Some(thread),
         })
@@ -150,17 +183,41 @@ impl ZenohBus {
 
     /// Hands a message to the Zenoh thread (never waits: a full queue drops it).
     pub fn publish(&self, message: &ShardMessage) {
-        let key = match message {
-            ShardMessage::Vehicle(v) => match self.state_keys.get(usize::from(v.vehicle)) {
-                Some(k) => k.clone(),
-                None => return,
-            },
-            ShardMessage::Shard(_) => self.shard_key.clone(),
+        let (slot, key) = match message {
+            ShardMessage::Vehicle(v) => {
+                let slot = usize::from(v.vehicle);
+                match self.state_prefixes.get(slot) {
+                    Some(prefix) => (slot, self.layout.state_key(prefix, v.pos_enu_m)),
+                    None => return,
+                }
+            }
+            ShardMessage::Shard(_) => (REPORT_SLOT, self.shard_key.clone()),
         };
         let mut bytes = Vec::with_capacity(48);
         encode(message, &mut bytes);
-        if self.outbound.try_send((key, bytes)).is_err() {
+        if self
+            .outbound
+            .try_send(Order::Publish { slot, key, bytes })
+            .is_err()
+        {
             self.stats.dropped_outbound.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Declares the subscriptions to `tiles` when they changed since the last call
+    /// (every state of the swarm when the horizon holds too many tiles).
+    pub fn follow(&mut self, tiles: &TileInterest) {
+        if self.following == Some(tiles.generation()) {
+            return;
+        }
+        let keys = if tiles.everything() {
+            vec![format!("ringswarm/{}/state/**", self.layout.swarm)]
+        } else {
+            tiles.tiles().map(|t| self.layout.tile_key(t)).collect()
+        };
+        // A full queue: try again on the next tick.
+        if self.outbound.try_send(Order::Follow(keys)).is_ok() {
+            self.following = Some(tiles.generation());
         }
     }
 
@@ -212,7 +269,7 @@ fn peer_config(listen: &[String], connect: &[String]) -> Result<zenoh::Config, S
 type Session = (
     JoinHandle<()>,
     mpsc::Receiver<Vec<u8>>,
-    mpsc::Sender<(String, Vec<u8>)>,
+    mpsc::Sender<Order>,
     Arc<BusStats>,
 );
 
@@ -228,7 +285,7 @@ fn start_session(
     alive: Option<String>,
 ) -> Result<Session, String> {
     let (in_tx, inbound) = mpsc::channel::<Vec<u8>>(INBOUND_QUEUE);
-    let (outbound, mut out_rx) = mpsc::channel::<(String, Vec<u8>)>(OUTBOUND_QUEUE);
+    let (outbound, mut out_rx) = mpsc::channel::<Order>(OUTBOUND_QUEUE);
     let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
     let stats = Arc::new(BusStats::default());
     let thread_stats = Arc::clone(&stats);
@@ -256,22 +313,10 @@ fn start_session(
                 };
                 let mut subscribers = Vec::new();
                 for key in &subscriptions {
-                    let tx = in_tx.clone();
-                    let stats = Arc::clone(&thread_stats);
-                    let declared = session
-                        .declare_subscriber(key.as_str())
-                        .callback(move |sample| {
-                            stats.received.fetch_add(1, Ordering::Relaxed);
-                            let bytes = sample.payload().to_bytes().into_owned();
-                            if tx.try_send(bytes).is_err() {
-                                stats.dropped_inbound.fetch_add(1, Ordering::Relaxed);
-                            }
-                        })
-                        .await;
-                    match declared {
+                    match subscribe(&session, key, &in_tx, &thread_stats).await {
                         Ok(s) => subscribers.push(s),
                         Err(e) => {
-                            let _ = ready_tx.send(Err(format!("subscribe to {key}: {e}")));
+                            let _ = ready_tx.send(Err(e));
                             return;
                         }
                     }
@@ -287,30 +332,57 @@ fn start_session(
                     None => None,
                 };
                 let _ = ready_tx.send(Ok(()));
-                let mut publishers = std::collections::HashMap::new();
-                while let Some((key, bytes)) = out_rx.recv().await {
-                    if !publishers.contains_key(&key) {
-                        match session.declare_publisher(key.clone()).await {
-                            Ok(p) => {
-                                publishers.insert(key.clone(), p);
+                let mut publishers: HashMap<usize, (String, zenoh::pubsub::Publisher<'static>)> =
+                    HashMap::new();
+                let mut followed: HashMap<String, zenoh::pubsub::Subscriber<()>> = HashMap::new();
+                while let Some(order) = out_rx.recv().await {
+                    match order {
+                        Order::Publish { slot, key, bytes } => {
+                            if publishers.get(&slot).is_none_or(|(k, _)| *k != key) {
+                                if let Some((_, old)) = publishers.remove(&slot) {
+                                    let _ = old.undeclare().await;
+                                }
+                                match session.declare_publisher(key.clone()).await {
+                                    Ok(p) => {
+                                        publishers.insert(slot, (key.clone(), p));
+                                    }
+                                    Err(e) => {
+                                        tracing::warn!(key, error = %e, "zenoh publisher refused");
+                                        continue;
+                                    }
+                                }
                             }
-                            Err(e) => {
-                                tracing::warn!(key, error = %e, "zenoh publisher refused");
-                                continue;
+                            if let Some((_, publisher)) = publishers.get(&slot) {
+                                let n = bytes.len() as u64;
+                                if publisher.put(bytes).await.is_ok() {
+                                    thread_stats.published.fetch_add(1, Ordering::Relaxed);
+                                    thread_stats.published_bytes.fetch_add(n, Ordering::Relaxed);
+                                }
                             }
                         }
-                    }
-                    if let Some(publisher) = publishers.get(&key) {
-                        let n = bytes.len() as u64;
-                        if publisher.put(bytes).await.is_ok() {
-                            thread_stats.published.fetch_add(1, Ordering::Relaxed);
-                            thread_stats.published_bytes.fetch_add(n, Ordering::Relaxed);
+                        Order::Follow(keys) => {
+                            followed.retain(|k, _| keys.contains(k));
+                            for key in keys {
+                                if followed.contains_key(&key) {
+                                    continue;
+                                }
+                                match subscribe(&session, &key, &in_tx, &thread_stats).await {
+                                    Ok(s) => {
+                                        thread_stats.subscribed.fetch_add(1, Ordering::Relaxed);
+                                        followed.insert(key, s);
+                                    }
+                                    Err(e) => {
+                                        tracing::warn!(error = %e, "zenoh subscription refused")
+                                    }
+                                }
+                            }
                         }
                     }
                 }
+                drop(followed);
                 drop(token);
                 drop(subscribers);
-                for (_, p) in publishers {
+                for (_, (_, p)) in publishers {
                     let _ = p.undeclare().await;
                 }
                 let _ = session.close().await;
@@ -326,4 +398,30 @@ fn start_session(
         Err(_) => return Err("the Zenoh thread stopped before its session opened".into()),
     }
     Ok((thread, inbound, outbound, stats))
+}
+
+/// Declares a subscriber to `key` whose samples go to `tx` (dropped and counted when its
+/// queue is full).
+///
+/// # Errors
+/// Zenoh refuses the key or the declaration, named.
+async fn subscribe(
+    session: &zenoh::Session,
+    key: &str,
+    tx: &mpsc::Sender<Vec<u8>>,
+    stats: &Arc<BusStats>,
+) -> Result<zenoh::pubsub::Subscriber<()>, String> {
+    let tx = tx.clone();
+    let stats = Arc::clone(stats);
+    session
+        .declare_subscriber(key)
+        .callback(move |sample| {
+            stats.received.fetch_add(1, Ordering::Relaxed);
+            let bytes = sample.payload().to_bytes().into_owned();
+            if tx.try_send(bytes).is_err() {
+                stats.dropped_inbound.fetch_add(1, Ordering::Relaxed);
+            }
+        })
+        .await
+        .map_err(|e| format!("subscribe to {key}: {e}"))
 }

@@ -341,6 +341,7 @@ mod tests {
             start_us: start.map(|(t, _)| t),
             start_sum: start.map(|(_, s)| s),
             now_sum: now,
+            top_speed_mps: 10.0,
         })
     }
 

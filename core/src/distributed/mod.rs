@@ -4,6 +4,7 @@
 //!
 //! - [`plan`]: which shard flies which vehicle, and which remote states a shard reads.
 //! - [`payload`]: the messages between shards and their versioned bytes.
+//! - [`tiles`]: where a state is published, and which a shard reads for its safety filter.
 //!
 //! The swarm machine takes these messages and makes them
 //! ([`crate::swarm::Swarm::handle_shard_message`], [`crate::swarm::Swarm::poll_shard_message`]);
@@ -11,9 +12,11 @@
 
 pub mod payload;
 pub mod plan;
+pub mod tiles;
 
 pub use payload::{
     MemberPhase, PAYLOAD_VERSION, PayloadError, ShardMessage, ShardReport, VehicleReport,
     WeightedSum, decode, encode,
 };
-pub use plan::{DEFAULT_START_LEAD, PlanError, ShardPlan, Watch};
+pub use plan::{DEFAULT_START_LEAD, DEFAULT_TILE_M, PlanError, ShardPlan, Watch};
+pub use tiles::{Tile, TileInterest};

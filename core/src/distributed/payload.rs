@@ -16,7 +16,7 @@
 use serde::{Deserialize, Serialize};
 
 /// The version of the payload's form; bumped on any change to the types below.
-pub const PAYLOAD_VERSION: u8 = 1;
+pub const PAYLOAD_VERSION: u8 = 2;
 
 /// Where a vehicle's link is, as another shard needs it: whether it flies on its
 /// shard's commands.
@@ -104,6 +104,9 @@ pub struct ShardReport {
     /// Its vehicles' `Σ wᵢ vᵢ` over the fresh states of this tick (the mean-velocity
     /// correction and the divergence guard read the swarm's from these).
     pub now_sum: WeightedSum,
+    /// The fastest of its vehicles now, as the safety filter measures speed (the
+    /// vertical axis scaled; m/s): the other shards size their horizon by it (version 2).
+    pub top_speed_mps: f32,
 }
 
 /// One payload between shards.
@@ -197,6 +200,7 @@ mod tests {
                 wv_mps: [90.3, 52.3],
                 w: 7.0,
             },
+            top_speed_mps: 14.9,
         })
     }
 

@@ -16,6 +16,11 @@ pub enum Watch {
     /// other shards are known by their reports alone. The safety filter then keeps the
     /// shard's vehicles apart from each other and from those neighbours only.
     Neighbours,
+    /// The ring in-neighbours, as `Neighbours`, plus every remote vehicle in a tile
+    /// within the safety filter's horizon of one of the shard's own vehicles
+    /// ([`super::tiles`]): the swarm-wide checks go by the shards' reports, and the
+    /// safety filter sees every vehicle close enough to matter.
+    Horizon,
 }
 
 impl Watch {
@@ -24,6 +29,7 @@ impl Watch {
         match self {
             Self::All => "all",
             Self::Neighbours => "neighbours",
+            Self::Horizon => "horizon",
         }
     }
 }
@@ -72,6 +78,7 @@ pub struct ShardPlan {
     watch: Watch,
     start_lead: Duration,
     epoch_us: u64,
+    tile_m: f64,
 }
 
 impl ShardPlan {
@@ -128,7 +135,7 @@ impl ShardPlan {
                 owner[j] != this
                     && match watch {
                         Watch::All => true,
-                        Watch::Neighbours => read_by[j].contains(&this),
+                        Watch::Neighbours | Watch::Horizon => read_by[j].contains(&this),
                     }
             })
             .collect();
@@ -136,7 +143,8 @@ impl ShardPlan {
             .map(|j| {
                 owner[j] == this
                     && match watch {
-                        Watch::All => shards > 1,
+                        // Any shard may have a vehicle near it.
+                        Watch::All | Watch::Horizon => shards > 1,
                         Watch::Neighbours => read_by[j].iter().any(|s| *s != this),
                     }
             })
@@ -155,6 +163,7 @@ impl ShardPlan {
             watch,
             start_lead: DEFAULT_START_LEAD,
             epoch_us: 0,
+            tile_m: DEFAULT_TILE_M,
         })
     }
 
@@ -168,6 +177,18 @@ impl ShardPlan {
     pub fn with_epoch_us(mut self, epoch_us: u64) -> Self {
         self.epoch_us = epoch_us;
         self
+    }
+
+    /// With states published in tiles of `tile_m` (m; finite and positive, the config
+    /// checks it). Every shard of a swarm uses the same.
+    pub fn with_tile_m(mut self, tile_m: f64) -> Self {
+        self.tile_m = tile_m;
+        self
+    }
+
+    /// The tiles' side (m).
+    pub fn tile_m(&self) -> f64 {
+        self.tile_m
     }
 
     /// This shard's index.
@@ -227,6 +248,10 @@ impl ShardPlan {
     }
 }
 
+/// The default [`ShardPlan::tile_m`] (m): a horizon of 60–130 m (vehicles at 5–15 m/s)
+/// then needs 4–9 tiles about one vehicle.
+pub const DEFAULT_TILE_M: f64 = 100.0;
+
 /// The default [`ShardPlan::start_lead`]: ten control periods at 50 Hz, ten times a
 /// 20 ms hop between shards.
 pub const DEFAULT_START_LEAD: Duration = Duration::from_millis(200);
@@ -257,6 +282,14 @@ mod tests {
         let watched: Vec<usize> = (0..6).filter(|i| all.is_watched(*i)).collect();
         assert_eq!(watched, vec![0, 1, 4, 5]);
         assert!(all.is_read_elsewhere(2) && all.is_read_elsewhere(3));
+        // The horizon reads the neighbours, as `Neighbours`, and publishes every vehicle.
+        let horizon =
+            ShardPlan::new(1, 3, vec![0, 0, 1, 1, 2, 2], &ring(6), Watch::Horizon).unwrap();
+        let watched: Vec<usize> = (0..6).filter(|i| horizon.is_watched(*i)).collect();
+        assert_eq!(watched, vec![1]);
+        let published: Vec<usize> = (0..6).filter(|i| horizon.is_read_elsewhere(*i)).collect();
+        assert_eq!(published, vec![2, 3]);
+        assert_eq!(horizon.tile_m(), DEFAULT_TILE_M);
     }
 
     #[test]

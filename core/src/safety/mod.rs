@@ -48,6 +48,13 @@ pub const LOOKAHEAD_S: f64 = 3.0;
 /// row that cannot be met inside the envelopes is met as nearly as they allow.
 pub const SLACK_COST: f64 = 1e4;
 
+/// The scaled distance (m) within which a pair is looked at: the separation, what two
+/// vehicles at `top_speed_mps` (scaled, as [`Separation::scaled`]) close head-on in
+/// `lookahead_s`, and a metre.
+pub fn look_radius_m(separation: &Separation, top_speed_mps: f64, lookahead_s: f64) -> f64 {
+    separation.horizontal_m + 2.0 * top_speed_mps * lookahead_s + 1.0
+}
+
 /// A barrier row counts as active when the command leaves less slack than this (m/s²).
 pub const ACTIVE_SLACK_MPS2: f64 = 1e-6;
 /// Rounds of the piecewise solve (rows an answer breaks join the pieces) before the
@@ -192,7 +199,7 @@ impl SafetyFilter {
             .filter_map(|a| a.side.map(|s| sep.scaled(s.vel_mps).norm()))
             .filter(|v| v.is_finite())
             .fold(0.0, f64::max);
-        let radius = sep.horizontal_m + 2.0 * top_speed * LOOKAHEAD_S + 1.0;
+        let radius = look_radius_m(&sep, top_speed, LOOKAHEAD_S);
         let pairs = self
             .sweep
             .pairs_within(&self.positions, sep.vertical_scale(), radius);

@@ -38,6 +38,7 @@
 mod events;
 mod fence;
 mod guard;
+mod horizon;
 mod laws;
 mod model;
 mod phases;

@@ -93,14 +93,21 @@ impl Swarm {
             } else if self.law.states[i].is_some()
                 && let Some(at) = self.remote_measured(i)
             {
-                // Another shard's vehicle: its state is as old as the hop made it.
-                age_s = age_s.max(now.saturating_since(at).as_secs_f64());
+                // Another shard's vehicle: its state is as old as the hop made it, and it
+                // answers its own shard's commands only after its attitude response
+                // (not measured here: counted as unmeasured).
+                let hop_s = now.saturating_since(at).as_secs_f64();
+                age_s = age_s.max(hop_s + period_s + UNMEASURED_RESPONSE_S);
             }
         }
         self.safety.agents.clear();
         self.safety.xy.clear();
         for i in 0..self.links.len() {
-            let controlled = self.law.states[i].is_some() && self.ours_in_air(i);
+            // A remote vehicle flown through its own shard's copy of this filter is a
+            // variable too: a pair split between shards is solved here as one process
+            // solves it, and each shard flies only its own vehicle's part.
+            let controlled =
+                self.law.states[i].is_some() && (self.ours_in_air(i) || self.cooperating_remote(i));
             let model = &self.law.flown_models[i];
             let envelope = &self.setup.envelope;
             let u_z = envelope.limit_vertical(self.law.commands[i].z, model);
@@ -178,7 +185,7 @@ impl Swarm {
             }
         }
         for (i, xy) in self.safety.xy.iter().enumerate() {
-            if self.safety.agents[i].controlled {
+            if self.safety.agents[i].controlled && !self.is_remote(i) {
                 self.law.commands[i].x = xy.x;
                 self.law.commands[i].y = xy.y;
             }

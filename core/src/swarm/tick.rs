@@ -45,6 +45,7 @@ impl Swarm {
                 None
             };
         }
+        self.update_horizon(now);
         self.transition(now);
         self.shard_prediction(now);
         self.observe_models(now);
@@ -75,12 +76,12 @@ impl Swarm {
         }
         self.isolate_non_finite(now, "the law's command");
         self.law.law_commands.copy_from_slice(&self.law.commands);
-        if let Some(p) = self.peers.as_ref() {
+        if self.peers.is_some() {
             // A vehicle whose command cannot be computed here (its state or a neighbour's
             // is not read) has none to saturate with.
-            for (i, c) in self.law.commands.iter_mut().enumerate() {
-                if !p.plan.is_computable(i) {
-                    *c = Vector3::zeros();
+            for i in 0..self.law.commands.len() {
+                if !self.computable_now(i) {
+                    self.law.commands[i] = Vector3::zeros();
                 }
             }
         }

@@ -1,0 +1,109 @@
+//! The horizon of a shard's safety filter ([`Watch::Horizon`]): which tiles of other
+//! shards' vehicle states it reads, re-reckoned on every control tick.
+//!
+//! The horizon is the distance at which the safety filter starts to look at a pair
+//! ([`look_radius_m`]), for the fastest vehicle of the swarm and a look-ahead of
+//! [`LOOKAHEAD_S`] plus [`SUBSCRIPTION_LAG_S`]: a vehicle of another shard that can
+//! come within the filter's reach before a new subscription delivers its state is
+//! already read. The fastest vehicle is the fastest this shard knows (its own, and the
+//! remote ones it reads) or any shard reports, heard within the link timeout.
+//!
+//! [`Watch::Horizon`]: crate::distributed::Watch::Horizon
+
+use ringswarm_wire::time::SimTime;
+
+use super::Swarm;
+use crate::distributed::tiles::SUBSCRIPTION_LAG_S;
+use crate::distributed::{TileInterest, VehicleReport};
+use crate::safety::{LOOKAHEAD_S, look_radius_m};
+
+impl Swarm {
+    /// The fastest of this shard's own vehicles with a fresh state (m/s, the vertical
+    /// axis scaled as the safety filter's separation does; plain speed without one).
+    pub(super) fn own_top_speed_mps(&self) -> f64 {
+        (0..self.links.len())
+            .filter(|i| !self.is_remote(*i))
+            .filter_map(|i| self.law.states[i])
+            .map(|s| self.scaled_speed_mps(s.vel_enu_mps))
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max)
+    }
+
+    fn scaled_speed_mps(&self, v: nalgebra::Vector3<f64>) -> f64 {
+        self.setup
+            .safety
+            .map_or(v.norm(), |s| s.separation.scaled(v).norm())
+    }
+
+    /// Re-reckons the tiles read from this shard's own vehicles' fresh positions: after
+    /// the states are in, before the safety filter. Without `[safety]`, none: nothing
+    /// but the ring neighbours is needed.
+    pub(super) fn update_horizon(&mut self, now: SimTime) {
+        let Some(p) = self.peers.as_ref() else {
+            return;
+        };
+        if p.tiles.is_none() {
+            return;
+        }
+        let timeout = self.link_timeout();
+        let reported = p
+            .reports
+            .iter()
+            .flatten()
+            .filter(|(at, _)| now.saturating_since(*at) <= timeout)
+            .map(|(_, r)| f64::from(r.top_speed_mps))
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max);
+        let known = self
+            .law
+            .states
+            .iter()
+            .flatten()
+            .map(|s| self.scaled_speed_mps(s.vel_enu_mps))
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max);
+        let radius = self.setup.safety.map_or(0.0, |s| {
+            look_radius_m(
+                &s.separation,
+                known.max(reported),
+                LOOKAHEAD_S + SUBSCRIPTION_LAG_S,
+            )
+        });
+        let own: Vec<nalgebra::Vector2<f64>> = if self.setup.safety.is_some() {
+            (0..self.links.len())
+                .filter(|i| !self.is_remote(*i))
+                .filter_map(|i| self.law.states[i])
+                .map(|s| s.pos_enu_m.xy())
+                .collect()
+        } else {
+            Vec::new()
+        };
+        if let Some(tiles) = self.peers.as_mut().and_then(|p| p.tiles.as_mut()) {
+            tiles.update(own, radius);
+        }
+    }
+
+    /// The tiles this shard reads (`Watch::Horizon` only): its transport subscribes to
+    /// them, and declares again when their [`TileInterest::generation`] moves.
+    pub fn shard_tiles(&self) -> Option<&TileInterest> {
+        self.peers.as_ref()?.tiles.as_ref()
+    }
+
+    /// Whether this shard's subscriptions take a vehicle's state: a ring neighbour it
+    /// watches, or (under the horizon) one in a tile it reads. What a transport without
+    /// Zenoh (lockstep) delivers by.
+    pub fn shard_reads(&self, report: &VehicleReport) -> bool {
+        let Some(p) = self.peers.as_ref() else {
+            return false;
+        };
+        let i = usize::from(report.vehicle);
+        if p.plan.is_watched(i) {
+            return true;
+        }
+        let pos = nalgebra::Vector2::new(
+            f64::from(report.pos_enu_m[0]),
+            f64::from(report.pos_enu_m[1]),
+        );
+        !p.plan.is_local(i) && p.tiles.as_ref().is_some_and(|t| t.reads(pos))
+    }
+}
