@@ -425,3 +425,106 @@ async fn subscribe(
         .await
         .map_err(|e| format!("subscribe to {key}: {e}"))
 }
+
+#[cfg(test)]
+mod tests {
+    use std::time::{Duration, Instant};
+
+    use nalgebra::Vector2;
+
+    use super::*;
+    use crate::consensus::RingDigraph;
+    use crate::distributed::{MemberPhase, VehicleReport, Watch, decode};
+
+    fn free_port() -> u16 {
+        std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .map(|a| a.port())
+            .expect("a free port")
+    }
+
+    fn report(vehicle: u16, x: f32, y: f32) -> ShardMessage {
+        ShardMessage::Vehicle(VehicleReport {
+            vehicle,
+            sent_us: 1,
+            age_us: 0,
+            phase: MemberPhase::Flying,
+            landed: false,
+            pos_enu_m: [x, y, 50.0],
+            vel_enu_mps: [0.0; 3],
+        })
+    }
+
+    /// The vehicles whose states reach `bus` while `publish` runs every 20 ms: until
+    /// `expected` are all in (at most 20 s), then 0.3 s more for any other.
+    fn heard(bus: &mut ZenohBus, expected: &[u16], publish: impl Fn()) -> Vec<u16> {
+        let mut seen = Vec::new();
+        let deadline = Instant::now() + Duration::from_secs(20);
+        let mut end: Option<Instant> = None;
+        while end.is_none_or(|e| Instant::now() < e) && Instant::now() < deadline {
+            publish();
+            std::thread::sleep(Duration::from_millis(20));
+            while let Ok(bytes) = bus.inbound.try_recv() {
+                if let Ok(ShardMessage::Vehicle(v)) = decode(&bytes) {
+                    seen.push(v.vehicle);
+                }
+            }
+            if end.is_none() && expected.iter().all(|e| seen.contains(e)) {
+                end = Some(Instant::now() + Duration::from_millis(300));
+            }
+        }
+        seen.sort_unstable();
+        seen.dedup();
+        seen
+    }
+
+    /// Two shards over real Zenoh on loopback: shard b reads its ring neighbour in any
+    /// tile, and the other vehicles only in the tiles it follows, as they move.
+    #[test]
+    fn a_shard_reads_its_neighbour_anywhere_and_the_others_by_tile() {
+        let port = free_port();
+        let layout = ShardLayout {
+            swarm: format!("tiles-{port}"),
+            names: ["a", "b", "c"].map(str::to_owned).to_vec(),
+            owner: vec![0, 0, 1, 1, 2, 2],
+            listen: vec![vec![format!("tcp/127.0.0.1:{port}")], vec![], vec![]],
+            connect: vec![vec![], vec![format!("tcp/127.0.0.1:{port}")], vec![]],
+            watch: Watch::Horizon,
+            tile_m: 100.0,
+            start_lead: Duration::from_millis(200),
+        };
+        let ring = RingDigraph::for_agents(6, 3.0).expect("ring");
+        let plan = |s| ShardPlan::new(s, 3, layout.owner.clone(), &ring, Watch::Horizon);
+        let vehicles: Vec<(Option<String>, u8)> = (1..=6).map(|id| (None, id)).collect();
+        let a = ZenohBus::open(&layout, &plan(0).expect("plan a"), &vehicles).expect("a");
+        let mut b = ZenohBus::open(&layout, &plan(1).expect("plan b"), &vehicles).expect("b");
+        // b follows the tiles about (50, 50) with a 60 m horizon: tiles (−1..=1)².
+        let mut tiles = TileInterest::new(100.0);
+        tiles.update([Vector2::new(50.0, 50.0)], 60.0);
+        b.follow(&tiles);
+        // Vehicle 1 (index 1) is b's ring in-neighbour: read at (950, 950). Vehicle 0 is
+        // in tile (0, 0): read. Vehicles 4 and 5 (shard c's, published here for it) are
+        // in tile (9, 9) and (1, 1).
+        let publish = |v4: (f32, f32)| {
+            a.publish(&report(0, 10.0, 10.0));
+            a.publish(&report(1, 950.0, 950.0));
+            a.publish(&report(4, v4.0, v4.1));
+            a.publish(&report(5, 150.0, 150.0));
+        };
+        let seen = heard(&mut b, &[0, 1, 5], || publish((950.0, 950.0)));
+        assert_eq!(seen, vec![0, 1, 5]);
+        // Vehicle 4 flies into tile (−1, 0): its publisher moves to that key, and b reads it.
+        let seen = heard(&mut b, &[4], || publish((-50.0, 50.0)));
+        assert_eq!(seen, vec![0, 1, 4, 5]);
+        // b's vehicles move away: the tiles about (1050, 1050) hold only vehicle 1's.
+        tiles.update([Vector2::new(1050.0, 1050.0)], 60.0);
+        b.follow(&tiles);
+        // (What was in flight when the subscriptions went is let through first.)
+        std::thread::sleep(Duration::from_millis(500));
+        while b.inbound.try_recv().is_ok() {}
+        let seen = heard(&mut b, &[1], || publish((-50.0, 50.0)));
+        assert_eq!(seen, vec![1]);
+        a.close();
+        b.close();
+    }
+}
