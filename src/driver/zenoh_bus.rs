@@ -15,6 +15,13 @@
 //! Payloads are the versioned bytes of [`crate::distributed::payload`]. A payload that
 //! arrives while the coordinator's queue is full is dropped and counted: the next tick's
 //! replaces it.
+//!
+//! Every publication carries a Zenoh timestamp (the session's hybrid logical clock:
+//! timestamping is on). On arrival a payload is taken only if its timestamp is newer than
+//! the last one taken under its key (a vehicle's key without its tile, or a shard's), so a
+//! payload reordered on the way, or the same one delivered through two subscriptions,
+//! never reaches the coordinator. The swarm machine still orders by the payload's own
+//! swarm-clock time, which lockstep (with no Zenoh) needs too.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -58,6 +65,10 @@ pub struct BusStats {
     pub published_bytes: AtomicU64,
     /// Payloads received.
     pub received: AtomicU64,
+    /// Payloads dropped on arrival because their Zenoh timestamp was not newer than the
+    /// last one taken under their key: reordered on the way, or the same sample through a
+    /// second subscription (a ring neighbour inside a followed tile).
+    pub not_newer: AtomicU64,
     /// Payloads received and dropped because the coordinator's queue was full.
     pub dropped_inbound: AtomicU64,
     /// Messages not published because the Zenoh thread's queue was full.
@@ -252,6 +263,9 @@ fn peer_config(listen: &[String], connect: &[String]) -> Result<zenoh::Config, S
     if !connect.is_empty() {
         settings.push(("connect/endpoints", json(connect)));
     }
+    // Each publication is stamped by the session's hybrid logical clock, for the order
+    // on arrival.
+    settings.push(("timestamping/enabled", "true".to_owned()));
     if !(listen.is_empty() && connect.is_empty()) {
         // Endpoints given: the shards find each other there, not by multicast.
         settings.push(("scouting/multicast/enabled", "false".to_owned()));
@@ -311,9 +325,10 @@ fn start_session(
                         return;
                     }
                 };
+                let newest: Newest = Arc::default();
                 let mut subscribers = Vec::new();
                 for key in &subscriptions {
-                    match subscribe(&session, key, &in_tx, &thread_stats).await {
+                    match subscribe(&session, key, &in_tx, &thread_stats, &newest).await {
                         Ok(s) => subscribers.push(s),
                         Err(e) => {
                             let _ = ready_tx.send(Err(e));
@@ -366,7 +381,9 @@ fn start_session(
                                 if followed.contains_key(&key) {
                                     continue;
                                 }
-                                match subscribe(&session, &key, &in_tx, &thread_stats).await {
+                                match subscribe(&session, &key, &in_tx, &thread_stats, &newest)
+                                    .await
+                                {
                                     Ok(s) => {
                                         thread_stats.subscribed.fetch_add(1, Ordering::Relaxed);
                                         followed.insert(key, s);
@@ -400,8 +417,45 @@ fn start_session(
     Ok((thread, inbound, outbound, stats))
 }
 
-/// Declares a subscriber to `key` whose samples go to `tx` (dropped and counted when its
-/// queue is full).
+/// The newest Zenoh timestamp taken under each ordering key ([`ordering_key`]), shared
+/// by every subscription of a session.
+type Newest = Arc<std::sync::Mutex<HashMap<String, zenoh::time::Timestamp>>>;
+
+/// What payloads are ordered under: a vehicle state's key without its tile (the vehicle
+/// moves from tile to tile), any other key whole.
+fn ordering_key(key: &str) -> &str {
+    if key.contains("/state/") {
+        key.rsplit_once('/').map_or(key, |(prefix, _)| prefix)
+    } else {
+        key
+    }
+}
+
+/// Whether a sample stamped `stamp` under `key` is newer than the last one taken there
+/// (and takes it). A sample without a timestamp (a publisher without timestamping) passes.
+fn newer(newest: &Newest, key: &str, stamp: Option<&zenoh::time::Timestamp>) -> bool {
+    let Some(stamp) = stamp else {
+        return true;
+    };
+    let Ok(mut map) = newest.lock() else {
+        return true;
+    };
+    let key = ordering_key(key);
+    match map.get_mut(key) {
+        Some(last) if *last >= *stamp => false,
+        Some(last) => {
+            *last = *stamp;
+            true
+        }
+        None => {
+            map.insert(key.to_owned(), *stamp);
+            true
+        }
+    }
+}
+
+/// Declares a subscriber to `key` whose samples go to `tx` when newer than the last taken
+/// under their key (dropped and counted otherwise, and when `tx` is full).
 ///
 /// # Errors
 /// Zenoh refuses the key or the declaration, named.
@@ -410,13 +464,19 @@ async fn subscribe(
     key: &str,
     tx: &mpsc::Sender<Vec<u8>>,
     stats: &Arc<BusStats>,
+    newest: &Newest,
 ) -> Result<zenoh::pubsub::Subscriber<()>, String> {
     let tx = tx.clone();
     let stats = Arc::clone(stats);
+    let newest = Arc::clone(newest);
     session
         .declare_subscriber(key)
         .callback(move |sample| {
             stats.received.fetch_add(1, Ordering::Relaxed);
+            if !newer(&newest, sample.key_expr().as_str(), sample.timestamp()) {
+                stats.not_newer.fetch_add(1, Ordering::Relaxed);
+                return;
+            }
             let bytes = sample.payload().to_bytes().into_owned();
             if tx.try_send(bytes).is_err() {
                 stats.dropped_inbound.fetch_add(1, Ordering::Relaxed);
@@ -516,6 +576,30 @@ mod tests {
         // Vehicle 4 flies into tile (−1, 0): its publisher moves to that key, and b reads it.
         let seen = heard(&mut b, &[4], || publish((-50.0, 50.0)));
         assert_eq!(seen, vec![0, 1, 4, 5]);
+        // Vehicle 1 in a followed tile comes through two subscriptions: each of its
+        // samples is taken once, by its Zenoh timestamp.
+        let before = b.stats().not_newer.load(Ordering::Relaxed);
+        let mut ones = 0;
+        for _ in 0..20 {
+            a.publish(&report(1, 20.0, 20.0));
+            std::thread::sleep(Duration::from_millis(20));
+            while let Ok(bytes) = b.inbound.try_recv() {
+                ones += usize::from(
+                    matches!(decode(&bytes), Ok(ShardMessage::Vehicle(v)) if v.vehicle == 1),
+                );
+            }
+        }
+        std::thread::sleep(Duration::from_millis(300));
+        while let Ok(bytes) = b.inbound.try_recv() {
+            ones += usize::from(
+                matches!(decode(&bytes), Ok(ShardMessage::Vehicle(v)) if v.vehicle == 1),
+            );
+        }
+        let doubles = b.stats().not_newer.load(Ordering::Relaxed) - before;
+        assert!(
+            ones <= 20 && doubles >= 10,
+            "{ones} taken, {doubles} dropped"
+        );
         // b's vehicles move away: the tiles about (1050, 1050) hold only vehicle 1's.
         tiles.update([Vector2::new(1050.0, 1050.0)], 60.0);
         b.follow(&tiles);
@@ -524,6 +608,11 @@ mod tests {
         while b.inbound.try_recv().is_ok() {}
         let seen = heard(&mut b, &[1], || publish((-50.0, 50.0)));
         assert_eq!(seen, vec![1]);
+        assert_eq!(
+            ordering_key("ringswarm/s/state/-/3/e1n2"),
+            "ringswarm/s/state/-/3"
+        );
+        assert_eq!(ordering_key("ringswarm/s/shard/a"), "ringswarm/s/shard/a");
         a.close();
         b.close();
     }
