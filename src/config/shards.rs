@@ -194,7 +194,7 @@ impl Config {
     /// Every problem, one per line: `[distributed]` without `[[shard]]` or the other way
     /// round, a name unfit for a key or used twice, a vehicle in no shard or in two, a
     /// shard naming a vehicle the file does not have, a shard with none, an endpoint that
-    /// does not parse, a `[target]` (not flown by shards yet), `watch = "neighbours"`
+    /// does not parse, `watch = "neighbours"`
     /// with the safety filter on.
     pub fn shard_layout(&self) -> Result<Option<ShardLayout>, String> {
         let (d, shards) = match (&self.distributed, self.shard.is_empty()) {
@@ -241,12 +241,6 @@ impl Config {
                 super::show(d.start_lead_ms),
                 super::show(2.0 * d.hop_ms)
             ));
-        }
-        if self.target.is_some() {
-            problems.push(
-                "[target] is not flown by shards yet: its planner needs every vehicle's velocity at one instant"
-                    .to_owned(),
-            );
         }
         if d.watch == WatchName::Neighbours && self.safety.enabled {
             problems.push(

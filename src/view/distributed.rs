@@ -342,6 +342,8 @@ mod tests {
             start_sum: start.map(|(_, s)| s),
             now_sum: now,
             top_speed_mps: 10.0,
+            planned: false,
+            plan_velocities: None,
         })
     }
 

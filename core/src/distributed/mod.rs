@@ -15,8 +15,8 @@ pub mod plan;
 pub mod tiles;
 
 pub use payload::{
-    MemberPhase, PAYLOAD_VERSION, PayloadError, ShardMessage, ShardReport, VehicleReport,
-    WeightedSum, decode, encode,
+    MemberPhase, PAYLOAD_VERSION, PayloadError, PlanVelocities, ShardMessage, ShardReport,
+    VehicleReport, WeightedSum, decode, encode,
 };
 pub use plan::{DEFAULT_START_LEAD, DEFAULT_TILE_M, PlanError, ShardPlan, Watch};
 pub use tiles::{Tile, TileInterest};

@@ -107,6 +107,26 @@ pub struct ShardReport {
     /// The fastest of its vehicles now, as the safety filter measures speed (the
     /// vertical axis scaled; m/s): the other shards size their horizon by it (version 2).
     pub top_speed_mps: f32,
+    /// With a `[target]`: whether it has made the flight's plan. The start proposals of
+    /// shards that have not (the plan's instant) and of shards that have (consensus) are
+    /// never taken for each other (version 2).
+    pub planned: bool,
+    /// With a `[target]`: its vehicles' velocities at the adopted plan instant, sent until
+    /// every other shard reports its plan made (version 2).
+    pub plan_velocities: Option<PlanVelocities>,
+}
+
+/// A shard's vehicles' velocities at the plan instant: every shard plans from all of
+/// them, so every shard makes the same plan.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct PlanVelocities {
+    /// The adopted plan instant (µs, swarm clock).
+    pub at_us: u64,
+    /// Its vehicles' horizontal velocities then (m/s, ENU), in ring order.
+    pub vel_mps: Vec<[f64; 2]>,
+    /// Each one's top speed for the planner (m/s; from its drag as its own shard
+    /// estimates it), `None` where there is none.
+    pub limit_mps: Vec<Option<f64>>,
 }
 
 /// One payload between shards.
@@ -201,6 +221,12 @@ mod tests {
                 w: 7.0,
             },
             top_speed_mps: 14.9,
+            planned: false,
+            plan_velocities: Some(PlanVelocities {
+                at_us: 1_764_000_000_500_000,
+                vel_mps: vec![[12.9, 7.48], [-1.0, 0.25]],
+                limit_mps: vec![Some(19.5), None],
+            }),
         })
     }
 

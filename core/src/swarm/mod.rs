@@ -418,12 +418,6 @@ impl Swarm {
                 "the shard plan does not give each of the {n} vehicles a shard"
             ));
         }
-        if setup.target.is_some() {
-            return Err(
-                "a [target] velocity is not flown by shards yet: its planner needs every vehicle's velocity at one instant"
-                    .to_owned(),
-            );
-        }
         let mut swarm = Self::new(setup);
         for i in (0..n).filter(|i| !plan.is_local(*i)) {
             // Never due: a remote vehicle's link is its own shard's.

@@ -28,7 +28,9 @@ impl Swarm {
     /// Every vehicle within [`PLAN_ALTITUDE_M`] of the commanded altitude and slower than
     /// [`PLAN_CLIMB_MPS`] vertically.
     fn level_at_altitude(&self) -> bool {
-        self.law.states.iter().all(|s| {
+        // Over the vehicles known here (every one in one process).
+        let known = (0..self.law.states.len()).filter(|i| self.is_known(*i));
+        known.map(|i| self.law.states[i]).all(|s| {
             s.is_some_and(|s| {
                 (s.pos_enu_m.z - self.setup.altitude_m).abs() < PLAN_ALTITUDE_M
                     && s.vel_enu_mps.z.abs() < PLAN_CLIMB_MPS
@@ -100,8 +102,11 @@ impl Swarm {
                     self.law.states[agent]
                         .map_or(f64::INFINITY, |s| (s.vel_enu_mps.xy() - v).norm())
                 };
+                // With shards, each judges its own re-targeted vehicles, and consensus
+                // starts once every shard is ready (start_when_agreed).
                 let worst = retarget
                     .iter()
+                    .filter(|(agent, _)| !self.is_remote(*agent))
                     .map(|r| (off(r), *r))
                     .max_by(|a, b| a.0.total_cmp(&b.0));
                 // The prediction is the w-weighted mean at the start of consensus: that
@@ -121,11 +126,15 @@ impl Swarm {
                     .target
                     .map_or(Duration::from_secs(30), |t| t.timeout);
                 match worst {
-                    None => self.start_consensus(now),
+                    None => self.start_when_agreed(now),
                     Some((error, _))
                         if mean_off < tolerance * share && error < RETARGET_AGENT_TOLERANCE_MPS =>
                     {
-                        self.start_consensus(now)
+                        self.start_when_agreed(now)
+                    }
+                    Some(_) if now.saturating_since(since) >= timeout && self.start_proposed() => {
+                        // Timed out before, and said so: waiting for the other shards.
+                        self.start_when_agreed(now)
                     }
                     Some((_, (agent, v))) if now.saturating_since(since) >= timeout => {
                         let at =
@@ -146,7 +155,7 @@ impl Swarm {
                                 v.y
                             ),
                         );
-                        self.start_consensus(now);
+                        self.start_when_agreed(now);
                     }
                     Some(_) => {}
                 }

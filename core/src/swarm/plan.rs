@@ -15,9 +15,10 @@ impl Swarm {
     /// Runs once; allocates (the planner and the stability check), like the start of
     /// consensus.
     pub(super) fn plan_target(&mut self, now: SimTime) {
-        let Some(target) = self.setup.target else {
+        if self.peers.is_some() {
+            self.plan_in_shards(now);
             return;
-        };
+        }
         let velocities: Vec<Vector2<f64>> = self
             .law
             .states
@@ -25,11 +26,59 @@ impl Swarm {
             .flatten()
             .map(|s| s.vel_enu_mps.xy())
             .collect();
+        let limits = (0..self.links.len())
+            .map(|i| self.vehicle_speed_limit_mps(i))
+            .collect();
+        self.plan_from(now, velocities, limits);
+    }
+
+    /// With shards: the plan at an instant every shard adopts, from every vehicle's
+    /// velocity and top speed then. This shard agrees on the instant as on a consensus
+    /// start, takes its own vehicles' velocities at it, and plans once every shard's are
+    /// in: every shard plans from the same numbers, to the same plan. It then re-targets
+    /// its own vehicles, and consensus starts at an instant agreed anew.
+    fn plan_in_shards(&mut self, now: SimTime) {
+        if self.peers.as_ref().is_some_and(|p| p.plan_own.is_none()) {
+            if !self.start_due(now) {
+                return;
+            }
+            let own: Vec<super::shard::OwnPlanInput> = (0..self.links.len())
+                .filter(|i| !self.is_remote(*i))
+                .map(|i| {
+                    let v = self.law.states[i].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
+                    (v, self.vehicle_speed_limit_mps(i))
+                })
+                .collect();
+            let Some(p) = self.peers.as_mut() else {
+                return;
+            };
+            let at = p.adopted_start().unwrap_or(now);
+            p.plan_own = Some((at, own));
+            self.log.push(
+                now,
+                false,
+                format!(
+                    "plan instant adopted at {:.3} s: waiting for every shard's velocities",
+                    at.as_secs_f64()
+                ),
+            );
+        }
+        let Some(inputs) = self.peers.as_ref().and_then(|p| p.plan_inputs()) else {
+            return;
+        };
+        self.plan_from(now, inputs.velocities_mps, inputs.limits_mps);
+    }
+
+    /// Planner stage 0 from every vehicle's velocity and top speed (ring order).
+    fn plan_from(&mut self, now: SimTime, velocities: Vec<Vector2<f64>>, limits: Vec<Option<f64>>) {
+        let Some(target) = self.setup.target else {
+            return;
+        };
         // Stage 1: the others keep these velocities, with feedback.
         for (keep, v) in self.law.keep_velocity.iter_mut().zip(&velocities) {
             *keep = Some(*v);
         }
-        let decision = match self.planned_ring(&target, velocities) {
+        let decision = match self.planned_ring(&target, velocities, &limits) {
             Ok((ring, retarget)) => {
                 let k = ring.k();
                 self.law.w = (0..self.links.len()).map(|i| ring.w(i)).collect();
@@ -68,6 +117,16 @@ impl Swarm {
             PlanDecision::Planned { retarget, .. } if !retarget.is_empty()
         );
         self.plan = Some(decision);
+        if let Some(p) = self.peers.as_mut() {
+            // Every shard re-targets its own vehicles (if any), then consensus starts at
+            // an instant agreed anew among shards that have all planned.
+            p.planned = true;
+            p.reweigh(&self.law.w);
+            self.new_round(now);
+            self.phase = SwarmPhase::Retargeting(now);
+            self.first_law.get_or_insert(now);
+            return;
+        }
         if retargeting {
             self.phase = SwarmPhase::Retargeting(now);
             self.first_law.get_or_insert(now);
@@ -83,8 +142,9 @@ impl Swarm {
         &self,
         target: &TargetVelocity,
         velocities: Vec<Vector2<f64>>,
+        per_vehicle: &[Option<f64>],
     ) -> Result<(RingDigraph, Vec<Retargeted>), String> {
-        let limits = self.speed_limits_mps(target);
+        let limits = speed_limits_mps(target, per_vehicle);
         let max_speed_mps = limits.iter().copied().reduce(f64::min);
         let k_max = self.k_max_the_airframes_fly(target)?;
         let plan = crate::consensus::plan(&PlanRequest {
@@ -144,27 +204,6 @@ impl Swarm {
         Ok((ring, retarget))
     }
 
-    /// Each vehicle's speed limit for the planner (m/s): `target.max_speed_mps` and its
-    /// drag-limited top speed ([`Swarm::vehicle_speed_limit_mps`]), the smaller; empty
-    /// when neither is known.
-    fn speed_limits_mps(&self, target: &TargetVelocity) -> Vec<f64> {
-        let limits: Vec<Option<f64>> = (0..self.links.len())
-            .map(
-                |i| match (target.max_speed_mps, self.vehicle_speed_limit_mps(i)) {
-                    (Some(a), Some(b)) => Some(a.min(b)),
-                    (a, b) => a.or(b),
-                },
-            )
-            .collect();
-        if limits.iter().all(Option::is_none) {
-            return Vec::new();
-        }
-        limits
-            .into_iter()
-            .map(|l| l.unwrap_or(MAX_SPEED_MPS))
-            .collect()
-    }
-
     /// `target.k_max`, lowered if needed so that the law's fastest mode stays within what
     /// the bandwidth gate allows (`setup.bandwidth`): the largest `k` that fits, by
     /// bisection (the fastest mode grows with `k`, through `βμ_max ≈ β(2 + k)`).
@@ -209,6 +248,26 @@ impl Swarm {
         let model = self.law.flown_models.get(i)?;
         (d > 0.0).then(|| SPEED_MARGIN * self.setup.envelope.horizontal_limit_mps2(0.0, model) / d)
     }
+}
+
+/// Each vehicle's speed limit for the planner (m/s): `target.max_speed_mps` and its own
+/// drag-limited top speed (`per_vehicle`, [`Swarm::vehicle_speed_limit_mps`]), the
+/// smaller; empty when neither is known for any vehicle.
+fn speed_limits_mps(target: &TargetVelocity, per_vehicle: &[Option<f64>]) -> Vec<f64> {
+    let limits: Vec<Option<f64>> = per_vehicle
+        .iter()
+        .map(|own| match (target.max_speed_mps, *own) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        })
+        .collect();
+    if limits.iter().all(Option::is_none) {
+        return Vec::new();
+    }
+    limits
+        .into_iter()
+        .map(|l| l.unwrap_or(MAX_SPEED_MPS))
+        .collect()
 }
 
 /// Fraction of the drag-limited top speed the planner may ask for.

@@ -37,8 +37,8 @@ use ringswarm_wire::time::SimTime;
 
 use super::{CommonState, Swarm, SwarmPhase};
 use crate::distributed::{
-    MemberPhase, ShardMessage, ShardPlan, ShardReport, TileInterest, VehicleReport, Watch,
-    WeightedSum,
+    MemberPhase, PlanVelocities, ShardMessage, ShardPlan, ShardReport, TileInterest, VehicleReport,
+    Watch, WeightedSum,
 };
 use crate::vehicle::Phase;
 
@@ -90,6 +90,11 @@ pub(super) struct Peers {
     predicted: bool,
     /// This shard's `Σ wᵢ vᵢ` on the last control tick.
     now_sum: WeightedSum,
+    /// With a `[target]`: the adopted plan instant and this shard's vehicles' velocities
+    /// and top speeds then (ring order), once taken.
+    pub(super) plan_own: Option<(SimTime, Vec<OwnPlanInput>)>,
+    /// With a `[target]`: whether this shard has made the flight's plan.
+    pub(super) planned: bool,
     outbox: VecDeque<ShardMessage>,
     /// Messages refused: from this shard's own index, out of range, or older than the
     /// one kept.
@@ -121,6 +126,8 @@ impl Peers {
             started: None,
             predicted: false,
             now_sum: WeightedSum::default(),
+            plan_own: None,
+            planned: false,
             outbox: VecDeque::new(),
             refused: 0,
             dropped: 0,
@@ -179,8 +186,10 @@ impl Peers {
     }
 
     /// The earliest start proposed in this round, this shard's own included.
-    fn adopted_start(&self) -> Option<SimTime> {
+    pub(super) fn adopted_start(&self) -> Option<SimTime> {
         let others = self.reports.iter().flatten().filter_map(|(_, r)| {
+            // A plan instant and a consensus start are never taken for each other.
+            (r.planned == self.planned).then_some(())?;
             r.start_us
                 .map(|us| self.local_time_of(us))
                 .filter(|t| *t >= self.round_since)
@@ -211,8 +220,64 @@ impl Peers {
         self.reports.iter().enumerate().all(|(s, r)| {
             s == self.plan.this()
                 || r.as_ref()
-                    .is_some_and(|(_, r)| r.start_us == Some(start_us))
+                    .is_some_and(|(_, r)| r.start_us == Some(start_us) && r.planned == self.planned)
         })
+    }
+
+    /// With a `[target]`: every vehicle's velocity at the adopted plan instant and its
+    /// top speed for the planner, in ring order, once every shard's are in (this shard's
+    /// own from `plan_own`).
+    pub(super) fn plan_inputs(&self) -> Option<PlanInputs> {
+        let (at, own) = self.plan_own.as_ref()?;
+        let at_us = self.to_swarm_us(*at);
+        let mut lists = Vec::with_capacity(self.reports.len());
+        for (s, r) in self.reports.iter().enumerate() {
+            if s == self.plan.this() {
+                lists.push(None);
+                continue;
+            }
+            let v = r.as_ref()?.1.plan_velocities.as_ref()?;
+            let count = self.plan.vehicles_of(s);
+            if v.at_us != at_us || v.vel_mps.len() != count || v.limit_mps.len() != count {
+                return None;
+            }
+            lists.push(Some((v.vel_mps.iter(), v.limit_mps.iter())));
+        }
+        let mut own = own.iter();
+        let n = self.remote.len();
+        let mut inputs = PlanInputs {
+            velocities_mps: Vec::with_capacity(n),
+            limits_mps: Vec::with_capacity(n),
+        };
+        for i in 0..n {
+            let s = self.plan.owner(i)?;
+            let (v, limit) = if s == self.plan.this() {
+                *own.next()?
+            } else {
+                let (vel, lim) = lists.get_mut(s)?.as_mut()?;
+                let [x, y] = *vel.next()?;
+                (Vector2::new(x, y), *lim.next()?)
+            };
+            inputs.velocities_mps.push(v);
+            inputs.limits_mps.push(limit);
+        }
+        Some(inputs)
+    }
+
+    /// Whether every other shard reports its plan made: this shard's plan velocities
+    /// are needed no more.
+    fn others_planned(&self) -> bool {
+        self.reports
+            .iter()
+            .enumerate()
+            .all(|(s, r)| s == self.plan.this() || r.as_ref().is_some_and(|(_, r)| r.planned))
+    }
+
+    /// The weights changed (a plan's `k`): the saturation's weights follow.
+    pub(super) fn reweigh(&mut self, w: &[f64]) {
+        for (i, (sw, w)) in self.saturation_weights.iter_mut().zip(w).enumerate() {
+            *sw = if self.plan.is_computable(i) { *w } else { 0.0 };
+        }
     }
 
     /// The swarm's w-weighted mean position and velocity at `start`, from every shard's
@@ -248,6 +313,20 @@ impl Peers {
     fn prediction(&self, start: SimTime, own: WeightedSum) -> Option<Vector2<f64>> {
         self.start_means(start, own).map(|(_, v)| v)
     }
+}
+
+/// One of this shard's vehicles at the plan instant: its velocity (m/s, ENU) and its top
+/// speed for the planner (m/s, if any).
+pub(super) type OwnPlanInput = (Vector2<f64>, Option<f64>);
+
+/// What every shard plans from: each vehicle's velocity at the plan instant and its top
+/// speed for the planner, in ring order.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct PlanInputs {
+    /// Velocities (m/s, ENU).
+    pub(super) velocities_mps: Vec<Vector2<f64>>,
+    /// Top speeds (m/s), `None` where there is none.
+    pub(super) limits_mps: Vec<Option<f64>>,
 }
 
 /// What another shard is told of a link's phase.
@@ -535,6 +614,19 @@ impl Swarm {
         }
     }
 
+    /// Starts consensus now (one process) or at the instant every shard adopts.
+    pub(super) fn start_when_agreed(&mut self, now: SimTime) {
+        if self.start_due(now) {
+            self.start_consensus(now);
+        }
+    }
+
+    /// Whether this shard has proposed a start in the current round (always false in one
+    /// process, which starts at once).
+    pub(super) fn start_proposed(&self) -> bool {
+        self.peers.as_ref().is_some_and(|p| p.proposal.is_some())
+    }
+
     /// Not every vehicle flies in this shard's view: it vouches for no start (its
     /// proposal stays, for when they fly again).
     pub(super) fn withdraw_start(&mut self) {
@@ -716,21 +808,33 @@ impl Swarm {
         }
         let in_round = matches!(
             phase,
-            SwarmPhase::Handshake | SwarmPhase::Holding(_) | SwarmPhase::Consensus(_)
+            SwarmPhase::Handshake
+                | SwarmPhase::Retargeting(_)
+                | SwarmPhase::Holding(_)
+                | SwarmPhase::Consensus(_)
         );
         let start = p.started.map(|(t, _)| t).or(p.agreed);
-        let report = ShardReport {
-            shard: u16::try_from(p.plan.this()).unwrap_or(u16::MAX),
-            sent_us: p.to_swarm_us(now),
-            vehicles,
-            flying,
-            lost,
-            ended,
-            start_us: start.filter(|_| in_round).map(|t| p.to_swarm_us(t)),
-            start_sum: p.started.map(|(_, s)| s).filter(|_| in_round),
-            now_sum: own,
-            top_speed_mps: top_speed,
-        };
+        let report =
+            ShardReport {
+                shard: u16::try_from(p.plan.this()).unwrap_or(u16::MAX),
+                sent_us: p.to_swarm_us(now),
+                vehicles,
+                flying,
+                lost,
+                ended,
+                start_us: start.filter(|_| in_round).map(|t| p.to_swarm_us(t)),
+                start_sum: p.started.map(|(_, s)| s).filter(|_| in_round),
+                now_sum: own,
+                top_speed_mps: top_speed,
+                planned: p.planned,
+                plan_velocities: p.plan_own.as_ref().filter(|_| !p.others_planned()).map(
+                    |(at, v)| PlanVelocities {
+                        at_us: p.to_swarm_us(*at),
+                        vel_mps: v.iter().map(|(v, _)| [v.x, v.y]).collect(),
+                        limit_mps: v.iter().map(|(_, l)| *l).collect(),
+                    },
+                ),
+            };
         p.push(ShardMessage::Shard(report));
     }
 }
