@@ -1,5 +1,5 @@
 //! The bodies of the fuzz targets (`fuzz/fuzz_targets`, run with `scripts/fuzz.sh`), here
-//! so that `tests/fuzz_smoke.rs` runs the same code on the seed corpus and on seeded
+//! so that `tests/integration/fuzz_smoke.rs` runs the same code on the seed corpus and on seeded
 //! random inputs in every test run. Each takes arbitrary bytes and must not panic; the
 //! inbound ones also check what comes out.
 //!

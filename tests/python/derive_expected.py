@@ -1,4 +1,4 @@
-"""Prints every expected value used by tests/paper_examples.rs, derived with numpy.
+"""Prints every expected value used by tests/integration/paper_examples.rs, derived with numpy.
 
 Run: .venv/bin/python tests/python/derive_expected.py
 """

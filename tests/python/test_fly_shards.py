@@ -88,7 +88,7 @@ def test_a_killed_shard_makes_the_other_hold(tmp_path):
         assert "brake and hold" in row[-1], row
         # Its cause: shard b's vehicles' states gone stale (300 ms), or its reports silent
         # (1.5 s), whichever came first; the timing itself is pinned in virtual time
-        # (tests/lockstep_shards.rs).
+        # (tests/integration/lockstep_shards.rs).
         assert "a vehicle is lost" in row[-1] and row[1] == "", row
         start_row = next(r for r in events(out_a) if START.search(r[-1]))
         assert float(row[0]) > float(start_row[0])

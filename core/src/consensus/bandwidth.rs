@@ -19,7 +19,7 @@
 //!   [`HOP_PRODUCT`] (`τ` the one-way delay between shards). The neighbour states that
 //!   cross it are carried forward by their age, which keeps much of the delay's phase
 //!   lag out of the loop; what is left was measured in lockstep on paper-sim1 split in
-//!   three (`ω = 34.8 1/s`, tests/lockstep_shards.rs), safety filter on: up to
+//!   three (`ω = 34.8 1/s`, tests/integration/lockstep_shards.rs), safety filter on: up to
 //!   `ω·τ = 4.2` (120 ms) the formation closes to 5 mm, with 30 % jitter and 5 % loss
 //!   too; from 4.5 (130 ms, with jitter) or 4.9 (140 ms, without) the safety filter,
 //!   which counts the hop and the remote vehicle's response in the age of what it knows,

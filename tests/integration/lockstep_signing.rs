@@ -1,7 +1,7 @@
 //! MAVLink 2 signing in lockstep: the paper's first simulation flown with every frame
 //! signed on both sides, and vehicles holding another key (or none) left on the ground.
 
-mod common;
+use crate::common;
 
 use ringswarm::driver::Observer;
 use ringswarm::driver::lockstep::Lockstep;

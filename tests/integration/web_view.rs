@@ -22,7 +22,7 @@ use ringswarm_wire::time::SimTime;
 use serde_json::Value;
 use tokio_tungstenite::tungstenite::Message;
 
-const SIM1: &str = include_str!("../config/paper-sim1.toml");
+const SIM1: &str = include_str!("../../config/paper-sim1.toml");
 
 fn sim1() -> Lockstep {
     Lockstep::from_config(&Config::from_toml(SIM1).expect("parses")).expect("scenario")
@@ -468,7 +468,7 @@ fn a_directory_that_is_not_a_run_directory_is_named() {
 fn the_state_names_the_constraints_the_safety_filter_bound() {
     // crossing.toml: eight x500s through the centre; find ticks where the filter bound
     // pairs and compare the view with the filter's own rows.
-    let text = include_str!("../config/crossing.toml");
+    let text = include_str!("../../config/crossing.toml");
     let mut run =
         Lockstep::from_config(&Config::from_toml(text).expect("parses")).expect("scenario");
     let mut checked = 0;

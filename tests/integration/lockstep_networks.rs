@@ -2,7 +2,7 @@
 //! networks whose system ids overlap (1, 2, 3 on each), routed by the same router as over
 //! UDP, flies exactly as with one socket per vehicle.
 
-mod common;
+use crate::common;
 
 use ringswarm::config::Config;
 use ringswarm::driver::lockstep::Lockstep;

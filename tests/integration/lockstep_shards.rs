@@ -170,7 +170,7 @@ fn three_shards_20_ms_apart_fly_paper_sim1_as_one_process_does() {
     one.run_until(SimTime::from_millis(55_000), |_| {});
     let predicted_one = one.swarm().predicted_final_velocity().unwrap();
     let formation_one = formation_error_m(one.vehicles(), &offsets());
-    // Measured: 4.58 mm (tests/lockstep_paper_sim1.rs pins it at 1 cm).
+    // Measured: 4.58 mm (tests/integration/lockstep_paper_sim1.rs pins it at 1 cm).
     assert!(formation_one < 0.005, "{formation_one}");
 
     let (three, finite) = run(sharded(&THREE, Watch::All, bus_ms(20.0, 0.0, 0.0)), 55);
@@ -537,7 +537,7 @@ fn watching_the_horizon_flies_paper_sim1_as_watching_the_neighbours_does() {
 }
 
 /// The paper's second simulation (a `[target]` of (20, 30) m/s) split in three, 20 ms
-/// apart. The plan (tests/lockstep_planner.rs): re-target agent 4 to
+/// apart. The plan (tests/integration/lockstep_planner.rs): re-target agent 4 to
 /// (34.7273, 72.6364) m/s and fly k = 10.
 #[test]
 fn three_shards_plan_re_target_and_reach_the_target_as_one_process_does() {
@@ -598,7 +598,7 @@ fn three_shards_plan_re_target_and_reach_the_target_as_one_process_does() {
         "{predicted:?}"
     );
     // 60 s later the swarm flies the target in formation, as one process does (1 %,
-    // 0.5 m: tests/lockstep_planner.rs).
+    // 0.5 m: tests/integration/lockstep_planner.rs).
     let target = Vector2::new(20.0, 30.0);
     let offsets: Vec<Vector2<f64>> = (0..6)
         .map(|l| {

@@ -53,7 +53,7 @@ fn analyze_a_ring_of_two_hundred_thousand_without_listing_it() {
     assert_eq!(v["agents"], serde_json::json!(200_000));
     assert!(v["laplacian_eigenvalues"].is_null() && v["w"].is_null());
     // Large-ring asymptote of Yu's bound, 2c³/((c² − 2)θ²) with c = 3, θ = 2π/m
-    // (tests/properties.rs derives it; the remainder is 5·10⁻¹⁰ here).
+    // (tests/integration/properties.rs derives it; the remainder is 5·10⁻¹⁰ here).
     let theta = 2.0 * std::f64::consts::PI / 100_000.0;
     let asymptote = 54.0 / (7.0 * theta * theta);
     let bound = v["yu_bound"].as_f64().unwrap();

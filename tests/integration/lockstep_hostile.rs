@@ -8,7 +8,7 @@
 //! the undisturbed one; with signing off the same attack takes vehicles away (so the
 //! check can fail).
 
-mod common;
+use crate::common;
 
 use nalgebra::Vector2;
 use rand::{Rng, SeedableRng};
