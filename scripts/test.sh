@@ -7,6 +7,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# Each step's heading carries the time it starts (UTC), for the CI log.
+step() { echo "== [$(date -u +%H:%M:%S)] $*"; }
+
 # What the Python checks need (Debian's chromium, the venv's packages) downloads and
 # installs while Rust compiles: it waits on the network and the disk, the build on the
 # two cores. Its output goes to a log, shown if it fails.
@@ -28,19 +31,21 @@ python_setup() {
 python_setup >"$setup_log" 2>&1 &
 setup_pid=$!
 
-echo "== cargo fmt --check"
+step "cargo fmt --check"
 cargo fmt --all --check
-echo "== cargo clippy"
+step "cargo clippy"
 cargo clippy --workspace --all-targets --locked -- -D warnings
 # The flight coordinator alone, without the emulator.
+step "cargo clippy, the coordinator without the emulator"
 cargo clippy --no-default-features --lib --bins --locked -- -D warnings
-echo "== fuzz/Cargo.lock resolves as committed"
+step "fuzz/Cargo.lock resolves as committed"
 cargo metadata --locked --format-version 1 --manifest-path fuzz/Cargo.toml >/dev/null
-echo "== cargo test"
+step "cargo test"
 cargo test --workspace --locked
+step "cargo build --bins"
 cargo build --workspace --locked --bins
 
-echo "== python checks: chromium and the venv (set up during the build)"
+step "python checks: chromium and the venv (set up during the build)"
 if ! wait "$setup_pid"; then
   cat "$setup_log"
   echo "the Python checks' setup failed (above)"
@@ -60,9 +65,12 @@ sync
 # The tests marked serial (several shards, emulators and coordinators in real time each)
 # run afterwards, alone, so that neither they nor the others fly on a loaded machine.
 if unshare -n true 2>/dev/null; then
+  step "python checks in parallel"
   RINGSWARM_TEST_NETNS=1 .venv/bin/python -m pytest "${pytest_args[@]}" -m "not serial" -n "${RINGSWARM_PYTEST_WORKERS:-4}" --dist loadgroup
+  step "python checks marked serial, alone"
   unshare -n bash -c 'ip link set lo up && exec .venv/bin/python -m pytest "$@"' _ "${pytest_args[@]}" -m serial -n 0
 else
   echo "python checks: network namespaces cannot be made here (unshare -n), so they run one at a time"
   .venv/bin/python -m pytest "${pytest_args[@]}" -n 0
 fi
+step "done"
