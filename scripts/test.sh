@@ -36,10 +36,10 @@ cargo fmt --all --check
 step "cargo clippy"
 cargo clippy --workspace --all-targets --locked -- -D warnings
 # The flight coordinator alone, without the emulator, as a companion computer builds it
-# (with Zenoh, for its shard). Without Zenoh as well, Cargo would unify the dependencies'
-# features differently and check 70 of them again (1 min 50 s of this run instead of
-# 50 s); what that leaves out is two five-line fallbacks that refuse `--shard` and
-# `view --zenoh`.
+# (with Zenoh, for its shard). Without Zenoh as well, Cargo unifies the dependencies'
+# features further from the workspace's and checks many of them again: 1 min 50 s of a
+# CI run, against 50 s with Zenoh kept. What that leaves out is two five-line fallbacks
+# that refuse `--shard` and `view --zenoh`.
 step "cargo clippy, the coordinator without the emulator"
 cargo clippy --no-default-features --features zenoh --lib --bins --locked -- -D warnings
 step "fuzz/Cargo.lock resolves as committed"
