@@ -52,3 +52,14 @@ pub fn vehicle_states(run: &Lockstep) -> Vec<[f64; 6]> {
         })
         .collect()
 }
+
+/// The places of a regular ring of `n` on a circle of `radius_m` (m, ENU), vehicle `l` at
+/// `2πl/n` from east: paper-sim2's `[formation] kind = "polygon"` of six at 20 m.
+pub fn ring_offsets_m(n: usize, radius_m: f64) -> Vec<nalgebra::Vector2<f64>> {
+    (0..n)
+        .map(|l| {
+            let a = 2.0 * std::f64::consts::PI * l as f64 / n as f64;
+            nalgebra::Vector2::new(a.cos(), a.sin()) * radius_m
+        })
+        .collect()
+}

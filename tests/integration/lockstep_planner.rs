@@ -67,12 +67,7 @@ fn the_swarm_then_reaches_the_target_velocity_in_formation() {
     run.run_until(SimTime::from_millis(71_000), |_| {});
     assert!(matches!(run.swarm().phase(), SwarmPhase::Consensus(_)));
     let target = Vector2::new(20.0, 30.0);
-    let offsets: Vec<Vector2<f64>> = (0..6)
-        .map(|l| {
-            let a = std::f64::consts::PI * l as f64 / 3.0;
-            Vector2::new(a.cos(), a.sin()) * 20.0
-        })
-        .collect();
+    let offsets = crate::common::ring_offsets_m(6, 20.0);
     let shifted: Vec<Vector2<f64>> = run
         .vehicles()
         .iter()

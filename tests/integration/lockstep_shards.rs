@@ -600,12 +600,7 @@ fn three_shards_plan_re_target_and_reach_the_target_as_one_process_does() {
     // 60 s later the swarm flies the target in formation, as one process does (1 %,
     // 0.5 m: tests/integration/lockstep_planner.rs).
     let target = Vector2::new(20.0, 30.0);
-    let offsets: Vec<Vector2<f64>> = (0..6)
-        .map(|l| {
-            let a = std::f64::consts::PI * l as f64 / 3.0;
-            Vector2::new(a.cos(), a.sin()) * 20.0
-        })
-        .collect();
+    let offsets = crate::common::ring_offsets_m(6, 20.0);
     for v in flight.vehicles() {
         let vel = ringswarm::control::ned_to_enu(v.status().vel_ned_mps).xy();
         assert!((vel - target).norm() <= 0.01 * target.norm(), "{vel:?}");
