@@ -21,62 +21,53 @@ impl Swarm {
     /// The fastest of this shard's own vehicles with a fresh state (m/s, the vertical
     /// axis scaled as the safety filter's separation does; plain speed without one).
     pub(super) fn own_top_speed_mps(&self) -> f64 {
-        (0..self.links.len())
-            .filter(|i| !self.is_remote(*i))
-            .filter_map(|i| self.law.states[i])
-            .map(|s| self.scaled_speed_mps(s.vel_enu_mps))
-            .filter(|v| v.is_finite())
-            .fold(0.0, f64::max)
+        self.top_speed_mps(|i| !self.is_remote(i))
     }
 
-    fn scaled_speed_mps(&self, v: nalgebra::Vector3<f64>) -> f64 {
-        self.setup
-            .safety
-            .map_or(v.norm(), |s| s.separation.scaled(v).norm())
+    /// The fastest of the vehicles `which` picks that have a fresh state here, scaled as
+    /// [`Self::own_top_speed_mps`].
+    fn top_speed_mps(&self, which: impl Fn(usize) -> bool) -> f64 {
+        (0..self.links.len())
+            .filter(|i| which(*i))
+            .filter_map(|i| self.law.states[i])
+            .map(|s| {
+                let v = s.vel_enu_mps;
+                self.setup
+                    .safety
+                    .map_or(v.norm(), |s| s.separation.scaled(v).norm())
+            })
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max)
     }
 
     /// Re-reckons the tiles read from this shard's own vehicles' fresh positions: after
     /// the states are in, before the safety filter. Without `[safety]`, none: nothing
     /// but the ring neighbours is needed.
     pub(super) fn update_horizon(&mut self, now: SimTime) {
-        let Some(p) = self.peers.as_ref() else {
+        let Some(p) = self.peers.as_ref().filter(|p| p.tiles.is_some()) else {
             return;
         };
-        if p.tiles.is_none() {
-            return;
-        }
-        let timeout = self.link_timeout();
-        let reported = p
-            .reports
-            .iter()
-            .flatten()
-            .filter(|(at, _)| now.saturating_since(*at) <= timeout)
-            .map(|(_, r)| f64::from(r.top_speed_mps))
-            .filter(|v| v.is_finite())
-            .fold(0.0, f64::max);
-        let known = self
-            .law
-            .states
-            .iter()
-            .flatten()
-            .map(|s| self.scaled_speed_mps(s.vel_enu_mps))
-            .filter(|v| v.is_finite())
-            .fold(0.0, f64::max);
-        let radius = self.setup.safety.map_or(0.0, |s| {
-            look_radius_m(
-                &s.separation,
-                known.max(reported),
-                LOOKAHEAD_S + SUBSCRIPTION_LAG_S,
-            )
-        });
-        let own: Vec<nalgebra::Vector2<f64>> = if self.setup.safety.is_some() {
-            (0..self.links.len())
-                .filter(|i| !self.is_remote(*i))
-                .filter_map(|i| self.law.states[i])
-                .map(|s| s.pos_enu_m.xy())
-                .collect()
-        } else {
-            Vec::new()
+        let (own, radius) = match self.setup.safety {
+            None => (Vec::new(), 0.0),
+            Some(safety) => {
+                let timeout = self.link_timeout();
+                let reported = p
+                    .reports
+                    .iter()
+                    .flatten()
+                    .filter(|(at, _)| now.saturating_since(*at) <= timeout)
+                    .map(|(_, r)| f64::from(r.top_speed_mps))
+                    .filter(|v| v.is_finite())
+                    .fold(0.0, f64::max);
+                let fastest = self.top_speed_mps(|_| true).max(reported);
+                let own: Vec<nalgebra::Vector2<f64>> = (0..self.links.len())
+                    .filter(|i| !self.is_remote(*i))
+                    .filter_map(|i| self.law.states[i])
+                    .map(|s| s.pos_enu_m.xy())
+                    .collect();
+                let lookahead_s = LOOKAHEAD_S + SUBSCRIPTION_LAG_S;
+                (own, look_radius_m(&safety.separation, fastest, lookahead_s))
+            }
         };
         if let Some(tiles) = self.peers.as_mut().and_then(|p| p.tiles.as_mut()) {
             tiles.update(own, radius);

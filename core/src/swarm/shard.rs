@@ -107,11 +107,7 @@ impl Peers {
     pub(super) fn new(plan: ShardPlan, w: &[f64]) -> Self {
         let shards = plan.shards();
         let n = w.len();
-        let saturation_weights = w
-            .iter()
-            .enumerate()
-            .map(|(i, w)| if plan.is_computable(i) { *w } else { 0.0 })
-            .collect();
+        let saturation_weights = saturation_weights(&plan, w);
         let tiles = (plan.watch() == Watch::Horizon).then(|| TileInterest::new(plan.tile_m()));
         Self {
             plan,
@@ -275,9 +271,7 @@ impl Peers {
 
     /// The weights changed (a plan's `k`): the saturation's weights follow.
     pub(super) fn reweigh(&mut self, w: &[f64]) {
-        for (i, (sw, w)) in self.saturation_weights.iter_mut().zip(w).enumerate() {
-            *sw = if self.plan.is_computable(i) { *w } else { 0.0 };
-        }
+        self.saturation_weights = saturation_weights(&self.plan, w);
     }
 
     /// The swarm's w-weighted mean position and velocity at `start`, from every shard's
@@ -313,6 +307,15 @@ impl Peers {
     fn prediction(&self, start: SimTime, own: WeightedSum) -> Option<Vector2<f64>> {
         self.start_means(start, own).map(|(_, v)| v)
     }
+}
+
+/// The ring's weights `w` for the vehicles whose commands `plan` computes here, zero for
+/// the others.
+fn saturation_weights(plan: &ShardPlan, w: &[f64]) -> Vec<f64> {
+    w.iter()
+        .enumerate()
+        .map(|(i, w)| if plan.is_computable(i) { *w } else { 0.0 })
+        .collect()
 }
 
 /// One of this shard's vehicles at the plan instant: its velocity (m/s, ENU) and its top
