@@ -605,7 +605,13 @@ pub struct VehicleSection {
     /// A serial port to its autopilot instead of UDP (companion mode: a shard on the
     /// vehicle's own computer, a cable to the flight controller's TELEM port).
     pub serial: Option<SerialSection>,
-    /// Emulator profile (`ideal`, `x500`).
+    /// The autopilot it runs: `auto` (default: whatever its first HEARTBEAT names, PX4
+    /// or ArduPilot), `px4` or `ardupilot` (a vehicle whose heartbeat says otherwise is
+    /// refused). The emulator serves `ardupilot` with its ArduPilot personality, `auto`
+    /// and `px4` with PX4's.
+    #[serde(default = "default_autopilot")]
+    pub autopilot: String,
+    /// Emulator profile (`ideal`, `x500`, `arducopter`).
     #[serde(default = "default_profile")]
     pub profile: String,
     /// Mass (kg) for the law's thrust.
@@ -643,6 +649,10 @@ pub struct AirframeSection {
     pub hover_throttle: Option<f64>,
     /// True linear drag (1/s).
     pub drag_per_s: Option<f64>,
+}
+
+fn default_autopilot() -> String {
+    "auto".to_owned()
 }
 
 fn default_profile() -> String {

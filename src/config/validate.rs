@@ -12,8 +12,9 @@ use super::Config;
 use crate::consensus::{CouplingGains, RingDigraph, analyze};
 use crate::control::{AltitudeGains, Envelope, VehicleModel};
 use crate::frame::{CommonFrame, Geodetic};
+use crate::swarm::SetpointKind;
 use crate::swarm::{GuardLimits, SwarmSetup, TargetVelocity};
-use crate::vehicle::LinkConfig;
+use crate::vehicle::{Autopilot, AutopilotChoice, LinkConfig};
 
 /// Longest flight (s): about eleven days. `Duration` cannot hold 1e20 s, and no battery
 /// lasts a day.
@@ -96,6 +97,7 @@ impl Config {
             split.lines().for_each(|l| p.push(l.to_owned()));
         }
         let n = self.vehicle.len();
+        let autopilots = self.autopilots(&mut p);
         let g = &self.gains;
         p.within("gains.k_vmean", g.k_vmean, 0.0, 10.0, " 1/s");
         let gains_ok = p.within("gains.k", g.k, -2.0, MAX_GAIN, "")
@@ -235,7 +237,9 @@ impl Config {
             links: self
                 .vehicle
                 .iter()
-                .map(|v| LinkConfig {
+                .zip(&autopilots)
+                .map(|(v, autopilot)| LinkConfig {
+                    autopilot: *autopilot,
                     setpoint_interval: timing.control_interval,
                     telemetry_interval: timing.control_interval,
                     attitude_interval: timing.attitude_interval,
@@ -263,6 +267,30 @@ impl Config {
             safety,
             fence,
         })
+    }
+
+    /// Each `[[vehicle]] autopilot`, by name; ArduPilot is flown with attitude setpoints
+    /// only.
+    fn autopilots(&self, p: &mut Problems) -> Vec<AutopilotChoice> {
+        self.vehicle
+            .iter()
+            .enumerate()
+            .map(|(i, v)| match AutopilotChoice::parse(&v.autopilot) {
+                Ok(choice) => {
+                    let ardupilot = choice == AutopilotChoice::Only(Autopilot::ArduPilot);
+                    if ardupilot && self.swarm.setpoint == SetpointKind::Acceleration {
+                        p.push(format!(
+                            "vehicle[{i}].autopilot = \"ardupilot\" is flown with attitude setpoints only: swarm.setpoint = \"acceleration\" is PX4's"
+                        ));
+                    }
+                    choice
+                }
+                Err(e) => {
+                    p.push(format!("vehicle[{i}].{e}"));
+                    AutopilotChoice::Auto
+                }
+            })
+            .collect()
     }
 
     /// `[safety]`: every key checked by name, and no two formation places closer than the

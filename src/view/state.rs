@@ -192,7 +192,7 @@ impl ViewState {
                     velocity_enu_mps: states[i].map(|s| s.vel_enu_mps.into()),
                     target_enu_m: targets.as_ref().map(|(_, t)| t[i].into()),
                     link_phase: swarm.vehicle_phase(i).name().to_owned(),
-                    mode: heard.then(|| crate::vehicle::px4_mode_name(state.custom_mode)),
+                    mode: heard.then(|| state.mode_name()),
                     armed: heard.then_some(state.armed),
                     telemetry_age_ms: state
                         .last_heard

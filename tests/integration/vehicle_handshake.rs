@@ -566,44 +566,65 @@ fn the_link_sends_a_ground_station_heartbeat_every_second_from_its_own_ids() {
     );
 }
 
-#[test]
-fn a_vehicle_whose_autopilot_is_not_px4_is_refused_at_discovery() {
-    use mavlink::dialects::common::{HEARTBEAT_DATA, MavAutopilot, MavModeFlag, MavState, MavType};
+/// The reason of the link's first `Failed` event after one HEARTBEAT from system 1 with
+/// `autopilot`, and what it sent afterwards (nothing but heartbeats is allowed).
+fn refusal_of(
+    cfg: LinkConfig,
+    autopilot: mavlink::dialects::common::MavAutopilot,
+) -> Option<String> {
+    use mavlink::dialects::common::{HEARTBEAT_DATA, MavModeFlag, MavState, MavType};
     let mut link = VehicleLink::new(
-        LinkConfig::new(1),
+        cfg,
         AttitudeThrust {
             attitude_ned_frd: UnitQuaternion::identity(),
             thrust_norm: 0.5,
             thrust_n: 0.0,
         },
     );
-    let ardupilot =
+    let heartbeat =
         ringswarm::link::Encoder::new(1, 1).encode(&MavMessage::HEARTBEAT(HEARTBEAT_DATA {
             custom_mode: 4,
             mavtype: MavType::MAV_TYPE_QUADROTOR,
-            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            autopilot,
             base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
             system_status: MavState::MAV_STATE_STANDBY,
             mavlink_version: 3,
         }));
-    link.handle_datagram(SimTime::from_millis(5), &ardupilot);
+    link.handle_datagram(SimTime::from_millis(5), &heartbeat);
     assert_eq!(link.phase(), Phase::Failed);
     let reason = std::iter::from_fn(|| link.poll_event()).find_map(|e| match e {
         LinkEvent::Failed(r) => Some(r),
         _ => None,
     });
-    assert_eq!(
-        reason.as_deref(),
-        Some(
-            "vehicle 1: autopilot is ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA), not PX4: refused (ringswarm speaks PX4's modes only)"
-        )
-    );
     // Nothing but heartbeats is ever sent to it.
     link.handle_timeout(SimTime::from_millis(3000));
     while let Some(bytes) = link.poll_transmit() {
         let msg = decode_datagram(&bytes).remove(0).unwrap().msg;
         assert!(matches!(msg, MavMessage::HEARTBEAT(_)), "{msg:?}");
     }
+    reason
+}
+
+#[test]
+fn a_vehicle_of_an_autopilot_not_spoken_or_not_configured_is_refused_at_discovery() {
+    use mavlink::dialects::common::MavAutopilot;
+    use ringswarm::vehicle::{Autopilot, AutopilotChoice};
+    assert_eq!(
+        refusal_of(LinkConfig::new(1), MavAutopilot::MAV_AUTOPILOT_GENERIC).as_deref(),
+        Some(
+            "vehicle 1: autopilot is generic (MAV_AUTOPILOT_GENERIC): refused (ringswarm speaks PX4 and ArduPilot)"
+        )
+    );
+    let px4_only = LinkConfig {
+        autopilot: AutopilotChoice::Only(Autopilot::Px4),
+        ..LinkConfig::new(1)
+    };
+    assert_eq!(
+        refusal_of(px4_only, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA).as_deref(),
+        Some(
+            "vehicle 1: its heartbeat says ArduPilot (MAV_AUTOPILOT_ARDUPILOTMEGA), the configuration autopilot = \"px4\": refused"
+        )
+    );
 }
 
 /// A link to vehicle 1 that gives it `fence` (ENU about the emulator's world reference,

@@ -6,11 +6,12 @@
 //! keys, signatures, replay protection), PX4's thrust-direction-to-attitude construction
 //! ([`attitude`]), the time type both machines
 //! are driven with ([`time`]), PX4's geodetic projection ([`geo`]) and PX4's mode and port
-//! numbers ([`px4`]). The coordinator takes its codec from here, not from the
+//! numbers ([`px4`]), and ArduCopter's modes and parameter names ([`ardupilot`]). The coordinator takes its codec from here, not from the
 //! emulator it is tested against.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod ardupilot;
 pub mod attitude;
 pub mod codec;
 pub mod geo;

@@ -4,7 +4,8 @@
 
 use mavlink::dialects::common::{
     AttitudeTargetTypemask, HEARTBEAT_DATA, MISSION_COUNT_DATA, MISSION_ITEM_INT_DATA,
-    MavAutopilot, MavCmd, MavFrame, MavMessage, MavMissionType, MavModeFlag, MavState, MavType,
+    MavAutopilot, MavCmd, MavFrame, MavMessage, MavMissionType, MavModeFlag, MavParamType,
+    MavSeverity, MavState, MavSysStatusSensor, MavType, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA,
     PositionTargetTypemask, SET_ATTITUDE_TARGET_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA,
     TIMESYNC_DATA,
 };
@@ -70,6 +71,22 @@ pub enum Outgoing<'a> {
         /// The item.
         item: &'a FenceItem,
     },
+    /// PARAM_REQUEST_READ by name.
+    ParamRead {
+        /// The vehicle.
+        target_system: u8,
+        /// The parameter's name (at most 16 bytes).
+        name: &'a str,
+    },
+    /// PARAM_SET (the value as a float, as ArduPilot reads it).
+    ParamSet {
+        /// The vehicle.
+        target_system: u8,
+        /// The parameter's name (at most 16 bytes).
+        name: &'a str,
+        /// Its new value.
+        value: f32,
+    },
 }
 
 impl Outgoing<'_> {
@@ -102,8 +119,49 @@ impl Outgoing<'_> {
                 seq,
                 item,
             } => fence_item(target_system, seq, item),
+            Self::ParamRead {
+                target_system,
+                name,
+            } => param_request_read(target_system, name),
+            Self::ParamSet {
+                target_system,
+                name,
+                value,
+            } => param_set(target_system, name, value),
         }
     }
+}
+
+/// A parameter name as the 16-byte field carries it (NUL-padded; a 16-byte name has no
+/// terminator). Longer names are cut, which no parameter the coordinator uses needs.
+fn param_id(name: &str) -> [u8; 16] {
+    let mut id = [0u8; 16];
+    let bytes = name.as_bytes();
+    let n = bytes.len().min(16);
+    id[..n].copy_from_slice(&bytes[..n]);
+    id
+}
+
+/// PARAM_REQUEST_READ of `name` (index −1: by name) from `target_system`'s autopilot.
+pub fn param_request_read(target_system: u8, name: &str) -> MavMessage {
+    MavMessage::PARAM_REQUEST_READ(PARAM_REQUEST_READ_DATA {
+        param_index: -1,
+        target_system,
+        target_component: 1,
+        param_id: param_id(name).into(),
+    })
+}
+
+/// PARAM_SET of `name` to `value`, typed REAL32: ArduPilot casts the float to the
+/// parameter's own type (an integer parameter is sent as its value as a float).
+pub fn param_set(target_system: u8, name: &str, value: f32) -> MavMessage {
+    MavMessage::PARAM_SET(PARAM_SET_DATA {
+        param_value: value,
+        target_system,
+        target_component: 1,
+        param_id: param_id(name).into(),
+        param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
+    })
 }
 
 /// Appends `out`'s frame to `bytes`: from `encoder`'s ids and sequence, signed by `signer`
@@ -319,6 +377,24 @@ pub enum Inbound {
         /// The system it is addressed to (0: any).
         target_system: u8,
     },
+    /// PARAM_VALUE: a parameter's name and value (as a float).
+    ParamValue {
+        /// Its name.
+        name: String,
+        /// Its value.
+        value: f32,
+    },
+    /// STATUSTEXT of severity WARNING or worse (a refusal's reason: "PreArm: …",
+    /// "Arm: …", "Mode change to … failed"); chunks are not joined.
+    StatusText {
+        /// MAV_SEVERITY value (0 emergency … 4 warning).
+        severity: u8,
+        /// The text, without its padding.
+        text: String,
+    },
+    /// SYS_STATUS that reports its pre-arm check (MAV_SYS_STATUS_PREARM_CHECK present):
+    /// whether it passes.
+    Prearm(bool),
     /// COMMAND_ACK.
     Ack {
         /// MAV_CMD id.
@@ -414,6 +490,31 @@ pub fn inbound(msg: &MavMessage) -> Option<Inbound> {
             ts1_ns: t.ts1,
             target_system: t.target_system,
         }),
+        MavMessage::PARAM_VALUE(p) => {
+            let name = p.param_id.to_str().ok()?.trim_end_matches('\0').to_owned();
+            p.param_value.is_finite().then_some(Inbound::ParamValue {
+                name,
+                value: p.param_value,
+            })
+        }
+        MavMessage::STATUSTEXT(t)
+            if (t.severity as u8) <= MavSeverity::MAV_SEVERITY_WARNING as u8 =>
+        {
+            let text = String::from_utf8_lossy(t.text.as_slice());
+            Some(Inbound::StatusText {
+                severity: t.severity as u8,
+                text: text.trim_end_matches('\0').trim().to_owned(),
+            })
+        }
+        MavMessage::SYS_STATUS(s)
+            if s.onboard_control_sensors_present
+                .contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK) =>
+        {
+            Some(Inbound::Prearm(
+                s.onboard_control_sensors_health
+                    .contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK),
+            ))
+        }
         MavMessage::COMMAND_ACK(a) => Some(Inbound::Ack {
             command: a.command as u16,
             result: a.result as u8,

@@ -5,6 +5,7 @@
 
 mod command;
 mod convert;
+mod dialect;
 pub mod provision;
 pub mod router;
 mod signer;
@@ -12,9 +13,10 @@ mod signer;
 pub use command::{Command, command_long, command_name, mission_result_name, result_name};
 pub use convert::{
     AUTOPILOT_PX4, Inbound, Outgoing, autopilot_name, encode, fence_count, fence_item,
-    gcs_heartbeat, inbound, set_attitude_target, set_position_target_acceleration,
-    timesync_request,
+    gcs_heartbeat, inbound, param_request_read, param_set, set_attitude_target,
+    set_position_target_acceleration, timesync_request,
 };
+pub use dialect::{Autopilot, AutopilotChoice, ParamAction, ParamStep, StreamRate};
 pub use ringswarm_wire::codec::{
     Encoder, Frame, FrameError, decode_datagram, decode_datagram_with, frame_system_id, frames,
     raw_frames,

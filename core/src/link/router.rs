@@ -2,9 +2,13 @@
 //! datagram is for: a sans-IO router between UDP sockets and the swarm's links.
 //!
 //! Two kinds of socket:
-//! - **Own socket** (PX4 SITL's layout): one socket per vehicle, a fixed address; only
-//!   datagrams from that address are the vehicle's (so a reply never comes from, or goes
-//!   to, the wrong vehicle).
+//! - **Own socket** (PX4 SITL's layout): one socket per vehicle. Every datagram it
+//!   receives is handed to that vehicle's link, which judges each frame (its system id,
+//!   its signature). The vehicle's address (PX4's default 127.0.0.1:14580+i, or the
+//!   configured one) is contacted first and then learned from the frames the link takes,
+//!   as on a network: ArduPilot SITL's `--serial0 udpclient:IP:PORT` sends from an
+//!   ephemeral port and takes only datagrams from the port it sends to, so the
+//!   coordinator answers where its frames come from.
 //! - **Network socket** (a ground station on 14550): one socket for many vehicles, told
 //!   apart by the system id in each frame's header; system ids are unique within a
 //!   network, not across networks. A vehicle's address is learned from the frames it
@@ -142,7 +146,7 @@ impl Router {
                 }
                 Some(Demux::Own(vehicle)) => {
                     *vehicle = i;
-                    false
+                    true
                 }
                 None => false,
             };
@@ -162,21 +166,21 @@ impl Router {
 
     /// The pieces of a datagram received on `socket` from `from`, each as the vehicle it
     /// is for and its byte range, in `out` (cleared first): the whole datagram on an
-    /// own socket when it comes from the vehicle's address, each frame on a network
+    /// own socket (its link judges the frames), each frame on a network
     /// socket whose system id belongs to one of its vehicles. Anything else is counted
     /// in [`Router::unroutable`]. Allocates nothing once `out` has grown.
     pub fn route_inbound(
         &mut self,
         socket: usize,
-        from: SocketAddr,
+        _from: SocketAddr,
         bytes: &[u8],
         out: &mut Vec<(usize, Range<usize>)>,
     ) {
         out.clear();
         match self.demux.get(socket) {
             Some(Demux::Own(vehicle)) => match self.routes.get(*vehicle) {
-                Some(route) if route.address == Some(from) => out.push((*vehicle, 0..bytes.len())),
-                _ => self.unroutable[socket] += 1,
+                Some(_) => out.push((*vehicle, 0..bytes.len())),
+                None => self.unroutable[socket] += 1,
             },
             Some(Demux::Network(by_id)) => {
                 let base = bytes.as_ptr() as usize;
@@ -325,17 +329,41 @@ mod tests {
     }
 
     #[test]
-    fn an_own_socket_takes_only_its_vehicles_address() {
+    fn an_own_socket_answers_where_its_vehicle_speaks_from() {
         let mut router = Router::new(&plan());
         let hb = heartbeat(1);
         let mut out = Vec::new();
+        let t = |s: f64| SimTime::from_secs_f64(s);
+        // PX4's port is contacted first.
+        assert_eq!(router.destination(4), Some((2, addr(14580))));
         router.route_inbound(2, addr(14580), &hb, &mut out);
         assert_eq!(out, vec![(4, 0..hb.len())]);
-        router.route_inbound(2, addr(14581), &hb, &mut out);
-        assert!(out.is_empty());
-        assert_eq!(router.unroutable(2), 1);
-        // Its address never moves.
-        assert_eq!(router.vouched(4, addr(14581), SimTime::ZERO), None);
+        // From anywhere, the datagram goes to the link, which judges its frames.
+        router.route_inbound(2, addr(45123), &hb, &mut out);
+        assert_eq!(out, vec![(4, 0..hb.len())]);
+        assert_eq!(router.unroutable(2), 0);
+        // Frames the link took from an ephemeral port (ArduPilot SITL's udpclient) move
+        // the address there, since PX4's port never answered.
+        assert_eq!(
+            router.vouched(4, addr(45123), t(1.0)),
+            Some(AddressLearned {
+                vehicle: 4,
+                before: Some(addr(14580)),
+                now: addr(45123)
+            })
+        );
+        assert_eq!(router.destination(4), Some((2, addr(45123))));
+        // Another sender while it speaks moves nothing.
+        assert_eq!(router.vouched(4, addr(14580), t(1.5)), None);
+        assert_eq!(router.destination(4), Some((2, addr(45123))));
+    }
+
+    #[test]
+    fn an_own_socket_keeps_a_configured_address_that_answers() {
+        let mut router = Router::new(&plan());
+        let t = |s: f64| SimTime::from_secs_f64(s);
+        assert_eq!(router.vouched(4, addr(14580), t(1.0)), None);
+        assert_eq!(router.vouched(4, addr(45123), t(1.5)), None);
         assert_eq!(router.destination(4), Some((2, addr(14580))));
     }
 

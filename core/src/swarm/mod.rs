@@ -59,7 +59,7 @@ use std::time::Duration;
 
 use crate::consensus::HorizontalState;
 use crate::control::{AttitudeThrust, VehicleModel, attitude_thrust_from_acceleration};
-use crate::vehicle::{Phase, Setpoint, VehicleLink};
+use crate::vehicle::{LinkEvent, Phase, Setpoint, VehicleLink};
 use events::EventLog;
 pub use events::{MAX_KEPT_EVENTS, REPEAT_WINDOW, SwarmEvent};
 pub use guard::{DivergenceGuard, GuardLimits, GuardTrip};
@@ -124,8 +124,9 @@ pub enum SwarmFailure {
     /// Not every vehicle was flying in OFFBOARD within the handshake timeout, or one
     /// vehicle's handshake gave up.
     Handshake {
-        /// The vehicles not flying: system id and its link phase.
-        not_flying: Vec<(u8, &'static str)>,
+        /// The vehicles not flying: system id and its link phase (with what its handshake
+        /// waits for, when it says).
+        not_flying: Vec<(u8, String)>,
         /// When the swarm gave up.
         after: Duration,
     },
@@ -142,7 +143,7 @@ impl fmt::Display for SwarmFailure {
                 )?;
                 for (j, (id, phase)) in not_flying.iter().enumerate() {
                     let sep = if j == 0 { "" } else { ", " };
-                    let what = match *phase {
+                    let what = match phase.as_str() {
                         "discovering" => "never heard",
                         other => other,
                     };
@@ -796,6 +797,15 @@ impl Swarm {
                 event.is_warning(),
                 event.to_string(),
             );
+            if let LinkEvent::HoverReported { hover_throttle } = event
+                && let Some(slot) = self.slots.get_mut(i)
+                && !slot.flown.seed_hover(hover_throttle)
+            {
+                let text = format!(
+                    "reported hover throttle {hover_throttle:.3} is outside the estimator's bounds: the configured one is flown"
+                );
+                self.log.push_vehicle(now, &self.setup.links[i], true, text);
+            }
         }
     }
 }

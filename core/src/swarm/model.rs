@@ -79,6 +79,8 @@ pub(super) struct FlownModel {
     /// Whether `force_sum` holds tilts (acceleration setpoints) instead of accelerations.
     tilt_only: bool,
     thrust_ticks: u32,
+    /// The hover estimator's bounds (normalised thrust).
+    hover_bounds: (f64, f64),
 }
 
 impl FlownModel {
@@ -115,7 +117,27 @@ impl FlownModel {
             force_sum: Vector2::zeros(),
             tilt_only: false,
             thrust_ticks: 0,
+            hover_bounds: (min, max),
         }
+    }
+
+    /// Starts over from the hover throttle the vehicle reports of itself (ArduPilot's
+    /// learnt MOT_THST_HOVER), which then stands for the configured one: flown until the
+    /// estimator disagrees with it. Refused (`false`) outside the estimator's bounds.
+    pub(super) fn seed_hover(&mut self, hover_throttle: f64) -> bool {
+        let (min, max) = self.hover_bounds;
+        if !(min..=max).contains(&hover_throttle) {
+            return false;
+        }
+        let Ok(model) =
+            VehicleModel::from_hover_throttle(self.configured.mass_kg(), hover_throttle)
+        else {
+            return false;
+        };
+        self.configured = model;
+        self.ekf = HoverThrustEkf::new(hover_throttle, min, max);
+        self.trusted = false;
+        true
     }
 
     /// Whether the drag estimate is flown (it disagreed significantly with the

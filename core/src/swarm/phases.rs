@@ -219,13 +219,13 @@ impl Swarm {
         if !(failed || timed_out) {
             return false;
         }
-        let not_flying: Vec<(u8, &'static str)> = (0..self.links.len())
+        let not_flying: Vec<(u8, String)> = (0..self.links.len())
             .filter_map(|i| {
                 let cfg = &self.setup.links[i];
                 if !self.is_known(i) {
                     // Another shard's, not watched here: its shard's report speaks for it.
                     return (!self.others_flying(now))
-                        .then_some((cfg.system_id, "its shard not all flying"));
+                        .then(|| (cfg.system_id, "its shard not all flying".to_owned()));
                 }
                 let phase = self.member_phase(i);
                 let state = self.law.states[i];
@@ -233,9 +233,14 @@ impl Swarm {
                     return None;
                 }
                 let name = if phase == Phase::Flying {
-                    "no usable position"
+                    "no usable position".to_owned()
                 } else {
-                    phase.name()
+                    // What its handshake still waits for, when it knows.
+                    let waiting = self.links.get(i).and_then(|l| l.waiting_for());
+                    match waiting {
+                        Some(what) => format!("{}: {what}", phase.name()),
+                        None => phase.name().to_owned(),
+                    }
                 };
                 Some((cfg.system_id, name))
             })

@@ -9,12 +9,13 @@ use ringswarm_wire::codec::FramePool;
 use ringswarm_wire::time::SimTime;
 
 use super::fence_upload::{FenceUpload, UploadAnswer, UploadSend};
+use super::params::{ParamSend, ParamSession};
 use super::telemetry::{OriginVerdict, PositionVerdict, TelemetryGate};
 use super::{LinkConfig, LinkEvent, Phase, Setpoint, VehicleState};
 
 use crate::link::{
-    AUTOPILOT_PX4, Command, Encoder, Inbound, Outgoing, Signer, autopilot_name, command_name,
-    encode, frames, inbound, mission_result_name,
+    Autopilot, AutopilotChoice, Command, Encoder, Inbound, Outgoing, Signer, autopilot_name,
+    command_name, encode, frames, inbound, mission_result_name,
 };
 
 /// How long the fence upload waits for the vehicle before it sends its last message
@@ -76,6 +77,16 @@ pub struct VehicleLink {
     round_trip: Option<Duration>,
     /// How far behind its sockets the coordinator is ([`VehicleLink::set_listen_lag`]).
     listen_lag: Duration,
+    /// The handshake's parameter reads and writes (its autopilot's), once discovered.
+    params: Option<ParamSession>,
+    /// The end-of-flight restore of what `params` wrote, once started.
+    restore: Option<ParamSession>,
+    /// Whether the vehicle multiplies the thrust it is sent by 1/cos(tilt).
+    angle_boost: bool,
+    /// Whether what `params` read was taken (the angle boost, the hover reported).
+    params_applied: bool,
+    /// The last warning the vehicle sent (STATUSTEXT, severity WARNING or worse).
+    last_warning: Option<String>,
 }
 
 impl VehicleLink {
@@ -88,6 +99,11 @@ impl VehicleLink {
             .clone()
             .map(|plan| FenceUpload::new(plan, FENCE_RETRY, cfg.max_attempts));
         Self {
+            params: None,
+            restore: None,
+            angle_boost: false,
+            params_applied: false,
+            last_warning: None,
             listen_lag: Duration::ZERO,
             timesync_sent_ns: None,
             round_trip: None,
@@ -117,6 +133,11 @@ impl VehicleLink {
             refused_reports: 0,
             next_origin: None,
         }
+    }
+
+    /// The last warning the vehicle sent (STATUSTEXT, severity WARNING or worse).
+    pub fn last_warning(&self) -> Option<&str> {
+        self.last_warning.as_deref()
     }
 
     /// Frames from the vehicle refused by the signing rules.
@@ -227,12 +248,24 @@ impl VehicleLink {
     fn send_setpoint(&mut self, now: SimTime) {
         let (target_system, time_boot_ms) = (self.cfg.system_id, now.boot_ms());
         let setpoint = self.setpoint;
+        let written;
         let out = match &setpoint {
-            Setpoint::Attitude(setpoint) => Outgoing::Attitude {
-                setpoint,
-                target_system,
-                time_boot_ms,
-            },
+            Setpoint::Attitude(setpoint) => {
+                // The thrust as this autopilot reads it.
+                let thrust = self
+                    .state
+                    .dialect()
+                    .thrust_field(setpoint, self.angle_boost);
+                written = crate::control::AttitudeThrust {
+                    thrust_norm: thrust,
+                    ..*setpoint
+                };
+                Outgoing::Attitude {
+                    setpoint: &written,
+                    target_system,
+                    time_boot_ms,
+                }
+            }
             Setpoint::Acceleration(accel_ned_mps2) => Outgoing::Acceleration {
                 accel_ned_mps2,
                 target_system,
@@ -280,9 +313,18 @@ impl VehicleLink {
         {
             next = next.min(fence.poll_timeout());
         }
+        if let Some(params) = &self.params
+            && matches!(self.phase, Phase::Streaming(_))
+        {
+            next = next.min(params.poll_timeout());
+        }
+        if let Some(restore) = &self.restore
+            && self.phase == Phase::Disarming
+        {
+            next = next.min(restore.poll_timeout());
+        }
         if let Phase::Streaming(since) = self.phase
-            && self.state.origin.is_some()
-            && self.fence_ready()
+            && self.ready_to_arm()
         {
             next = next.min(since + self.cfg.pre_stream);
         }
@@ -309,7 +351,7 @@ impl VehicleLink {
             | Phase::Overridden
             | Phase::VehicleHold => false,
             // Keep OFFBOARD fed until the vehicle has taken NAV_LAND.
-            Phase::Landing => self.pending.is_some() && self.state.in_offboard(),
+            Phase::Landing => self.pending.is_some() && self.state.in_fly_mode(),
             _ => true,
         }
     }
@@ -327,7 +369,7 @@ impl VehicleLink {
             Phase::Overridden => {} // someone else flies it
             Phase::Streaming(_) if !self.state.armed => {
                 self.pending = None;
-                self.phase = Phase::Done;
+                self.close(now);
             }
             Phase::Lost => {} // sent when the vehicle is heard again
             _ => self.request_land(now),
@@ -400,9 +442,14 @@ impl VehicleLink {
                 autopilot,
                 failsafe,
             } => {
-                if self.phase == Phase::Discovering && autopilot != AUTOPILOT_PX4 {
-                    self.refuse_autopilot(autopilot);
-                    return;
+                if self.phase == Phase::Discovering {
+                    match self.dialect_of(autopilot) {
+                        Ok(dialect) => self.state.autopilot = Some(dialect),
+                        Err(reason) => {
+                            self.fail(reason);
+                            return;
+                        }
+                    }
                 }
                 self.state.last_heartbeat = Some(now);
                 self.state.custom_mode = custom_mode;
@@ -413,14 +460,21 @@ impl VehicleLink {
                 self.state.armed = armed;
                 match self.phase {
                     Phase::Discovering => {
-                        self.events.push_back(LinkEvent::Discovered);
+                        let autopilot = self.state.dialect();
+                        self.events.push_back(LinkEvent::Discovered { autopilot });
+                        let steps = autopilot.setup_params(self.cfg.own_ids.0);
+                        self.params = Some(ParamSession::new(
+                            steps,
+                            self.cfg.ack_timeout,
+                            self.cfg.max_attempts,
+                        ));
                         self.start_streaming(now);
                     }
                     Phase::Lost => self.recover(now),
                     Phase::Flying => {
                         // Two in a row: a heartbeat sent just before the switch may still
                         // arrive after the acknowledgement.
-                        if self.state.in_offboard() && armed {
+                        if self.state.in_fly_mode() && armed {
                             self.heartbeats_out_of_offboard = 0;
                         } else {
                             self.heartbeats_out_of_offboard += 1;
@@ -529,6 +583,14 @@ impl VehicleLink {
                     });
                 }
             }
+            Inbound::ParamValue { name, value } => self.on_param_value(now, &name, value),
+            Inbound::StatusText { text, .. } => {
+                if self.last_warning.as_deref() != Some(text.as_str()) {
+                    self.events.push_back(LinkEvent::VehicleSays(text.clone()));
+                    self.last_warning = Some(text);
+                }
+            }
+            Inbound::Prearm(ok) => self.state.prearm_ok = Some(ok),
             Inbound::FenceRequest { seq, target_system } => {
                 if self.fence_answer_is_ours(target_system) {
                     let answer = self.fence.as_mut().map(|f| f.on_request(now, seq));
@@ -616,17 +678,148 @@ impl VehicleLink {
         }
     }
 
-    /// A vehicle whose autopilot is not PX4 is never commanded: PX4's mode numbers and
-    /// offboard rules would mean something else to it.
-    fn refuse_autopilot(&mut self, autopilot: u8) {
-        let reason = format!(
-            "vehicle {}: autopilot is {}, not PX4: refused (ringswarm speaks PX4's modes only)",
-            self.cfg.system_id,
-            autopilot_name(autopilot)
-        );
+    /// The dialect a first heartbeat's `autopilot` asks for, or why the vehicle is
+    /// refused: an autopilot the coordinator does not speak (its mode numbers would mean
+    /// something else), or not the one configured. ArduPilot is flown with attitude
+    /// setpoints only.
+    fn dialect_of(&self, autopilot: u8) -> Result<Autopilot, String> {
+        let id = self.cfg.system_id;
+        let Some(dialect) = Autopilot::from_heartbeat(autopilot) else {
+            return Err(format!(
+                "vehicle {id}: autopilot is {}: refused (ringswarm speaks PX4 and ArduPilot)",
+                autopilot_name(autopilot)
+            ));
+        };
+        if let AutopilotChoice::Only(want) = self.cfg.autopilot
+            && want != dialect
+        {
+            return Err(format!(
+                "vehicle {id}: its heartbeat says {}, the configuration autopilot = \"{}\": refused",
+                autopilot_name(autopilot),
+                want.key()
+            ));
+        }
+        if dialect == Autopilot::ArduPilot && matches!(self.setpoint, Setpoint::Acceleration(_)) {
+            return Err(format!(
+                "vehicle {id}: ArduPilot is flown with attitude setpoints only (swarm.setpoint = \"attitude\")"
+            ));
+        }
+        Ok(dialect)
+    }
+
+    /// Gives up on the vehicle for `reason`.
+    pub(super) fn fail(&mut self, reason: String) {
         self.phase = Phase::Failed;
         self.pending = None;
         self.events.push_back(LinkEvent::Failed(reason));
+    }
+
+    /// Whether the handshake may arm (or switch) the vehicle: its origin known, the fence
+    /// held, its parameters set, and its pre-arm checks passed where it reports them.
+    fn ready_to_arm(&self) -> bool {
+        self.state.origin.is_some()
+            && self.fence_ready()
+            && self.params.as_ref().is_none_or(ParamSession::done)
+            && (!self.state.dialect().reports_prearm() || self.state.prearm_ok == Some(true))
+    }
+
+    /// What the handshake waits for before it arms, for an operator (`None`: nothing).
+    pub fn waiting_for(&self) -> Option<String> {
+        if !matches!(self.phase, Phase::Streaming(_) | Phase::Arming) {
+            return None;
+        }
+        let said = self
+            .last_warning
+            .as_ref()
+            .map_or(String::new(), |t| format!("; it last said \"{t}\""));
+        let what = if self.state.origin.is_none() {
+            "its position estimate (no GPS_GLOBAL_ORIGIN yet)"
+        } else if !self.fence_ready() {
+            "the fence upload"
+        } else if !self.params.as_ref().is_none_or(ParamSession::done) {
+            "its parameters"
+        } else if self.state.dialect().reports_prearm() && self.state.prearm_ok != Some(true) {
+            "its pre-arm checks (EKF)"
+        } else {
+            "arming"
+        };
+        Some(format!("waiting for {what}{said}"))
+    }
+
+    /// A PARAM_VALUE: the handshake's session while streaming, the restore while
+    /// disarming.
+    fn on_param_value(&mut self, now: SimTime, name: &str, value: f32) {
+        let restoring = self.phase == Phase::Disarming;
+        let session = if restoring {
+            self.restore.as_mut()
+        } else if matches!(self.phase, Phase::Streaming(_)) {
+            self.params.as_mut()
+        } else {
+            None
+        };
+        let Some(session) = session else { return };
+        let written = session.changed().len();
+        let sends = session.on_value(now, name, value);
+        let newly: Vec<(&'static str, f32)> = session.changed()[written..].to_vec();
+        for (name, from) in newly {
+            self.events.push_back(LinkEvent::ParamWritten {
+                name,
+                from,
+                to: value,
+                restored: restoring,
+            });
+        }
+        self.send_params(sends);
+        self.on_params_progress();
+    }
+
+    /// After a parameter answer or timeout: what the session's end means.
+    pub(super) fn on_params_progress(&mut self) {
+        if self.phase == Phase::Disarming {
+            if let Some(restore) = &self.restore
+                && (restore.done() || restore.failure().is_some())
+            {
+                if let Some(why) = restore.failure() {
+                    let text = format!("parameters not put back: {why}");
+                    self.events.push_back(LinkEvent::VehicleSays(text));
+                }
+                self.finish_restored();
+            }
+            return;
+        }
+        let Some(params) = &self.params else { return };
+        if let Some(why) = params.failure() {
+            let reason = format!("vehicle {}: {why}", self.cfg.system_id);
+            self.fail(reason);
+            return;
+        }
+        if params.done() && !self.params_applied {
+            let dialect = self.state.dialect();
+            let read = |p: &ringswarm_wire::ardupilot::ParamName| params.value(p);
+            self.angle_boost = dialect.angle_boost(read);
+            if let Some(hover_throttle) = dialect.reported_hover(read) {
+                self.events
+                    .push_back(LinkEvent::HoverReported { hover_throttle });
+            }
+            self.params_applied = true;
+        }
+    }
+
+    pub(super) fn send_params(&mut self, sends: Vec<ParamSend>) {
+        let target_system = self.cfg.system_id;
+        for send in sends {
+            match send {
+                ParamSend::Read(name) => self.queue(Outgoing::ParamRead {
+                    target_system,
+                    name,
+                }),
+                ParamSend::Set { name, value } => self.queue(Outgoing::ParamSet {
+                    target_system,
+                    name,
+                    value,
+                }),
+            }
+        }
     }
 
     /// Runs the timers due at `now`: the setpoint stream, the pre-stream, command
@@ -706,25 +899,36 @@ impl VehicleLink {
         if matches!(self.phase, Phase::Streaming(_)) {
             let answer = self.fence.as_mut().map(|f| f.handle_timeout(now));
             self.on_fence_answer(answer);
+            let sends = self
+                .params
+                .as_mut()
+                .map(|p| p.handle_timeout(now))
+                .unwrap_or_default();
+            self.send_params(sends);
+            self.on_params_progress();
+        }
+        if self.phase == Phase::Disarming {
+            let sends = self
+                .restore
+                .as_mut()
+                .map(|p| p.handle_timeout(now))
+                .unwrap_or_default();
+            self.send_params(sends);
+            self.on_params_progress();
         }
         if let Phase::Streaming(since) = self.phase
             && now.saturating_since(since) >= self.cfg.pre_stream
-            && self.state.origin.is_some()
-            && self.fence_ready()
+            && self.ready_to_arm()
         {
-            if self.state.armed {
-                self.request_offboard(now)
-            } else {
-                self.request_arm(now)
-            }
+            self.next_handshake_step(now);
         }
         if let Some(p) = self.pending
             && now >= p.deadline
             && p.accepted
             && self.phase == Phase::Offboarding
         {
-            // ACCEPTED and nothing else came: OFFBOARD it is.
-            self.enter_flying();
+            // ACCEPTED and nothing else came: the mode it is.
+            self.mode_taken(now);
         }
         if let Some(p) = self.pending
             && now >= p.deadline

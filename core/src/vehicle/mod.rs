@@ -1,5 +1,7 @@
-//! The coordinator's side of one vehicle: a sans-IO machine for PX4's offboard handshake
-//! and link health.
+//! The coordinator's side of one vehicle: a sans-IO machine for its autopilot's handshake
+//! (PX4's or ArduPilot's, the dialect in [`crate::link::Autopilot`]) and link health.
+//! Below, OFFBOARD is the mode the vehicle is flown in and AUTO.LOITER the one it is
+//! handed to: GUIDED and BRAKE on ArduPilot.
 //!
 //! ```text
 //!  Discovering ──heartbeat from the expected system──► Streaming (setpoints at the stream rate,
@@ -33,9 +35,10 @@
 //!
 //! From its first timeout on, in every phase, the link sends a ground-station HEARTBEAT
 //! (type GCS, autopilot INVALID) every `heartbeat_interval` from its own ids, as
-//! QGroundControl and MAVSDK do; PX4 watches it for its data-link-loss failsafe. A first
-//! heartbeat whose `autopilot` is not PX4 fails the link at discovery, with a message
-//! naming the vehicle and its autopilot: PX4's mode numbers mean something else elsewhere.
+//! QGroundControl and MAVSDK do; PX4 watches it for its data-link-loss failsafe. The
+//! first heartbeat's `autopilot` picks the dialect (`LinkConfig::autopilot`: `Auto`, or
+//! only the one configured); an autopilot the coordinator does not speak, or not the one
+//! configured, fails the link at discovery with a message naming the vehicle and both.
 //!
 //! Drive it with [`VehicleLink::handle_datagram`] for every datagram from the vehicle's
 //! address, [`VehicleLink::handle_timeout`] at [`VehicleLink::poll_timeout`], and send what
@@ -47,9 +50,10 @@
 
 mod fence_upload;
 mod link;
+pub mod params;
 pub mod telemetry;
 
-pub use crate::link::LinkSigning;
+pub use crate::link::{Autopilot, AutopilotChoice, LinkSigning};
 use crate::link::{command_name, result_name};
 pub use crate::safety::{FenceItem, FenceItemKind};
 pub use fence_upload::{FencePlan, FenceUpload, UploadAnswer, UploadSend, UploadState};
@@ -64,11 +68,6 @@ use ringswarm_wire::time::SimTime;
 
 use crate::control::AttitudeThrust;
 use crate::frame::Geodetic;
-
-use ringswarm_wire::px4::{
-    MAIN_AUTO as PX4_MAIN_AUTO, MAIN_OFFBOARD as PX4_MAIN_OFFBOARD,
-    SUB_AUTO_LAND as PX4_SUB_AUTO_LAND, SUB_AUTO_LOITER as PX4_SUB_AUTO_LOITER,
-};
 
 /// What a link streams to keep OFFBOARD and fly the vehicle.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -123,6 +122,8 @@ pub struct LinkConfig {
     pub network: Option<String>,
     /// The fence to give the vehicle before it is armed (mission type FENCE), if any.
     pub fence: Option<Arc<FencePlan>>,
+    /// The autopilot it must run (default: whichever its first heartbeat names).
+    pub autopilot: AutopilotChoice,
 }
 
 impl LinkConfig {
@@ -158,6 +159,7 @@ impl LinkConfig {
             retake_offboard: false,
             signing: None,
             fence: None,
+            autopilot: AutopilotChoice::Auto,
         }
     }
 }
@@ -216,8 +218,11 @@ impl Phase {
 /// What the swarm should know.
 #[derive(Debug, Clone, PartialEq)]
 pub enum LinkEvent {
-    /// First heartbeat from the expected system.
-    Discovered,
+    /// First heartbeat from the expected system, and the autopilot it names.
+    Discovered {
+        /// Its autopilot.
+        autopilot: Autopilot,
+    },
     /// The vehicle reports armed.
     Armed,
     /// The vehicle is in OFFBOARD and armed.
@@ -251,8 +256,10 @@ pub enum LinkEvent {
     Landed,
     /// Disarmed on the ground: the link is done.
     Disarmed,
-    /// Left OFFBOARD while flying; PX4's custom mode it reports now.
+    /// Left OFFBOARD (GUIDED) while flying; the custom mode it reports now.
     LeftOffboard {
+        /// Its autopilot (whose mode numbers `custom_mode` is in).
+        autopilot: Autopilot,
         /// The heartbeat's custom mode.
         custom_mode: u32,
         /// Armed, as that heartbeat says.
@@ -298,6 +305,27 @@ pub enum LinkEvent {
     /// A frame from the vehicle failed the signing rules (reported once per link; the
     /// count is in [`crate::vehicle::VehicleLink::refused_frames`]).
     SigningRefused(String),
+    /// The vehicle said this (a STATUSTEXT of severity WARNING or worse; a repeat of the
+    /// last one is not reported again).
+    VehicleSays(String),
+    /// The hover throttle the vehicle reports of itself (ArduPilot's learnt
+    /// MOT_THST_HOVER): the swarm starts its hover estimate from it.
+    HoverReported {
+        /// Normalised thrust at hover (0..1).
+        hover_throttle: f64,
+    },
+    /// A vehicle parameter written by the handshake (`from` → `to`), or put back at the
+    /// end (`restored`).
+    ParamWritten {
+        /// The vehicle's name for it.
+        name: &'static str,
+        /// The value before.
+        from: f32,
+        /// The value after.
+        to: f32,
+        /// Whether this is the end-of-flight restore.
+        restored: bool,
+    },
 }
 
 impl LinkEvent {
@@ -306,8 +334,10 @@ impl LinkEvent {
     pub fn is_warning(&self) -> bool {
         !matches!(
             self,
-            Self::Discovered
+            Self::Discovered { .. }
                 | Self::Armed
+                | Self::HoverReported { .. }
+                | Self::ParamWritten { .. }
                 | Self::Flying
                 | Self::Recovered
                 | Self::EstimateGood { .. }
@@ -322,9 +352,9 @@ impl LinkEvent {
 impl fmt::Display for LinkEvent {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Self::Discovered => write!(f, "discovered"),
+            Self::Discovered { autopilot } => write!(f, "discovered ({})", autopilot.name()),
             Self::Armed => write!(f, "armed"),
-            Self::Flying => write!(f, "flying in OFFBOARD"),
+            Self::Flying => write!(f, "flying"),
             Self::Retrying { command, attempt } => write!(
                 f,
                 "{} not acknowledged: attempt {attempt}",
@@ -342,10 +372,15 @@ impl fmt::Display for LinkEvent {
             Self::Landing => write!(f, "landing"),
             Self::Landed => write!(f, "landed"),
             Self::Disarmed => write!(f, "disarmed"),
-            Self::LeftOffboard { custom_mode, armed } => write!(
+            Self::LeftOffboard {
+                autopilot,
+                custom_mode,
+                armed,
+            } => write!(
                 f,
-                "left OFFBOARD by itself: now in {} ({})",
-                px4_mode_name(*custom_mode),
+                "left {} by itself: now in {} ({})",
+                autopilot.fly_mode_name(),
+                autopilot.mode_name(*custom_mode),
                 if *armed { "armed" } else { "disarmed" }
             ),
             Self::Refused { command, result } => write!(
@@ -379,13 +414,21 @@ impl fmt::Display for LinkEvent {
                 f,
                 "frames refused by signing ({why}); is the vehicle provisioned with this key?"
             ),
+            Self::VehicleSays(text) => write!(f, "says \"{text}\""),
+            Self::HoverReported { hover_throttle } => {
+                write!(f, "reports its hover throttle: {hover_throttle:.3}")
+            }
+            Self::ParamWritten {
+                name,
+                from,
+                to,
+                restored,
+            } => {
+                let what = if *restored { "put back" } else { "set" };
+                write!(f, "parameter {name} {what}: {from} -> {to}")
+            }
         }
     }
-}
-
-/// PX4's name for a custom mode (main mode in bits 16–23, sub mode in 24–31).
-pub fn px4_mode_name(custom_mode: u32) -> String {
-    ringswarm_wire::px4::mode_name(custom_mode)
 }
 
 /// What the coordinator knows of the vehicle (its own frames: local NED, body FRD).
@@ -401,8 +444,12 @@ pub struct VehicleState {
     pub origin: Option<Geodetic>,
     /// Armed, as the last heartbeat said.
     pub armed: bool,
-    /// PX4 custom mode of the last heartbeat.
+    /// The autopilot its first heartbeat named (`None` before it was heard).
+    pub autopilot: Option<Autopilot>,
+    /// Custom mode of the last heartbeat (in its autopilot's numbering).
     pub custom_mode: u32,
+    /// Whether its pre-arm checks pass, where it reports them (SYS_STATUS).
+    pub prearm_ok: Option<bool>,
     /// A failsafe acts, as the last heartbeat said (system status CRITICAL).
     pub failsafe: bool,
     /// On the ground, as EXTENDED_SYS_STATE said.
@@ -420,20 +467,29 @@ pub struct VehicleState {
 }
 
 impl VehicleState {
-    /// Whether the heartbeat says OFFBOARD.
-    pub fn in_offboard(&self) -> bool {
-        (self.custom_mode >> 16) & 0xFF == PX4_MAIN_OFFBOARD
+    /// Its dialect: the autopilot its heartbeat named, PX4 before it was heard.
+    pub fn dialect(&self) -> Autopilot {
+        self.autopilot.unwrap_or(Autopilot::Px4)
     }
 
-    /// Whether the heartbeat says AUTO.LAND.
+    /// Whether the heartbeat says it is in the mode it is flown in (PX4 OFFBOARD,
+    /// ArduPilot GUIDED or GUIDED_NOGPS).
+    pub fn in_fly_mode(&self) -> bool {
+        self.dialect().in_fly_mode(self.custom_mode)
+    }
+
+    /// Whether the heartbeat says its landing mode (AUTO.LAND, LAND).
     pub fn in_land(&self) -> bool {
-        (self.custom_mode >> 16) & 0xFF == PX4_MAIN_AUTO
-            && (self.custom_mode >> 24) & 0xFF == PX4_SUB_AUTO_LAND
+        self.dialect().in_land(self.custom_mode)
     }
 
-    /// Whether the heartbeat says AUTO.LOITER (Hold).
+    /// Whether the heartbeat says the hold mode it is handed to (AUTO.LOITER, BRAKE).
     pub fn in_hold(&self) -> bool {
-        (self.custom_mode >> 16) & 0xFF == PX4_MAIN_AUTO
-            && (self.custom_mode >> 24) & 0xFF == PX4_SUB_AUTO_LOITER
+        self.dialect().in_hold(self.custom_mode)
+    }
+
+    /// Its autopilot's name for the heartbeat's mode.
+    pub fn mode_name(&self) -> String {
+        self.dialect().mode_name(self.custom_mode)
     }
 }

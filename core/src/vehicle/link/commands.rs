@@ -1,37 +1,27 @@
-//! What the link sends and what answers mean: the handshake (stream, arm, OFFBOARD), the
-//! landing and disarm, the hand-over to the vehicle's own Hold, the vehicle's own
-//! decisions after a loss, and each command's acknowledgement, retries included.
+//! What the link sends and what answers mean: the handshake (stream, arm, the fly mode,
+//! in the order the vehicle's autopilot takes them), the landing and disarm, the
+//! hand-over to the vehicle's own hold mode, the vehicle's own decisions after a loss,
+//! and each command's acknowledgement, retries included.
 
 use std::time::Duration;
 
 use ringswarm_wire::time::SimTime;
 
-use super::super::{LinkEvent, PX4_MAIN_AUTO, PX4_MAIN_OFFBOARD, PX4_SUB_AUTO_LOITER, Phase};
+use super::super::params::ParamSession;
+use super::super::{LinkEvent, Phase};
 use super::{Pending, VehicleLink};
-use crate::link::{Command, Outgoing};
+use crate::link::{Command, Outgoing, StreamRate};
 
 /// MAV_RESULT_ACCEPTED.
 const ACCEPTED: u8 = 0;
 /// How long an ACCEPTED for DO_SET_MODE waits for a second, real answer (PX4 main sends
 /// it a few milliseconds after its early ACCEPTED).
 pub(super) const MODE_ACK_SETTLE: Duration = Duration::from_millis(100);
-/// Message ids the coordinator asks to be streamed, and GPS_GLOBAL_ORIGIN asked for (at
-/// the start of streaming, then with every heartbeat until it has come).
-const LOCAL_POSITION_NED: u32 = 32;
-const ATTITUDE_QUATERNION: u32 = 31;
+/// GPS_GLOBAL_ORIGIN, asked for at the start of streaming, then with every heartbeat
+/// until it has come.
 const GPS_GLOBAL_ORIGIN: u32 = 49;
-/// Streams of PX4's onboard link (`mavlink_main.cpp`, MAVLINK_MODE_ONBOARD) the
-/// coordinator does not read, turned off on its link (interval −1): every one of them is
-/// a datagram the vehicle sends and the coordinator parses for nothing, and together they
-/// are most of what a large swarm would send it. ATTITUDE (100 Hz on PX4's onboard link)
-/// and GLOBAL_POSITION_INT (50) first, then HIGHRES_IMU (50), ODOMETRY (30), RC_CHANNELS
-/// (20), the 10 Hz ones (ALTITUDE, DISTANCE_SENSOR, ATTITUDE_TARGET, SERVO_OUTPUT_RAW,
-/// VFR_HUD, POSITION_TARGET_LOCAL_NED and _GLOBAL_INT, NAV_CONTROLLER_OUTPUT), and
-/// SYS_STATUS, GPS_RAW_INT, BATTERY_STATUS, HOME_POSITION. A stream the autopilot does
-/// not have is refused harmlessly; a ground station on another link keeps its own.
-const UNREAD_STREAMS: [u32; 17] = [
-    30, 33, 105, 331, 65, 141, 132, 83, 36, 74, 85, 87, 62, 1, 24, 147, 242,
-];
+/// MAV_RESULT_FAILED: ArduPilot's answer to an arm its checks refuse.
+const FAILED: u8 = 4;
 
 impl VehicleLink {
     pub(super) fn hand_to_hold(&mut self, now: SimTime, reason: String, resume_when_fresh: bool) {
@@ -40,10 +30,7 @@ impl VehicleLink {
         self.hold_confirmed = false;
         self.heartbeats_out_of_offboard = 0;
         self.events.push_back(LinkEvent::HandedToHold(reason));
-        let hold = Command::SetMode {
-            main: PX4_MAIN_AUTO,
-            sub: PX4_SUB_AUTO_LOITER,
-        };
+        let hold = self.state.dialect().hold_mode();
         self.send_pending(now, hold, 1);
     }
 
@@ -58,10 +45,40 @@ impl VehicleLink {
         self.send_pending(now, Command::Disarm, 1);
     }
 
-    pub(super) fn finish(&mut self) {
+    /// Disarmed on the ground: done, once what the handshake wrote on the vehicle is put
+    /// back (the link stays Disarming meanwhile).
+    pub(super) fn finish(&mut self, now: SimTime) {
         self.pending = None;
-        self.phase = Phase::Done;
+        if self.restore.is_some() {
+            return; // already putting back
+        }
         self.events.push_back(LinkEvent::Disarmed);
+        self.close(now);
+    }
+
+    /// Done with a disarmed vehicle: at once, or once what the handshake wrote on it is put
+    /// back (Disarming meanwhile).
+    pub(super) fn close(&mut self, now: SimTime) {
+        let changed = self
+            .params
+            .as_ref()
+            .map(|p| p.changed().to_vec())
+            .unwrap_or_default();
+        if changed.is_empty() || self.restore.is_some() {
+            self.phase = Phase::Done;
+            return;
+        }
+        self.phase = Phase::Disarming;
+        let mut restore =
+            ParamSession::restore(&changed, self.cfg.ack_timeout, self.cfg.max_attempts);
+        let sends = restore.start(now);
+        self.restore = Some(restore);
+        self.send_params(sends);
+    }
+
+    /// The restore is over (done or given up): the link is done.
+    pub(super) fn finish_restored(&mut self) {
+        self.phase = Phase::Done;
     }
 
     /// Heard again after a loss. Before it first flew, the handshake starts over. After,
@@ -82,7 +99,7 @@ impl VehicleLink {
             self.phase = Phase::VehicleHold;
         } else if !self.has_flown
             || self.cfg.retake_offboard
-            || (self.state.armed && self.state.in_offboard())
+            || (self.state.armed && self.state.in_fly_mode())
         {
             // Still armed in OFFBOARD (a loss shorter than its COM_OF_LOSS_T): the usual
             // stream then DO_SET_MODE, which it already is in; no arming.
@@ -96,6 +113,7 @@ impl VehicleLink {
     pub(super) fn left_offboard(&mut self, now: SimTime) {
         self.pending = None;
         self.events.push_back(LinkEvent::LeftOffboard {
+            autopilot: self.state.dialect(),
             custom_mode: self.state.custom_mode,
             armed: self.state.armed,
         });
@@ -111,12 +129,13 @@ impl VehicleLink {
         self.pending = None;
         self.next_setpoint = now;
         let us = |d: std::time::Duration| Some(d.as_micros() as f32);
-        let streams = [
-            (LOCAL_POSITION_NED, us(self.cfg.telemetry_interval)),
-            (ATTITUDE_QUATERNION, us(self.cfg.attitude_interval)),
-        ];
-        let off = UNREAD_STREAMS.map(|id| (id, None));
-        for (message_id, interval_us) in streams.into_iter().chain(off) {
+        for (message_id, rate) in self.state.dialect().streams() {
+            let interval_us = match rate {
+                StreamRate::Telemetry => us(self.cfg.telemetry_interval),
+                StreamRate::Attitude => us(self.cfg.attitude_interval),
+                StreamRate::Fixed(us) => Some(us),
+                StreamRate::Off => None,
+            };
             let stream = Command::StreamInterval {
                 message_id,
                 interval_us,
@@ -125,6 +144,49 @@ impl VehicleLink {
         }
         self.request_origin();
         self.start_fence_upload(now);
+        let sends = self
+            .params
+            .as_mut()
+            .map(|p| p.start(now))
+            .unwrap_or_default();
+        self.send_params(sends);
+    }
+
+    /// The next step of the handshake from what the vehicle is now: arm, switch to the fly
+    /// mode (in the order its autopilot takes them), or fly.
+    pub(super) fn next_handshake_step(&mut self, now: SimTime) {
+        let (armed, in_mode) = (self.state.armed, self.state.in_fly_mode());
+        if self.state.dialect().mode_before_arming() {
+            if !in_mode {
+                self.request_fly_mode(now);
+            } else if !armed {
+                self.request_arm(now);
+            } else {
+                self.enter_flying();
+            }
+        } else if armed {
+            self.request_fly_mode(now);
+        } else {
+            self.request_arm(now);
+        }
+    }
+
+    /// The fly mode was taken (acknowledged, or shown by the heartbeat).
+    pub(super) fn mode_taken(&mut self, now: SimTime) {
+        if self.state.dialect().mode_before_arming() && !self.state.armed {
+            self.request_arm(now);
+        } else {
+            self.enter_flying();
+        }
+    }
+
+    /// The vehicle armed (acknowledged, or shown by the heartbeat).
+    fn armed_now(&mut self, now: SimTime) {
+        if self.state.dialect().mode_before_arming() {
+            self.enter_flying();
+        } else {
+            self.request_fly_mode(now);
+        }
     }
 
     /// Asks for GPS_GLOBAL_ORIGIN once (fire and forget: the heartbeat timer asks again
@@ -140,10 +202,13 @@ impl VehicleLink {
     /// A heartbeat may show that a command took effect even if its ack was lost.
     pub(super) fn advance_on_state(&mut self, now: SimTime) {
         if self.phase == Phase::Arming && self.state.armed {
-            self.request_offboard(now);
+            self.armed_now(now);
         }
-        if self.phase == Phase::Offboarding && self.state.armed && self.state.in_offboard() {
-            self.enter_flying();
+        if self.phase == Phase::Offboarding
+            && self.state.in_fly_mode()
+            && (self.state.armed || self.state.dialect().mode_before_arming())
+        {
+            self.mode_taken(now);
         }
         if self.phase == Phase::Landing {
             if self.pending.is_some_and(|p| p.command == Command::Land) && self.state.in_land() {
@@ -155,12 +220,12 @@ impl VehicleLink {
                     self.request_disarm(now);
                 } else {
                     self.events.push_back(LinkEvent::Landed);
-                    self.finish();
+                    self.finish(now);
                 }
             }
         }
         if self.phase == Phase::Disarming && !self.state.armed {
-            self.finish();
+            self.finish(now);
         }
     }
 
@@ -181,6 +246,17 @@ impl VehicleLink {
         if result != ACCEPTED {
             self.events
                 .push_back(LinkEvent::Refused { command, result });
+            if self.phase == Phase::Arming
+                && result == FAILED
+                && self.state.dialect().reports_prearm()
+            {
+                // Its checks said no (an EKF not yet ready, named in its STATUSTEXT):
+                // wait for them again; the swarm's handshake timeout bounds the wait.
+                self.pending = None;
+                self.state.prearm_ok = None;
+                self.phase = Phase::Streaming(now);
+                return;
+            }
             if let Some(p) = &mut self.pending
                 && p.accepted
             {
@@ -191,7 +267,7 @@ impl VehicleLink {
             return; // resent at the deadline
         }
         match self.phase {
-            Phase::Arming => self.request_offboard(now),
+            Phase::Arming => self.armed_now(now),
             Phase::Offboarding => {
                 if let Some(p) = &mut self.pending {
                     p.accepted = true;
@@ -202,7 +278,7 @@ impl VehicleLink {
                 self.pending = None;
                 self.events.push_back(LinkEvent::Landing);
             }
-            Phase::Disarming => self.finish(),
+            Phase::Disarming => self.finish(now),
             Phase::VehicleHold => {
                 self.pending = None;
                 self.hold_confirmed = true;
@@ -216,13 +292,10 @@ impl VehicleLink {
         self.send_pending(now, Command::Arm, 1);
     }
 
-    pub(super) fn request_offboard(&mut self, now: SimTime) {
+    pub(super) fn request_fly_mode(&mut self, now: SimTime) {
         self.phase = Phase::Offboarding;
-        let offboard = Command::SetMode {
-            main: PX4_MAIN_OFFBOARD,
-            sub: 0,
-        };
-        self.send_pending(now, offboard, 1);
+        let mode = self.state.dialect().fly_mode();
+        self.send_pending(now, mode, 1);
     }
 
     pub(super) fn send_pending(&mut self, now: SimTime, command: Command, attempt: u8) {
