@@ -16,7 +16,9 @@
 //!
 //! [[vehicle]]                  # one table per vehicle, in instance order (ports 14580+i …)
 //! system_id = 1                # default: instance + 1
-//! profile = "x500"             # "x500" (default) or "ideal"
+//! profile = "x500"             # "x500" (default), "ideal" or "arducopter"
+//! autopilot = "px4"            # whose autopilot it plays on the wire: "px4" or "ardupilot"
+//! ekf_settle_s = 5.0           # ardupilot: seconds after boot before its EKF has a position
 //! start_ned_m = [0.0, 0.0, 0.0]    # NED offset from the reference; becomes its local origin
 //! velocity_ned_mps = [0.0, 0.0, 0.0]
 //! yaw_deg = 0.0
@@ -45,7 +47,7 @@ use serde::Deserialize;
 use std::time::Duration;
 
 use crate::autopilot::estimator::EstimatorConfig;
-use crate::autopilot::{BatteryConfig, StartState, VehicleConfig, WindConfig};
+use crate::autopilot::{BatteryConfig, Personality, StartState, VehicleConfig, WindConfig};
 use crate::profile::Profile;
 use crate::udp::LinkFaults;
 use crate::world::{Geodetic, World};
@@ -179,6 +181,21 @@ pub struct EmulatedVehicle {
     pub battery_sag: f64,
     /// Battery capacity (mAh; default the profile's BAT1_CAPACITY).
     pub battery_capacity_mah: Option<f64>,
+    /// Whose autopilot it plays: `px4` (default; `auto` too) or `ardupilot`.
+    #[serde(default = "default_autopilot")]
+    pub autopilot: String,
+    /// ArduPilot: seconds after boot before its EKF has a position and it may arm.
+    #[serde(default = "default_ekf_settle")]
+    pub ekf_settle_s: f64,
+}
+
+fn default_autopilot() -> String {
+    "px4".to_owned()
+}
+
+/// ArduPilot SITL takes about 40 s; the emulator's default is shorter, as a test needs.
+fn default_ekf_settle() -> f64 {
+    5.0
 }
 
 impl Default for EmulatedVehicle {
@@ -204,6 +221,8 @@ impl Default for EmulatedVehicle {
             estimator_latency_ms: 0.0,
             battery_sag: 0.0,
             battery_capacity_mah: None,
+            autopilot: default_autopilot(),
+            ekf_settle_s: default_ekf_settle(),
         }
     }
 }
@@ -280,7 +299,33 @@ impl EmulatedVehicle {
                 None
             }
         };
-        let Some(profile) = profile.filter(|_| problems.is_empty()) else {
+        let personality = match self.autopilot.as_str() {
+            "px4" | "auto" => Some(Personality::Px4),
+            "ardupilot" => {
+                let settle = self.ekf_settle_s;
+                if settle.is_finite() && (0.0..=600.0).contains(&settle) {
+                    Some(Personality::ArduPilot {
+                        ekf_settle: Duration::from_secs_f64(settle),
+                    })
+                } else {
+                    problems.push(format!(
+                        "{}ekf_settle_s must be a finite number in [0, 600] s, got {settle}",
+                        names.vehicle
+                    ));
+                    None
+                }
+            }
+            other => {
+                problems.push(format!(
+                    "{}autopilot = \"{other}\" is not one of \"px4\", \"ardupilot\" (\"auto\" plays PX4)",
+                    names.vehicle
+                ));
+                None
+            }
+        };
+        let (Some(profile), Some(personality)) =
+            (profile.filter(|_| problems.is_empty()), personality)
+        else {
             return Err(problems);
         };
         let cfg = VehicleConfig {
@@ -312,6 +357,7 @@ impl EmulatedVehicle {
                 sag: self.battery_sag,
             },
             signing: None,
+            personality,
         };
         cfg.validate()
             .map_err(|e| vec![format!("{}: {e}", names.vehicle.trim_end_matches('.'))])?;

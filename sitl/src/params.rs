@@ -1,19 +1,25 @@
-//! The parameter table: PX4 names, PX4 encoding.
+//! The parameter table: PX4 names, PX4 encoding; or, for the ArduPilot personality,
+//! ArduCopter's names and encoding on the wire in front of the PX4 ones the emulated
+//! controllers still read (those are not on the wire then).
 //!
-//! Values travel as MAVLink `float` fields. Integer parameters use PX4's bytewise encoding
-//! (`MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE`): the `i32`'s bytes are sent as the
-//! float's bytes. The profile's physical values are read-only (`SIM_*`): a PARAM_SET on
-//! them, or of a value out of range, is answered with the unchanged value, as PX4 does.
+//! Values travel as MAVLink `float` fields. PX4's integer parameters use its bytewise
+//! encoding (`MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE`): the `i32`'s bytes are sent
+//! as the float's bytes. ArduPilot's integers travel as their value cast to a float
+//! (`MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT`). The profile's physical values are read-only
+//! (`SIM_*`): a PARAM_SET on them, or of a value out of range, is answered with the
+//! unchanged value, as PX4 does.
 
 use crate::profile::Profile;
 
 /// A parameter's type on the wire.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ParamKind {
-    /// `MAV_PARAM_TYPE_INT32`, bytewise.
+    /// `MAV_PARAM_TYPE_INT32`, bytewise (PX4).
     Int32,
     /// `MAV_PARAM_TYPE_REAL32`.
     Real32,
+    /// `MAV_PARAM_TYPE_INT32`, its value cast to a float (ArduPilot).
+    Int32Cast,
 }
 
 /// One parameter.
@@ -35,7 +41,7 @@ impl Param {
     /// The value as MAVLink carries it.
     pub fn wire_value(&self) -> f32 {
         match self.kind {
-            ParamKind::Real32 => self.value as f32,
+            ParamKind::Real32 | ParamKind::Int32Cast => self.value as f32,
             ParamKind::Int32 => f32::from_ne_bytes((self.value as i32).to_ne_bytes()),
         }
     }
@@ -44,6 +50,8 @@ impl Param {
     pub fn from_wire(&self, wire: f32) -> f64 {
         match self.kind {
             ParamKind::Real32 => f64::from(wire),
+            // ArduPilot rounds a float written to an integer parameter.
+            ParamKind::Int32Cast => f64::from(wire).round(),
             ParamKind::Int32 => f64::from(i32::from_ne_bytes(wire.to_ne_bytes())),
         }
     }
@@ -69,6 +77,8 @@ pub enum ParamSetError {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ParamTable {
     params: Vec<Param>,
+    /// The first this many are on the wire (listed, read and set by a ground station).
+    on_wire: usize,
 }
 
 impl ParamTable {
@@ -178,12 +188,58 @@ impl ParamTable {
                 true,
             ),
         ];
-        Self { params }
+        Self {
+            on_wire: params.len(),
+            params,
+        }
     }
 
-    /// Number of parameters (`param_count`).
+    /// The table of the ArduPilot personality: ArduCopter's parameters a ground station
+    /// and the coordinator read and write (4.7 names; ArduPilot's defaults, the hover
+    /// throttle the profile's), in front of the PX4 table the emulated controllers read.
+    pub fn ardupilot(system_id: u8, profile: &Profile) -> Self {
+        use ParamKind::{Int32Cast, Real32};
+        let p = |name, kind, value, range: (f64, f64)| Param {
+            name,
+            kind,
+            value,
+            range,
+            read_only: false,
+        };
+        let mut params = vec![
+            p("ATC_ANGLE_BOOST", Int32Cast, 1.0, (0.0, 1.0)),
+            p("DISARM_DELAY", Int32Cast, 10.0, (0.0, 127.0)),
+            p("FENCE_ACTION", Int32Cast, 1.0, (0.0, 5.0)),
+            p("FENCE_ALT_MAX", Real32, 100.0, (10.0, 1000.0)),
+            p("FENCE_ENABLE", Int32Cast, 0.0, (0.0, 1.0)),
+            p("FENCE_MARGIN", Real32, 2.0, (1.0, 10.0)),
+            p("FENCE_TYPE", Int32Cast, 7.0, (0.0, 15.0)),
+            p("FS_GCS_ENABLE", Int32Cast, 0.0, (0.0, 7.0)),
+            p("FS_GCS_TIMEOUT", Real32, 5.0, (2.0, 120.0)),
+            p("GUID_OPTIONS", Int32Cast, 0.0, (0.0, 255.0)),
+            p("GUID_TIMEOUT", Real32, 3.0, (0.1, 5.0)),
+            p("MAV_GCS_SYSID", Int32Cast, 255.0, (1.0, 255.0)),
+            Param {
+                read_only: true, // taken at the next boot only
+                ..p("MAV_SYSID", Int32Cast, f64::from(system_id), (1.0, 255.0))
+            },
+            p(
+                "MOT_THST_HOVER",
+                Real32,
+                profile.hover_throttle(),
+                (0.125, 0.6875),
+            ),
+            p("WPNAV_SPEED_DN", Real32, 150.0, (10.0, 500.0)),
+            p("WPNAV_SPEED_UP", Real32, 250.0, (10.0, 1000.0)),
+        ];
+        let on_wire = params.len();
+        params.extend(Self::new(system_id, profile).params);
+        Self { params, on_wire }
+    }
+
+    /// Number of parameters on the wire (`param_count`).
     pub fn len(&self) -> usize {
-        self.params.len()
+        self.on_wire
     }
 
     /// Whether the table is empty (never, for a vehicle).
@@ -191,9 +247,25 @@ impl ParamTable {
         self.params.is_empty()
     }
 
-    /// The parameter at `index`.
+    /// The parameter at `index` on the wire.
     pub fn get(&self, index: usize) -> Option<&Param> {
-        self.params.get(index)
+        self.params.get(index).filter(|_| index < self.on_wire)
+    }
+
+    /// The index and parameter called `name` on the wire.
+    pub fn find_on_wire(&self, name: &str) -> Option<(usize, &Param)> {
+        self.find(name).filter(|(i, _)| *i < self.on_wire)
+    }
+
+    /// Sets a parameter on the wire from its wire value (as [`ParamTable::set`]).
+    ///
+    /// # Errors
+    /// [`ParamSetError`]; a parameter not on the wire is unknown.
+    pub fn set_on_wire(&mut self, name: &str, wire: f32) -> Result<usize, ParamSetError> {
+        if self.find_on_wire(name).is_none() {
+            return Err(ParamSetError::Unknown(name.to_owned()));
+        }
+        self.set(name, wire)
     }
 
     /// The index and parameter called `name`.
@@ -252,6 +324,31 @@ mod tests {
         assert_eq!(sys.wire_value().to_ne_bytes(), 3i32.to_ne_bytes());
         let (_, hover) = table.find("MPC_THR_HOVER").unwrap();
         assert_eq!(hover.wire_value(), 0.5);
+    }
+
+    #[test]
+    fn ardupilot_shows_its_own_names_with_integers_as_floats() {
+        let mut table = ParamTable::ardupilot(4, &Profile::arducopter());
+        assert_eq!(table.len(), 16);
+        let (_, sys) = table.find_on_wire("MAV_SYSID").unwrap();
+        assert_eq!(sys.wire_value(), 4.0);
+        let (_, hover) = table.find_on_wire("MOT_THST_HOVER").unwrap();
+        assert!((hover.wire_value() - 0.39).abs() < 1e-6);
+        // The PX4 parameters the controllers read are there, but not on the wire.
+        assert!(table.find("MPC_THR_HOVER").is_some());
+        assert!(table.find_on_wire("MPC_THR_HOVER").is_none());
+        assert!((0..table.len()).all(|i| table.get(i).is_some()));
+        assert!(table.get(table.len()).is_none());
+        assert_eq!(
+            table.set_on_wire("COM_OF_LOSS_T", 2.0),
+            Err(ParamSetError::Unknown("COM_OF_LOSS_T".into()))
+        );
+        assert!(table.set_on_wire("GUID_OPTIONS", 8.0).is_ok());
+        assert_eq!(table.value("GUID_OPTIONS"), 8.0);
+        assert_eq!(
+            table.set_on_wire("MAV_SYSID", 9.0),
+            Err(ParamSetError::ReadOnly("MAV_SYSID"))
+        );
     }
 
     #[test]

@@ -108,6 +108,35 @@ impl Profile {
         }
     }
 
+    /// The `arducopter` profile: ArduPilot SITL's built-in quad (`SIM_Frame.cpp`: 3 kg,
+    /// 0.35 m diagonal, hover throttle 0.39, inertia m·0.25·(d/2)² about x and y, twice
+    /// that about z) with ArduCopter's attitude P gain (ATC_ANG_RLL_P 4.5). Its drag is
+    /// the linear part only: the momentum drag at hover, 0.72 N/(m/s) for 3 kg = 0.24 1/s;
+    /// SITL's quadratic part (0.101 N/(m/s)², 0.034 1/m per kg) is not modelled, so above
+    /// about 7 m/s this airframe is slower to lose speed than ArduPilot's.
+    pub fn arducopter() -> Self {
+        let mass_kg = 3.0;
+        let half_diagonal_m: f64 = 0.175;
+        let ixx = mass_kg * 0.25 * half_diagonal_m * half_diagonal_m;
+        Self {
+            name: "arducopter",
+            mass_kg,
+            inertia_kg_m2: Vector3::new(ixx, ixx, 2.0 * ixx),
+            motor_offset_m: half_diagonal_m,
+            max_motor_thrust_n: mass_kg * GRAVITY_MPS2 / (4.0 * 0.39),
+            moment_constant_m: 0.016,
+            motor_time_constant_s: 0.03,
+            linear_drag_per_s: 0.24,
+            gains: AttitudeGains {
+                attitude_p: Vector3::new(4.5, 4.5, 4.5),
+                rate_p: Vector3::new(18.0, 18.0, 8.0),
+                rate_i: Vector3::new(8.0, 8.0, 4.0),
+                rate_d: Vector3::new(0.0, 0.0, 0.0),
+                max_rate_rps: Vector3::new(3.8, 3.8, 3.5),
+            },
+        }
+    }
+
     /// The same airframe with another true mass (kg), hover throttle (the motors' thrust
     /// for that mass) or linear drag (1/s); `None` keeps the profile's.
     ///
@@ -143,8 +172,8 @@ impl Profile {
     }
 
     /// Every profile, for listings.
-    pub fn all() -> [Self; 2] {
-        [Self::ideal(), Self::x500()]
+    pub fn all() -> [Self; 3] {
+        [Self::ideal(), Self::x500(), Self::arducopter()]
     }
 }
 
@@ -187,6 +216,14 @@ mod tests {
         assert!((x.hover_throttle() - 0.5).abs() < 1e-12);
         let i = Profile::ideal();
         assert!((i.hover_throttle() - 0.2).abs() < 1e-12);
+        let a = Profile::arducopter();
+        assert!((a.hover_throttle() - 0.39).abs() < 1e-12);
+        // ArduPilot SITL's inertia: 3 kg · 0.25 · (0.35 m / 2)² = 0.0230 kg·m².
+        assert!((a.inertia_kg_m2.x - 0.022_968_75).abs() < 1e-12);
+        assert_eq!(
+            "arducopter".parse::<Profile>().map(|p| p.name),
+            Ok("arducopter")
+        );
     }
 
     #[test]
@@ -194,7 +231,7 @@ mod tests {
         let err = "x600".parse::<Profile>().unwrap_err();
         assert_eq!(
             err.to_string(),
-            "unknown vehicle profile \"x600\" (known: ideal, x500)"
+            "unknown vehicle profile \"x600\" (known: ideal, x500, arducopter)"
         );
     }
 }

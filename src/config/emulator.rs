@@ -128,6 +128,8 @@ impl Config {
                 estimator_latency_ms: e.estimator_latency_ms,
                 battery_sag: e.battery_sag,
                 battery_capacity_mah: e.battery_capacity_mah,
+                autopilot: v.autopilot.clone(),
+                ekf_settle_s: e.ekf_settle_s,
                 ..EmulatedVehicle::default()
             };
             let (vehicle, airframe_key) =

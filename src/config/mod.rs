@@ -470,6 +470,9 @@ pub struct EmulatorSection {
     pub battery_capacity_mah: Option<f64>,
     /// Telemetry faults of one vehicle for a while: `[[emulator.fault]]`.
     pub fault: Vec<FaultSection>,
+    /// Vehicles with `autopilot = "ardupilot"`: seconds after boot before their EKF has
+    /// a position and they may arm (default 5; real ArduPilot SITL takes about 40).
+    pub ekf_settle_s: f64,
 }
 
 /// `[[emulator.fault]]`: vehicle `vehicle` (1-based) reports something wrong between
@@ -531,6 +534,7 @@ impl Default for EmulatorSection {
             battery_sag: 0.0,
             battery_capacity_mah: None,
             fault: Vec::new(),
+            ekf_settle_s: 5.0,
         }
     }
 }

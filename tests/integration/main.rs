@@ -6,6 +6,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod ardupilot;
 mod cli;
 mod config;
 mod config_random;

@@ -14,16 +14,16 @@ use ringswarm_sitl::profile::Profile;
 use ringswarm_sitl::world::World;
 use ringswarm_wire::time::SimTime;
 
-struct Harness {
-    link: VehicleLink,
-    vehicle: Vehicle,
-    now: SimTime,
-    events: Vec<(SimTime, LinkEvent)>,
-    sent_to_vehicle: Vec<MavMessage>,
+pub(crate) struct Harness {
+    pub(crate) link: VehicleLink,
+    pub(crate) vehicle: Vehicle,
+    pub(crate) now: SimTime,
+    pub(crate) events: Vec<(SimTime, LinkEvent)>,
+    pub(crate) sent_to_vehicle: Vec<MavMessage>,
 }
 
 /// Decides whether a frame gets through: `(to_vehicle, message) -> deliver?`.
-type Filter<'a> = &'a mut dyn FnMut(bool, &MavMessage) -> bool;
+pub(crate) type Filter<'a> = &'a mut dyn FnMut(bool, &MavMessage) -> bool;
 
 impl Harness {
     fn new(expected_system: u8, vehicle_system: u8) -> Self {
@@ -31,6 +31,12 @@ impl Harness {
     }
 
     fn with_config(cfg: LinkConfig, vehicle_system: u8) -> Self {
+        Self::with_vehicle(cfg, VehicleConfig::new(vehicle_system, Profile::x500()))
+    }
+
+    /// A link with `cfg` and its idle setpoint level at thrust `0.5`, to the emulated
+    /// vehicle `vehicle`.
+    pub(crate) fn with_vehicle(cfg: LinkConfig, vehicle: VehicleConfig) -> Self {
         let idle = AttitudeThrust {
             attitude_ned_frd: UnitQuaternion::identity(),
             thrust_norm: 0.5,
@@ -38,18 +44,14 @@ impl Harness {
         };
         Self {
             link: VehicleLink::new(cfg, idle),
-            vehicle: Vehicle::new(
-                VehicleConfig::new(vehicle_system, Profile::x500()),
-                World::default(),
-            )
-            .unwrap(),
+            vehicle: Vehicle::new(vehicle, World::default()).unwrap(),
             now: SimTime::ZERO,
             events: Vec::new(),
             sent_to_vehicle: Vec::new(),
         }
     }
 
-    fn run(&mut self, d: Duration, filter: Filter<'_>) {
+    pub(crate) fn run(&mut self, d: Duration, filter: Filter<'_>) {
         let end = self.now + d;
         while self.now < end {
             self.now = self.now + Duration::from_millis(1);
@@ -81,7 +83,7 @@ impl Harness {
     }
 
     /// What was sent to the vehicle apart from our ground-station heartbeats.
-    fn commands_sent(&self) -> Vec<&MavMessage> {
+    pub(crate) fn commands_sent(&self) -> Vec<&MavMessage> {
         self.sent_to_vehicle
             .iter()
             .filter(|m| !matches!(m, MavMessage::HEARTBEAT(_)))
@@ -115,14 +117,14 @@ impl Harness {
     }
 
     /// The reason of the first `Failed` event.
-    fn failure(&self) -> Option<String> {
+    pub(crate) fn failure(&self) -> Option<String> {
         self.events.iter().find_map(|(_, e)| match e {
             LinkEvent::Failed(r) => Some(r.clone()),
             _ => None,
         })
     }
 
-    fn flying_at(&self) -> Option<SimTime> {
+    pub(crate) fn flying_at(&self) -> Option<SimTime> {
         self.events
             .iter()
             .find(|(_, e)| *e == LinkEvent::Flying)
@@ -130,7 +132,7 @@ impl Harness {
     }
 }
 
-fn deliver_all(_: bool, _: &MavMessage) -> bool {
+pub(crate) fn deliver_all(_: bool, _: &MavMessage) -> bool {
     true
 }
 

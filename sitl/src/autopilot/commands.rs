@@ -27,6 +27,7 @@ const REPOSITION_CHANGE_MODE: u32 = 1;
 /// A command with its seven parameters (`None` = unused).
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Command {
+    /// The command.
     pub id: MavCmd,
     pub params: [Option<f64>; 7],
 }
@@ -69,7 +70,18 @@ impl Vehicle {
         sender: (u8, u8),
         cmd: Command,
     ) {
+        let ardupilot = self.is_ardupilot();
         let result = match cmd.id {
+            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM if ardupilot => self.ap_arm_disarm(now, &cmd),
+            MavCmd::MAV_CMD_DO_SET_MODE if ardupilot => self.ap_set_mode(now, &cmd),
+            MavCmd::MAV_CMD_NAV_LAND if ardupilot => self.ap_land(),
+            MavCmd::MAV_CMD_NAV_TAKEOFF if ardupilot => self.ap_takeoff(&cmd),
+            // ArduPilot: param3 (the response target) must be 0.
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL
+                if ardupilot && cmd.params[2].is_some_and(|p| p != 0.0) =>
+            {
+                MavResult::MAV_RESULT_DENIED
+            }
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => self.cmd_arm_disarm(now, &cmd),
             MavCmd::MAV_CMD_DO_SET_MODE => self.cmd_set_mode(now, &cmd),
             MavCmd::MAV_CMD_NAV_LAND => {
@@ -134,7 +146,8 @@ impl Vehicle {
         sender: (u8, u8),
         cmd: Command,
     ) {
-        if cmd.id == MavCmd::MAV_CMD_DO_SET_MODE {
+        // ArduPilot answers once.
+        if cmd.id == MavCmd::MAV_CMD_DO_SET_MODE && !self.is_ardupilot() {
             self.send_ack(link, sender, cmd.id, MavResult::MAV_RESULT_ACCEPTED);
         }
         self.run_command(now, link, sender, cmd);

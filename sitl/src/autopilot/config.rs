@@ -21,6 +21,20 @@ pub struct StartState {
     pub in_air: bool,
 }
 
+/// Whose autopilot the vehicle plays on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Personality {
+    /// PX4 (the default).
+    #[default]
+    Px4,
+    /// ArduPilot's ArduCopter ([`super::ardupilot`]); its EKF has a position
+    /// `ekf_settle` after boot (arming is refused before).
+    ArduPilot {
+        /// How long after boot the EKF has a position.
+        ekf_settle: std::time::Duration,
+    },
+}
+
 /// Steady wind plus seeded gusts (a first-order Gauss–Markov process per axis).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WindConfig {
@@ -65,6 +79,8 @@ pub struct VehicleConfig {
     /// The MAVLink 2 signing key it boots with (from its key store or the command line);
     /// `None` accepts everything unsigned, as PX4 without a key does.
     pub signing: Option<crate::keystore::StoredKey>,
+    /// Whose autopilot it plays (default PX4).
+    pub personality: Personality,
 }
 
 /// The battery: its capacity and how much thrust its voltage sag costs.
@@ -96,6 +112,7 @@ impl VehicleConfig {
             estimator: EstimatorConfig::default(),
             battery: BatteryConfig::default(),
             signing: None,
+            personality: Personality::Px4,
         }
     }
 
@@ -144,6 +161,15 @@ impl VehicleConfig {
             return Err(format!(
                 "vehicle {}: battery capacity must be in [1, 1000000] mAh, got {c}",
                 self.system_id
+            ));
+        }
+        if let Personality::ArduPilot { ekf_settle } = self.personality
+            && ekf_settle > std::time::Duration::from_secs(600)
+        {
+            return Err(format!(
+                "vehicle {}: the ArduPilot EKF settle must be at most 600 s, got {} s",
+                self.system_id,
+                ekf_settle.as_secs_f64()
             ));
         }
         self.estimator

@@ -174,6 +174,10 @@ impl Vehicle {
         if !self.for_us(m.target_system, m.target_component) {
             return false;
         }
+        if self.is_ardupilot() {
+            self.ap_attitude_target(now, m);
+            return true;
+        }
         let target = offboard::attitude_target(&AttitudeTarget {
             type_mask: m.type_mask.bits(),
             q: m.q.map(f64::from),
@@ -282,8 +286,12 @@ impl Vehicle {
         if !self.for_us(m.target_system, 0) {
             return false;
         }
-        let main = (m.custom_mode >> 16) & 0xFF;
-        let sub = m.custom_mode >> 24;
+        // ArduPilot's custom mode is the plain mode number; PX4's packs main and sub.
+        let (main, sub) = if self.is_ardupilot() {
+            (m.custom_mode, 0)
+        } else {
+            ((m.custom_mode >> 16) & 0xFF, m.custom_mode >> 24)
+        };
         let params = [
             1.0,
             main as f32,
@@ -310,7 +318,7 @@ impl Vehicle {
         } else {
             m.param_id.to_str().ok().and_then(|name| {
                 self.params
-                    .find(name.trim_end_matches('\0'))
+                    .find_on_wire(name.trim_end_matches('\0'))
                     .map(|(i, _)| i)
             })
         };
@@ -331,7 +339,7 @@ impl Vehicle {
             .unwrap_or("")
             .trim_end_matches('\0')
             .to_owned();
-        match self.params.set(&name, m.param_value) {
+        match self.params.set_on_wire(&name, m.param_value) {
             Ok(index) => {
                 self.tuning = super::tuning::Tuning::from_params(&self.params);
                 self.send_param(link, index);
@@ -339,7 +347,7 @@ impl Vehicle {
             Err(err) => {
                 tracing::debug!(sysid = self.cfg.system_id, ?err, "parameter not set");
                 // Answer with the current value, as PX4 does, when the name exists.
-                if let Some((index, _)) = self.params.find(&name) {
+                if let Some((index, _)) = self.params.find_on_wire(&name) {
                     self.send_param(link, index);
                 }
             }

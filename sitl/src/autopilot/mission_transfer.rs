@@ -127,6 +127,8 @@ impl Vehicle {
             target_component: to.1,
             mission_type,
         };
+        // ArduPilot asks every item with MISSION_REQUEST (MissionItemProtocol.cpp).
+        let legacy = legacy || self.is_ardupilot();
         #[allow(deprecated)]
         let msg = if legacy {
             MavMessage::MISSION_REQUEST(mavlink::dialects::common::MISSION_REQUEST_DATA {

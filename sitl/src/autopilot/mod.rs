@@ -25,6 +25,7 @@
 //! [`PHYSICS_STEP`]; the machine integrates in fixed 1 ms steps up to `now`), then drain
 //! [`Vehicle::poll_transmit`]. It never reads a clock or touches a socket.
 
+mod ardupilot;
 mod commands;
 mod config;
 mod datalink;
@@ -53,7 +54,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-pub use config::{BatteryConfig, StartState, VehicleConfig, WindConfig};
+pub use config::{BatteryConfig, Personality, StartState, VehicleConfig, WindConfig};
 pub use geofence::Geofence;
 pub use mission::MissionStore;
 pub use mission_item::MissionItem;
@@ -228,6 +229,8 @@ pub struct Vehicle {
     last_step: SimTime,
     boot_at: SimTime,
     counters: Counters,
+    /// The ArduPilot personality's own state (`None`: PX4's).
+    ap: Option<ardupilot::ApState>,
 }
 
 impl Vehicle {
@@ -260,7 +263,16 @@ impl Vehicle {
             wind_ned_mps: cfg.wind.steady_ned_mps,
             ground_z_ned_m: ground_local_z,
         };
-        let mut params = ParamTable::new(cfg.system_id, &cfg.profile);
+        let ap = match cfg.personality {
+            Personality::Px4 => None,
+            Personality::ArduPilot { ekf_settle } => {
+                Some(ardupilot::ApState::at_boot(ekf_settle, in_air))
+            }
+        };
+        let mut params = match ap {
+            Some(_) => ParamTable::ardupilot(cfg.system_id, &cfg.profile),
+            None => ParamTable::new(cfg.system_id, &cfg.profile),
+        };
         if let Some(capacity) = cfg.battery.capacity_mah {
             params
                 .set("BAT1_CAPACITY", capacity as f32)
@@ -269,7 +281,11 @@ impl Vehicle {
         let tuning = Tuning::from_params(&params);
         let links = [LinkId::Offboard, LinkId::Gcs].map(|_| Link {
             encoder: Encoder::new(cfg.system_id, 1),
-            streams: telemetry::default_streams(cfg.fast_rate_hz),
+            // ArduCopter streams nothing until asked (its MAVn_* rates default to 0).
+            streams: match ap {
+                Some(_) => telemetry::heartbeat_only(),
+                None => telemetry::default_streams(cfg.fast_rate_hz),
+            },
             streams_due: SimTime::ZERO,
             last_heard: None,
             wired: true,
@@ -329,6 +345,7 @@ impl Vehicle {
             last_step: SimTime::ZERO,
             boot_at: SimTime::ZERO,
             counters: Counters::default(),
+            ap,
             state,
             cfg,
         })
@@ -448,7 +465,11 @@ impl Vehicle {
 
     /// One fixed step of autopilot logic, control and physics ending at `t`.
     fn step(&mut self, t: SimTime) {
-        self.check_offboard_loss(t);
+        if self.is_ardupilot() {
+            self.ap_guided_timeout(t);
+        } else {
+            self.check_offboard_loss(t);
+        }
         self.check_datalink(t);
         self.mission_timers(t);
         self.check_geofence(t);
@@ -545,6 +566,10 @@ impl Vehicle {
             if !on_ground {
                 self.took_off = true;
             }
+        }
+        if self.is_ardupilot() {
+            self.ap_landed_disarm(t);
+            return;
         }
         if !self.armed {
             return;

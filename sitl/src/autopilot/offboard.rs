@@ -47,6 +47,16 @@ pub enum OffboardTarget {
         /// Yaw-rate feed-forward (rad/s), NaN when not given.
         yawspeed_ff_rps: f64,
     },
+    /// An attitude with a climb rate (ArduPilot's guided angle mode reads the thrust
+    /// field so by default): the thrust is the vehicle's own, to make the climb.
+    AttitudeClimb {
+        /// Attitude.
+        attitude: UnitQuaternion<f64>,
+        /// Climb rate (m/s, up).
+        climb_up_mps: f64,
+        /// Yaw-rate feed-forward (rad/s), NaN when not given.
+        yawspeed_ff_rps: f64,
+    },
     /// Body rates (FRD, rad/s; NaN yaw = 0) with normalised thrust.
     Rates {
         /// Roll, pitch, yaw rate.

@@ -15,7 +15,7 @@ impl Vehicle {
     /// What the attitude controller tracks this step; `None` spins the motors down
     /// (disarmed).
     pub(super) fn attitude_command(&mut self, t: SimTime, dt: f64) -> Option<AttitudeCommand> {
-        if !self.armed {
+        if !self.armed || !self.motors_started(t) {
             self.navigator.pos_ctrl_active = false;
             return None;
         }
@@ -37,6 +37,23 @@ impl Vehicle {
                         setpoint: AttitudeSetpoint {
                             attitude,
                             thrust_norm: thrust,
+                        },
+                        yawspeed_ff_rps,
+                    });
+                }
+                Some(OffboardTarget::AttitudeClimb {
+                    attitude,
+                    climb_up_mps,
+                    yawspeed_ff_rps,
+                }) => {
+                    self.navigator.pos_ctrl_active = false;
+                    if self.landed && climb_up_mps <= 0.0 {
+                        return Some(idle(self));
+                    }
+                    return Some(AttitudeCommand::Attitude {
+                        setpoint: AttitudeSetpoint {
+                            attitude,
+                            thrust_norm: self.climb_thrust(&attitude, climb_up_mps),
                         },
                         yawspeed_ff_rps,
                     });
@@ -96,6 +113,18 @@ impl Vehicle {
             setpoint: out.attitude,
             yawspeed_ff_rps: out.yawspeed_ff_rps,
         })
+    }
+
+    /// The thrust that makes `climb_up_mps` at `attitude`: the hover thrust, plus the
+    /// vertical velocity error times MPC_Z_VEL_P_ACC, over the cosine of the tilt (a
+    /// climb-rate loop like ArduPilot's guided angle mode runs).
+    fn climb_thrust(&self, attitude: &nalgebra::UnitQuaternion<f64>, climb_up_mps: f64) -> f64 {
+        let p = &self.tuning.mpc;
+        let climb_now = -self.state.vel_ned_mps.z;
+        let accel_up = p.z_vel_pid[0] * (climb_up_mps - climb_now);
+        let g = crate::profile::GRAVITY_MPS2;
+        let cos_tilt = (attitude * nalgebra::Vector3::z()).z.clamp(0.1, 1.0);
+        (p.thr_hover * (g + accel_up) / g / cos_tilt).clamp(p.thr_min, p.thr_max)
     }
 
     pub(super) fn check_offboard_loss(&mut self, t: SimTime) {

@@ -64,6 +64,17 @@ pub(super) fn default_streams(fast_rate_hz: f64) -> Vec<Stream> {
     .collect()
 }
 
+/// The ArduPilot personality's streams at boot: the heartbeat, nothing else until asked.
+pub(super) fn heartbeat_only() -> Vec<Stream> {
+    let interval = Some(Duration::from_secs(1));
+    vec![Stream {
+        msg_id: HEARTBEAT,
+        default_interval: interval,
+        interval,
+        next_due: SimTime::ZERO,
+    }]
+}
+
 /// Messages that can be streamed or requested once.
 fn is_known(msg_id: u32) -> bool {
     matches!(
@@ -223,7 +234,7 @@ impl Vehicle {
             param_index: index as u16,
             param_id: param.name.into(),
             param_type: match param.kind {
-                ParamKind::Int32 => MavParamType::MAV_PARAM_TYPE_INT32,
+                ParamKind::Int32 | ParamKind::Int32Cast => MavParamType::MAV_PARAM_TYPE_INT32,
                 ParamKind::Real32 => MavParamType::MAV_PARAM_TYPE_REAL32,
             },
         });
@@ -237,9 +248,21 @@ impl Vehicle {
     }
 
     fn build(&self, now: SimTime, msg_id: u32) -> Option<MavMessage> {
+        if self.is_ardupilot() {
+            match msg_id {
+                HEARTBEAT => return Some(self.ap_heartbeat()),
+                // Not until its EKF has an origin (GCS_Common.cpp skips them).
+                LOCAL_POSITION_NED | GPS_GLOBAL_ORIGIN | HOME_POSITION if !self.ekf_ready(now) => {
+                    return None;
+                }
+                // PX4's message; ArduPilot sends EKF_STATUS_REPORT instead.
+                ESTIMATOR_STATUS => return None,
+                _ => {}
+            }
+        }
         Some(match msg_id {
             HEARTBEAT => self.heartbeat(),
-            SYS_STATUS => self.sys_status(),
+            SYS_STATUS => self.sys_status(now),
             EXTENDED_SYS_STATE => MavMessage::EXTENDED_SYS_STATE(EXTENDED_SYS_STATE_DATA {
                 vtol_state: MavVtolState::MAV_VTOL_STATE_UNDEFINED,
                 landed_state: self.landed_state(),
@@ -355,7 +378,7 @@ impl Vehicle {
         4.0 * (3.5 + 0.7 * remaining) - 0.01 * self.battery.current_a
     }
 
-    fn sys_status(&self) -> MavMessage {
+    fn sys_status(&self, now: SimTime) -> MavMessage {
         let sensors = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_GYRO
             | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_ACCEL
             | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_3D_MAG
@@ -366,10 +389,15 @@ impl Vehicle {
             | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
             | MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_BATTERY
             | MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK;
+        // The pre-arm bit is healthy once the EKF has a position (ArduPilot; always PX4's).
+        let mut health = sensors;
+        if !self.ekf_ready(now) {
+            health.remove(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK);
+        }
         MavMessage::SYS_STATUS(SYS_STATUS_DATA {
             onboard_control_sensors_present: sensors,
             onboard_control_sensors_enabled: sensors,
-            onboard_control_sensors_health: sensors,
+            onboard_control_sensors_health: health,
             load: 250,
             voltage_battery: (self.battery_voltage_v() * 1000.0) as u16,
             current_battery: (self.battery.current_a * 100.0) as i16,

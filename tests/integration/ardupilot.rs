@@ -1,0 +1,162 @@
+//! The coordinator's vehicle machine against the emulator's ArduPilot personality:
+//! ArduPilot's handshake order, its parameters set by name and put back, its pre-arm
+//! wait, and the refusals named.
+
+use std::time::Duration;
+
+use mavlink::dialects::common::MavMessage;
+use ringswarm::vehicle::{Autopilot, LinkConfig, LinkEvent, Phase};
+use ringswarm_sitl::autopilot::{FlightMode, Personality, VehicleConfig};
+use ringswarm_sitl::profile::Profile;
+use ringswarm_wire::time::SimTime;
+
+use super::vehicle_handshake::{Harness, deliver_all};
+
+/// ArduCopter's quad on the ground, its EKF settled `settle_s` after boot.
+fn arducopter(settle_s: f64) -> VehicleConfig {
+    VehicleConfig {
+        personality: Personality::ArduPilot {
+            ekf_settle: Duration::from_secs_f64(settle_s),
+        },
+        ..VehicleConfig::new(1, Profile::arducopter())
+    }
+}
+
+fn param_writes(h: &Harness) -> Vec<(&'static str, f32, f32, bool)> {
+    h.events
+        .iter()
+        .filter_map(|(_, e)| match e {
+            LinkEvent::ParamWritten {
+                name,
+                from,
+                to,
+                restored,
+            } => Some((*name, *from, *to, *restored)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The position in the commands sent of the first COMMAND_LONG `command` whose param1
+/// is `param1`.
+fn first_command(h: &Harness, command: u32, param1: f32) -> Option<usize> {
+    h.commands_sent().iter().position(|m| {
+        matches!(m, MavMessage::COMMAND_LONG(c) if c.command as u32 == command && c.param1 == param1)
+    })
+}
+
+#[test]
+fn an_ardupilot_vehicle_is_handshaken_in_its_order_flown_landed_and_given_its_parameters_back() {
+    let mut h = Harness::with_vehicle(LinkConfig::new(1), arducopter(3.0));
+    h.run(Duration::from_secs(8), &mut deliver_all);
+    assert!(h.events.iter().any(|(_, e)| *e
+        == LinkEvent::Discovered {
+            autopilot: Autopilot::ArduPilot
+        }));
+    // Its learnt hover throttle is reported (0.39 as a float).
+    let hover = h.events.iter().find_map(|(_, e)| match e {
+        LinkEvent::HoverReported { hover_throttle } => Some(*hover_throttle),
+        _ => None,
+    });
+    assert!(hover.is_some_and(|v| (v - 0.39).abs() < 1e-6), "{hover:?}");
+    // GUID_OPTIONS bit 3 set and the coordinator made its ground station (253).
+    assert_eq!(
+        param_writes(&h),
+        [
+            ("GUID_OPTIONS", 0.0, 8.0, false),
+            ("MAV_GCS_SYSID", 255.0, 253.0, false)
+        ]
+    );
+    assert_eq!(h.vehicle.params().value("GUID_OPTIONS"), 8.0);
+    assert_eq!(h.vehicle.params().value("MAV_GCS_SYSID"), 253.0);
+    // The streams it needs asked for, none turned off (ArduPilot streams nothing unasked).
+    let mut asked: Vec<(f32, f32)> = h
+        .commands_sent()
+        .iter()
+        .filter_map(|m| match m {
+            MavMessage::COMMAND_LONG(c) if c.command as u32 == 511 => Some((c.param1, c.param2)),
+            _ => None,
+        })
+        .collect();
+    asked.dedup();
+    assert_eq!(
+        asked,
+        [
+            (32.0, 20_000.0),
+            (31.0, 20_000.0),
+            (245.0, 200_000.0),
+            (1.0, 500_000.0)
+        ]
+    );
+    // GUIDED first, then the arm; not before its EKF has a position (3 s), and never
+    // refused (the link waited for the pre-arm bit).
+    let guided = first_command(&h, 176, 1.0).expect("DO_SET_MODE sent");
+    let arm = first_command(&h, 400, 1.0).expect("ARM sent");
+    assert!(guided < arm, "GUIDED at {guided}, ARM at {arm}");
+    let flying = h.flying_at().expect("flying");
+    assert!(flying >= SimTime::from_secs_f64(3.0), "{flying:?}");
+    assert!(flying <= SimTime::from_secs_f64(5.0), "{flying:?}");
+    assert!(
+        !h.events
+            .iter()
+            .any(|(_, e)| matches!(e, LinkEvent::Refused { .. }))
+    );
+    assert_eq!(h.link.phase(), Phase::Flying);
+    assert_eq!(h.link.state().custom_mode, 4);
+    let status = h.vehicle.status();
+    assert!(status.armed && status.mode == FlightMode::Offboard);
+    // Level at the idle setpoint's throttle 0.5 over its hover 0.39: it took off by itself.
+    assert!(status.height_m > 1.0, "{} m", status.height_m);
+
+    let now = h.now;
+    h.link.land(now);
+    h.run(Duration::from_secs(60), &mut deliver_all);
+    assert_eq!(h.link.phase(), Phase::Done);
+    let status = h.vehicle.status();
+    assert!(!status.armed && status.landed);
+    // Put back as they were, under the names the vehicle answered to.
+    assert_eq!(h.vehicle.params().value("GUID_OPTIONS"), 0.0);
+    assert_eq!(h.vehicle.params().value("MAV_GCS_SYSID"), 255.0);
+    assert_eq!(
+        param_writes(&h)[2..],
+        [
+            ("GUID_OPTIONS", 8.0, 0.0, true),
+            ("MAV_GCS_SYSID", 253.0, 255.0, true)
+        ]
+    );
+    // LAND (9), then disarmed by itself or by the link on the ground.
+    assert!(h.events.iter().any(|(_, e)| *e == LinkEvent::Landing));
+    assert!(h.events.iter().any(|(_, e)| *e == LinkEvent::Disarmed));
+}
+
+#[test]
+fn a_guid_options_write_never_confirmed_fails_the_link_by_name_and_nothing_is_armed() {
+    let mut h = Harness::with_vehicle(LinkConfig::new(1), arducopter(1.0));
+    let mut drop_the_write = |to_vehicle: bool, m: &MavMessage| {
+        !(to_vehicle
+            && matches!(m, MavMessage::PARAM_SET(p) if p.param_id.to_str().is_ok_and(|n| n.starts_with("GUID_OPTIONS"))))
+    };
+    h.run(Duration::from_secs(6), &mut drop_the_write);
+    assert_eq!(h.link.phase(), Phase::Failed);
+    assert_eq!(
+        h.failure().as_deref(),
+        Some("vehicle 1: parameter GUID_OPTIONS = 8 not confirmed after 4 attempts")
+    );
+    assert!(first_command(&h, 400, 1.0).is_none());
+    assert!(!h.vehicle.status().armed);
+}
+
+#[test]
+fn a_vehicle_whose_pre_arm_never_passes_is_not_armed_and_says_what_it_waits_for() {
+    let mut h = Harness::with_vehicle(LinkConfig::new(1), arducopter(1.0));
+    // Its SYS_STATUS never arrives: the pre-arm bit is never seen.
+    let mut no_sys_status =
+        |to_vehicle: bool, m: &MavMessage| to_vehicle || !matches!(m, MavMessage::SYS_STATUS(_));
+    h.run(Duration::from_secs(10), &mut no_sys_status);
+    assert!(matches!(h.link.phase(), Phase::Streaming(_)));
+    assert_eq!(
+        h.link.waiting_for().as_deref(),
+        Some("waiting for its pre-arm checks (EKF)")
+    );
+    assert!(first_command(&h, 400, 1.0).is_none());
+}
