@@ -62,6 +62,11 @@ pub const SCENARIOS: &[Scenario] = &[
         toml: include_str!("../../config/ground-start.toml"),
     },
     Scenario {
+        name: "mixed-autopilots",
+        about: "three PX4 x500s and three ArduCopters in one ring: OFFBOARD and GUIDED, one prediction",
+        toml: include_str!("../../config/mixed-autopilots.toml"),
+    },
+    Scenario {
         name: "link-loss",
         about: "paper-sim1 with quadrotor 3 silent from 20 s to 23 s: failsafe, hold, resume",
         toml: include_str!("../../config/link-loss.toml"),

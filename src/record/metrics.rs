@@ -312,6 +312,8 @@ impl SafetyReport {
 pub struct ModelReport {
     /// The vehicle's MAVLink system id.
     pub system_id: u8,
+    /// The autopilot its heartbeat named (`px4`, `ardupilot`; `null` if never heard).
+    pub autopilot: Option<&'static str>,
     /// Hover thrust estimate (normalised) and its standard deviation.
     pub hover_throttle: f64,
     /// See `hover_throttle`.
@@ -341,8 +343,14 @@ impl ModelReport {
                 let (hover, hover_std) = swarm.hover_estimate(i)?;
                 let (drag, drag_std, fed) = swarm.drag_estimate(i)?;
                 let b = swarm.disturbance_estimate_mps2(i)?;
+                let autopilot = swarm
+                    .links()
+                    .get(i)
+                    .and_then(|l| l.state().autopilot)
+                    .map(|a| a.key());
                 Some(Self {
                     system_id: link.system_id,
+                    autopilot,
                     hover_throttle: hover,
                     hover_throttle_std: hover_std,
                     drag_per_s: drag,

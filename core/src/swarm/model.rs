@@ -121,6 +121,12 @@ impl FlownModel {
         }
     }
 
+    /// The hover throttle the estimate started from: the configured one, or the one the
+    /// vehicle reported of itself.
+    pub(super) fn start_hover(&self) -> f64 {
+        self.configured.hover_throttle()
+    }
+
     /// Starts over from the hover throttle the vehicle reports of itself (ArduPilot's
     /// learnt MOT_THST_HOVER), which then stands for the configured one: flown until the
     /// estimator disagrees with it. Refused (`false`) outside the estimator's bounds.

@@ -205,8 +205,8 @@ impl Swarm {
                     &self.setup.links[i],
                     true,
                     format!(
-                        "hover thrust estimated at {hover:.3} ± {std:.3}, not the configured {:.3}: flying the estimate",
-                        self.setup.models[i].hover_throttle()
+                        "hover thrust estimated at {hover:.3} ± {std:.3}, not the {:.3} it started from: flying the estimate",
+                        self.slots[i].flown.start_hover()
                     ),
                 );
             }
