@@ -265,3 +265,21 @@ fn a_mixed_ring_of_px4_and_ardupilot_vehicles_flies_one_prediction_into_formatio
     // The separation kept: 3 m enforced, never less than 0.95 of it.
     assert!(closest_m >= 0.95 * 3.0, "closest {closest_m} m");
 }
+
+#[test]
+fn an_ardupilot_vehicle_is_given_the_fence_item_by_item_and_its_geofence_switched_on() {
+    use super::vehicle_handshake::{fenced, polygon};
+    let mut h = Harness::with_vehicle(fenced(&polygon(4, 100.0)), arducopter(1.0));
+    h.run(Duration::from_secs(5), &mut deliver_all);
+    assert_eq!(h.link.phase(), Phase::Flying);
+    assert!(
+        h.events
+            .iter()
+            .any(|(_, e)| *e == LinkEvent::FenceUploaded { items: 4 })
+    );
+    // ArduPilot asked for each item with MISSION_REQUEST, and holds the polygon.
+    assert_eq!(h.vehicle.geofence().items().len(), 4);
+    // FENCE_TYPE's default 7 has the polygon bit already: only FENCE_ENABLE is written.
+    assert_eq!(param_writes(&h)[2..], [("FENCE_ENABLE", 0.0, 1.0, false)]);
+    assert_eq!(h.vehicle.params().value("FENCE_ENABLE"), 1.0);
+}

@@ -631,7 +631,7 @@ fn a_vehicle_of_an_autopilot_not_spoken_or_not_configured_is_refused_at_discover
 
 /// A link to vehicle 1 that gives it `fence` (ENU about the emulator's world reference,
 /// where vehicle 1 starts).
-fn fenced(fence: &ringswarm::safety::Fence) -> LinkConfig {
+pub(crate) fn fenced(fence: &ringswarm::safety::Fence) -> LinkConfig {
     let frame = ringswarm::frame::CommonFrame::new(World::default().reference);
     let plan = ringswarm::vehicle::FencePlan::new(fence, &frame).expect("a plan");
     LinkConfig {
@@ -641,7 +641,7 @@ fn fenced(fence: &ringswarm::safety::Fence) -> LinkConfig {
 }
 
 /// A regular polygon of `n` vertices and radius `r_m` about the start.
-fn polygon(n: usize, r_m: f64) -> ringswarm::safety::Fence {
+pub(crate) fn polygon(n: usize, r_m: f64) -> ringswarm::safety::Fence {
     let vertices_m = (0..n)
         .map(|k| {
             let a = std::f64::consts::TAU * k as f64 / n as f64;

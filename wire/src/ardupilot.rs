@@ -126,6 +126,20 @@ pub const ATC_ANGLE_BOOST: ParamName = ParamName {
     current: "ATC_ANGLE_BOOST",
     legacy: "ATC_ANGLE_BOOST",
 };
+/// Whether the geofence acts (0, 1).
+pub const FENCE_ENABLE: ParamName = ParamName {
+    current: "FENCE_ENABLE",
+    legacy: "FENCE_ENABLE",
+};
+/// Which fences act (bits: 1 altitude max, 2 circle about home, 4 the uploaded polygons
+/// and circles, 8 altitude min).
+pub const FENCE_TYPE: ParamName = ParamName {
+    current: "FENCE_TYPE",
+    legacy: "FENCE_TYPE",
+};
+/// FENCE_TYPE bit 2: the uploaded inclusion polygons and circles.
+pub const FENCE_TYPE_POLYGON: u32 = 4;
+
 /// Seconds a landed, idle, armed vehicle waits before it disarms itself.
 pub const DISARM_DELAY: ParamName = ParamName {
     current: "DISARM_DELAY",

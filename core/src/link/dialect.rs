@@ -245,8 +245,34 @@ impl Autopilot {
     /// thrust written for it depends on both), GUID_OPTIONS bit 3 set (thrust as a
     /// throttle, not a climb rate) and MAV_GCS_SYSID made the coordinator's (its GCS
     /// failsafe, when enabled, then watches the coordinator's heartbeat). What is written
-    /// is put back at the end of the flight. PX4: none.
-    pub fn setup_params(self, own_system_id: u8) -> Vec<ParamStep> {
+    /// is put back at the end of the flight. With a fence to give (`fenced`), its
+    /// geofence is switched on for the uploaded polygon or circle too (FENCE_TYPE bit 2,
+    /// FENCE_ENABLE 1): ArduPilot keeps an uploaded fence but acts on it only then. PX4:
+    /// none (its geofence acts on an uploaded fence by GF_ACTION).
+    pub fn setup_params(self, own_system_id: u8, fenced: bool) -> Vec<ParamStep> {
+        match self {
+            Self::Px4 => Vec::new(),
+            Self::ArduPilot => {
+                let mut steps = self.guided_params(own_system_id);
+                if fenced {
+                    steps.extend([
+                        ParamStep {
+                            param: ardupilot::FENCE_TYPE,
+                            action: ParamAction::SetBits(ardupilot::FENCE_TYPE_POLYGON),
+                        },
+                        ParamStep {
+                            param: ardupilot::FENCE_ENABLE,
+                            action: ParamAction::Set(1.0),
+                        },
+                    ]);
+                }
+                steps
+            }
+        }
+    }
+
+    /// ArduPilot's parameters for guided attitude control and its ground station.
+    fn guided_params(self, own_system_id: u8) -> Vec<ParamStep> {
         match self {
             Self::Px4 => Vec::new(),
             Self::ArduPilot => vec![
@@ -339,6 +365,30 @@ mod tests {
         assert_eq!(Autopilot::from_heartbeat(3), Some(ap));
         assert_eq!(Autopilot::from_heartbeat(12), Some(px4));
         assert_eq!(Autopilot::from_heartbeat(0), None);
+    }
+
+    #[test]
+    fn ardupilot_sets_its_guided_thrust_and_ground_station_and_its_fence_when_fenced() {
+        let names = |steps: Vec<ParamStep>| -> Vec<(&str, ParamAction)> {
+            steps.iter().map(|s| (s.param.current, s.action)).collect()
+        };
+        let guided = [
+            ("MOT_THST_HOVER", ParamAction::Read),
+            ("ATC_ANGLE_BOOST", ParamAction::Read),
+            ("GUID_OPTIONS", ParamAction::SetBits(8)),
+            ("MAV_GCS_SYSID", ParamAction::Set(253.0)),
+        ];
+        assert_eq!(names(Autopilot::ArduPilot.setup_params(253, false)), guided);
+        let fenced = names(Autopilot::ArduPilot.setup_params(253, true));
+        assert_eq!(fenced[..4], guided);
+        assert_eq!(
+            fenced[4..],
+            [
+                ("FENCE_TYPE", ParamAction::SetBits(4)),
+                ("FENCE_ENABLE", ParamAction::Set(1.0))
+            ]
+        );
+        assert!(Autopilot::Px4.setup_params(253, true).is_empty());
     }
 
     #[test]

@@ -462,7 +462,8 @@ impl VehicleLink {
                     Phase::Discovering => {
                         let autopilot = self.state.dialect();
                         self.events.push_back(LinkEvent::Discovered { autopilot });
-                        let steps = autopilot.setup_params(self.cfg.own_ids.0);
+                        let steps =
+                            autopilot.setup_params(self.cfg.own_ids.0, self.fence.is_some());
                         self.params = Some(ParamSession::new(
                             steps,
                             self.cfg.ack_timeout,
@@ -717,10 +718,14 @@ impl VehicleLink {
     /// Whether the handshake may arm (or switch) the vehicle: its origin known, the fence
     /// held, its parameters set, and its pre-arm checks passed where it reports them.
     fn ready_to_arm(&self) -> bool {
+        let prearm = self.state.dialect().reports_prearm();
         self.state.origin.is_some()
             && self.fence_ready()
             && self.params.as_ref().is_none_or(ParamSession::done)
-            && (!self.state.dialect().reports_prearm() || self.state.prearm_ok == Some(true))
+            // An autopilot that streams only what it is asked for is armed on a position
+            // stream that came (arming starts its DISARM_DELAY clock).
+            && (!prearm || self.state.last_position.is_some())
+            && (!prearm || self.state.prearm_ok == Some(true))
     }
 
     /// What the handshake waits for before it arms, for an operator (`None`: nothing).
@@ -738,6 +743,8 @@ impl VehicleLink {
             "the fence upload"
         } else if !self.params.as_ref().is_none_or(ParamSession::done) {
             "its parameters"
+        } else if self.state.dialect().reports_prearm() && self.state.last_position.is_none() {
+            "its position stream (LOCAL_POSITION_NED)"
         } else if self.state.dialect().reports_prearm() && self.state.prearm_ok != Some(true) {
             "its pre-arm checks (EKF)"
         } else {
