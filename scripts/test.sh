@@ -27,6 +27,9 @@ python_setup() {
     python3 -m venv .venv
   fi
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -r tests/python/requirements.txt
+  # MAVProxy headless, without its GUI's dependencies (matplotlib, OpenCV, VTK: hundreds of
+  # megabytes that a console on stdin never imports).
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps MAVProxy==1.8.75
 }
 python_setup >"$setup_log" 2>&1 &
 setup_pid=$!

@@ -198,9 +198,18 @@ pub struct SitlArgs {
     /// `sitl/src/config_file.rs`); the fault and profile flags then do not apply.
     #[arg(long)]
     pub config: Option<std::path::PathBuf>,
-    /// Vehicle profile: ideal or x500.
-    #[arg(long, default_value = "x500")]
-    pub profile: String,
+    /// Vehicle profile: ideal, x500 or arducopter (default x500; arducopter with
+    /// `--autopilot ardupilot`).
+    #[arg(long)]
+    pub profile: Option<String>,
+    /// Whose autopilot the vehicles play on the wire: px4 or ardupilot (ArduCopter's
+    /// heartbeat, modes, GUIDED thrust and parameters; nothing streamed until asked).
+    #[arg(long, default_value = "px4")]
+    pub autopilot: String,
+    /// ArduPilot: seconds after boot before a vehicle's EKF has a position and it may arm
+    /// (real ArduPilot SITL takes about 40).
+    #[arg(long, default_value_t = 5.0)]
+    pub ekf_settle_s: f64,
     /// Simulated seconds per real second.
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,

@@ -207,6 +207,8 @@ impl ParamTable {
             read_only: false,
         };
         let mut params = vec![
+            // All checks on; the emulator's own are the EKF settle and the mode's.
+            p("ARMING_CHECK", Int32Cast, 1.0, (0.0, 1_048_575.0)),
             p("ATC_ANGLE_BOOST", Int32Cast, 1.0, (0.0, 1.0)),
             p("DISARM_DELAY", Int32Cast, 10.0, (0.0, 127.0)),
             p("FENCE_ACTION", Int32Cast, 1.0, (0.0, 5.0)),
@@ -329,7 +331,7 @@ mod tests {
     #[test]
     fn ardupilot_shows_its_own_names_with_integers_as_floats() {
         let mut table = ParamTable::ardupilot(4, &Profile::arducopter());
-        assert_eq!(table.len(), 16);
+        assert_eq!(table.len(), 17);
         let (_, sys) = table.find_on_wire("MAV_SYSID").unwrap();
         assert_eq!(sys.wire_value(), 4.0);
         let (_, hover) = table.find_on_wire("MOT_THST_HOVER").unwrap();

@@ -9,7 +9,7 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use nalgebra::Vector3;
 use ringswarm_sitl::autopilot::LinkId;
-use ringswarm_sitl::autopilot::{VehicleConfig, VehicleStatus};
+use ringswarm_sitl::autopilot::{Personality, VehicleConfig, VehicleStatus};
 use ringswarm_sitl::config_file::SitlConfig;
 use ringswarm_sitl::fleet::{
     FleetVehicle, Shards, VehicleControl, VehicleSpec, bind_fleet, spawn_shards,
@@ -222,7 +222,26 @@ fn config_from_flags(args: &SitlArgs) -> anyhow::Result<SitlConfig> {
             args.spacing_m
         );
     }
-    let profile: Profile = args.profile.parse()?;
+    let personality = match args.autopilot.as_str() {
+        "px4" => Personality::Px4,
+        "ardupilot"
+            if args.ekf_settle_s.is_finite() && (0.0..=600.0).contains(&args.ekf_settle_s) =>
+        {
+            Personality::ArduPilot {
+                ekf_settle: Duration::from_secs_f64(args.ekf_settle_s),
+            }
+        }
+        "ardupilot" => bail!(
+            "--ekf-settle-s must be a finite number in [0, 600] s, got {}",
+            args.ekf_settle_s
+        ),
+        other => bail!("--autopilot must be px4 or ardupilot, got \"{other}\""),
+    };
+    let default_profile = match personality {
+        Personality::Px4 => "x500",
+        Personality::ArduPilot { .. } => "arducopter",
+    };
+    let profile: Profile = args.profile.as_deref().unwrap_or(default_profile).parse()?;
     Ok(SitlConfig {
         world: World::default(),
         faults,
@@ -230,6 +249,7 @@ fn config_from_flags(args: &SitlArgs) -> anyhow::Result<SitlConfig> {
         vehicles: (0..vehicles)
             .map(|i| {
                 let mut cfg = VehicleConfig::new((i + 1) as u8, profile.clone());
+                cfg.personality = personality;
                 cfg.start.pos_world_ned_m = Vector3::new(0.0, args.spacing_m * f64::from(i), 0.0);
                 cfg
             })

@@ -283,3 +283,191 @@ fn an_ardupilot_vehicle_is_given_the_fence_item_by_item_and_its_geofence_switche
     assert_eq!(param_writes(&h)[2..], [("FENCE_ENABLE", 0.0, 1.0, false)]);
     assert_eq!(h.vehicle.params().value("FENCE_ENABLE"), 1.0);
 }
+
+/// An emulated ArduCopter driven by hand, as a ground station on its offboard link.
+struct Copter {
+    vehicle: ringswarm_sitl::autopilot::Vehicle,
+    now: SimTime,
+    encoder: ringswarm::link::Encoder,
+    acks: Vec<(u16, u8)>,
+}
+
+impl Copter {
+    fn new(settle_s: f64) -> Self {
+        let vehicle = ringswarm_sitl::autopilot::Vehicle::new(
+            arducopter(settle_s),
+            ringswarm_sitl::world::World::default(),
+        )
+        .unwrap();
+        Self {
+            vehicle,
+            now: SimTime::ZERO,
+            encoder: ringswarm::link::Encoder::new(255, 190),
+            acks: Vec::new(),
+        }
+    }
+
+    fn send(&mut self, msg: &MavMessage) {
+        let bytes = self.encoder.encode(msg);
+        self.vehicle.handle_datagram(
+            self.now,
+            ringswarm_sitl::autopilot::LinkId::Offboard,
+            &bytes,
+        );
+    }
+
+    /// COMMAND_LONG `command` with `params`; its COMMAND_ACK result.
+    fn command(&mut self, command: u16, params: [f32; 7]) -> Option<u8> {
+        use mavlink::dialects::common::MavCmd;
+        let id = match command {
+            21 => MavCmd::MAV_CMD_NAV_LAND,
+            176 => MavCmd::MAV_CMD_DO_SET_MODE,
+            400 => MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            511 => MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            other => panic!("command {other} not used here"),
+        };
+        let msg = MavMessage::COMMAND_LONG(mavlink::dialects::common::COMMAND_LONG_DATA {
+            target_system: 1,
+            target_component: 1,
+            command: id,
+            confirmation: 0,
+            param1: params[0],
+            param2: params[1],
+            param3: params[2],
+            param4: params[3],
+            param5: params[4],
+            param6: params[5],
+            param7: params[6],
+        });
+        self.acks.clear();
+        self.send(&msg);
+        self.run(0.01, None);
+        self.acks
+            .iter()
+            .rev()
+            .find(|(c, _)| *c == command)
+            .map(|(_, r)| *r)
+    }
+
+    fn attitude_target(&mut self, pitch_rad: f64, thrust: f32, type_mask: u8) {
+        let q = nalgebra::UnitQuaternion::from_euler_angles(0.0, pitch_rad, 0.0);
+        let msg =
+            MavMessage::SET_ATTITUDE_TARGET(mavlink::dialects::common::SET_ATTITUDE_TARGET_DATA {
+                time_boot_ms: 0,
+                q: [q.w as f32, q.i as f32, q.j as f32, q.k as f32],
+                body_roll_rate: 0.0,
+                body_pitch_rate: 0.0,
+                body_yaw_rate: 0.0,
+                thrust,
+                target_system: 1,
+                target_component: 1,
+                type_mask: mavlink::dialects::common::AttitudeTargetTypemask::from_bits_truncate(
+                    type_mask,
+                ),
+                thrust_body: [0.0; 3],
+            });
+        self.send(&msg);
+    }
+
+    /// Runs `seconds`, streaming `(pitch, thrust)` at 50 Hz if given.
+    fn run(&mut self, seconds: f64, stream: Option<(f64, f32)>) {
+        let end = self.now + Duration::from_secs_f64(seconds);
+        let mut next = self.now;
+        while self.now < end {
+            self.now = self.now + Duration::from_millis(1);
+            if let Some((pitch, thrust)) = stream
+                && self.now >= next
+            {
+                self.attitude_target(pitch, thrust, 7);
+                next = self.now + Duration::from_millis(20);
+            }
+            self.vehicle.handle_timeout(self.now);
+            while let Some(tx) = self.vehicle.poll_transmit() {
+                for frame in ringswarm::link::decode_datagram(&tx.bytes)
+                    .into_iter()
+                    .flatten()
+                {
+                    if let MavMessage::COMMAND_ACK(a) = frame.msg {
+                        self.acks.push((a.command as u16, a.result as u8));
+                    }
+                }
+            }
+        }
+    }
+
+    fn climb_mps(&self) -> f64 {
+        -self.vehicle.status().vel_ned_mps.z
+    }
+}
+
+#[test]
+fn the_emulated_arducopter_reads_guided_thrust_as_arducopter_does() {
+    let mut c = Copter::new(2.0);
+    // Arming before the EKF has a position: FAILED (4).
+    assert_eq!(c.command(176, [1.0, 4.0, 0.0, 0.0, 0.0, 0.0, 0.0]), Some(0));
+    assert_eq!(c.command(400, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]), Some(4));
+    // A SET_MESSAGE_INTERVAL with a response target (param3) is DENIED (2).
+    assert_eq!(
+        c.command(511, [32.0, 20_000.0, 1.0, 0.0, 0.0, 0.0, 0.0]),
+        Some(2)
+    );
+    c.run(2.0, None);
+    assert_eq!(c.command(400, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]), Some(0));
+    // By default thrust is a climb rate: 0.75 asks (0.75 − 0.5) · 2 · WPNAV_SPEED_UP
+    // (250 cm/s) = 1.25 m/s up. The motors start 2 s after the arm; then it climbs.
+    c.run(1.9, Some((0.0, 0.75)));
+    assert!(c.vehicle.status().landed);
+    c.run(8.0, Some((0.0, 0.75)));
+    let climb = c.climb_mps();
+    assert!((climb - 1.25).abs() < 0.02, "{climb} m/s");
+    // 0.5 holds the altitude; 0.25 descends at (0.5 − 0.25) · 2 · WPNAV_SPEED_DN
+    // (150 cm/s) = 0.75 m/s.
+    c.run(5.0, Some((0.0, 0.5)));
+    assert!(c.climb_mps().abs() < 0.02, "{} m/s", c.climb_mps());
+    c.run(5.0, Some((0.0, 0.25)));
+    assert!((c.climb_mps() + 0.75).abs() < 0.02, "{} m/s", c.climb_mps());
+    c.run(3.0, Some((0.0, 0.5)));
+    // GUID_OPTIONS bit 3: thrust as a throttle, boosted by 1/cos(tilt): the hover
+    // throttle 0.39 holds the altitude level and at 20° of pitch alike.
+    let set = MavMessage::PARAM_SET(mavlink::dialects::common::PARAM_SET_DATA {
+        param_value: 8.0,
+        target_system: 1,
+        target_component: 1,
+        param_id: {
+            let mut id = [0u8; 16];
+            id[..12].copy_from_slice(b"GUID_OPTIONS");
+            id.into()
+        },
+        param_type: mavlink::dialects::common::MavParamType::MAV_PARAM_TYPE_INT32,
+    });
+    c.send(&set);
+    c.run(4.0, Some((0.0, 0.39)));
+    assert!(c.climb_mps().abs() < 0.05, "{} m/s", c.climb_mps());
+    let v0 = c.vehicle.status().vel_ned_mps.x;
+    c.run(1.0, Some((-20f64.to_radians(), 0.39)));
+    // While the attitude lags the target (about 0.22 s, the profile's response), the
+    // boosted thrust points nearer the vertical: (1/cos 20° − 1) · g = 0.63 m/s² up for
+    // 0.22 s, 0.14 m/s of climb, which then stays (ArduPilot's boost does the same).
+    assert!(c.climb_mps().abs() < 0.2, "{} m/s", c.climb_mps());
+    // Nose down 20°: it accelerates north at about g·tan 20° = 3.6 m/s² less drag.
+    let dv = c.vehicle.status().vel_ned_mps.x - v0;
+    assert!(dv > 2.5 && dv < 3.6, "{dv} m/s in 1 s");
+    // Setpoints stop: GUID_TIMEOUT (3 s) later it is level and holds its altitude, still
+    // in GUIDED.
+    c.run(4.0, Some((0.0, 0.39)));
+    let z = c.vehicle.status().height_m;
+    c.run(6.0, None);
+    assert_eq!(c.vehicle.status().mode, FlightMode::Offboard);
+    assert!((c.vehicle.status().height_m - z).abs() < 0.3);
+    assert!(c.climb_mps().abs() < 0.05);
+    // Throttle ignored (bit 64): refused.
+    let refused = c.vehicle.status().counters.rejected_setpoints;
+    c.attitude_target(0.0, 0.39, 7 | 64);
+    assert_eq!(c.vehicle.status().counters.rejected_setpoints, refused + 1);
+    // A disarm in the air is refused (FAILED); LAND lands and disarms by itself.
+    assert_eq!(c.command(400, [0.0; 7]), Some(4));
+    assert_eq!(c.command(21, [0.0; 7]), Some(0));
+    c.run(40.0, None);
+    let status = c.vehicle.status();
+    assert!(status.landed && !status.armed);
+}

@@ -398,6 +398,45 @@ impl Vehicle {
         }
     }
 
+    /// REQUEST_DATA_STREAM: a group of ArduPilot's streams at `rate_hz` on `link`
+    /// (`start` 0 stops them): 0 all, 2 EXTENDED_STATUS (SYS_STATUS, GPS_RAW_INT),
+    /// 6 POSITION (LOCAL_POSITION_NED, GLOBAL_POSITION_INT), 10 EXTRA1 (ATTITUDE), the
+    /// groups of `GCS_MAVLink_Parameters.cpp` the emulator has messages for.
+    pub(super) fn ap_request_data_stream(
+        &mut self,
+        now: SimTime,
+        link: LinkId,
+        group: u8,
+        rate_hz: u16,
+        start: u8,
+    ) {
+        const EXTENDED_STATUS: [u32; 2] = [1, 24];
+        const POSITION: [u32; 2] = [32, 33];
+        const EXTRA1: [u32; 1] = [30];
+        let ids: Vec<u32> = match group {
+            0 => EXTENDED_STATUS
+                .iter()
+                .chain(&POSITION)
+                .chain(&EXTRA1)
+                .copied()
+                .collect(),
+            2 => EXTENDED_STATUS.to_vec(),
+            6 => POSITION.to_vec(),
+            10 => EXTRA1.to_vec(),
+            _ => return,
+        };
+        let interval = if start == 0 || rate_hz == 0 {
+            Some(None)
+        } else {
+            Some(Some(Duration::from_secs_f64(
+                1.0 / f64::from(rate_hz.min(50)),
+            )))
+        };
+        for id in ids {
+            self.set_interval(now, link, id, interval);
+        }
+    }
+
     /// Whether the motors run (ArduPilot: 2 s after arming).
     pub(super) fn motors_started(&self, t: SimTime) -> bool {
         !self.is_ardupilot()

@@ -138,6 +138,21 @@ impl Vehicle {
             MavMessage::PARAM_REQUEST_READ(m) => self.on_param_request_read(link, &m),
             MavMessage::PARAM_SET(m) => self.on_param_set(link, &m),
             MavMessage::TIMESYNC(m) => self.on_timesync(now, link, &m),
+            // ArduPilot's stream groups (MAVProxy asks for them); PX4 has none.
+            #[allow(deprecated)]
+            MavMessage::REQUEST_DATA_STREAM(m) if self.is_ardupilot() => {
+                let ours = self.for_us(m.target_system, m.target_component);
+                if ours {
+                    self.ap_request_data_stream(
+                        now,
+                        link,
+                        m.req_stream_id as u8,
+                        m.req_message_rate,
+                        m.start_stop,
+                    );
+                }
+                ours
+            }
             _ => true,
         };
         if heard {

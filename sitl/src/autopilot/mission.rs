@@ -87,8 +87,12 @@ impl MissionStore {
 
 impl Vehicle {
     /// MISSION_CURRENT (and a pending MISSION_ITEM_REACHED, repeated up to 10 times at
-    /// 1 Hz as PX4 does) on both links.
+    /// 1 Hz as PX4 does) on both links. ArduPilot sends neither unasked (they belong to
+    /// its stream groups).
     pub(super) fn report_mission(&mut self) {
+        if self.is_ardupilot() {
+            return;
+        }
         let state = if self.navigator.mission.items.is_empty() {
             MissionState::MISSION_STATE_NO_MISSION
         } else if self.navigator.mission.finished {

@@ -231,6 +231,9 @@ pub struct Vehicle {
     counters: Counters,
     /// The ArduPilot personality's own state (`None`: PX4's).
     ap: Option<ardupilot::ApState>,
+    /// The climb-rate loop's integral (m/s², up) of guided attitude targets with a climb
+    /// rate.
+    climb_integral_mps2: f64,
 }
 
 impl Vehicle {
@@ -346,6 +349,7 @@ impl Vehicle {
             boot_at: SimTime::ZERO,
             counters: Counters::default(),
             ap,
+            climb_integral_mps2: 0.0,
             state,
             cfg,
         })

@@ -48,12 +48,13 @@ impl Vehicle {
                 }) => {
                     self.navigator.pos_ctrl_active = false;
                     if self.landed && climb_up_mps <= 0.0 {
+                        self.climb_integral_mps2 = 0.0;
                         return Some(idle(self));
                     }
                     return Some(AttitudeCommand::Attitude {
                         setpoint: AttitudeSetpoint {
                             attitude,
-                            thrust_norm: self.climb_thrust(&attitude, climb_up_mps),
+                            thrust_norm: self.climb_thrust(&attitude, climb_up_mps, dt),
                         },
                         yawspeed_ff_rps,
                     });
@@ -115,14 +116,23 @@ impl Vehicle {
         })
     }
 
-    /// The thrust that makes `climb_up_mps` at `attitude`: the hover thrust, plus the
-    /// vertical velocity error times MPC_Z_VEL_P_ACC, over the cosine of the tilt (a
-    /// climb-rate loop like ArduPilot's guided angle mode runs).
-    fn climb_thrust(&self, attitude: &nalgebra::UnitQuaternion<f64>, climb_up_mps: f64) -> f64 {
-        let p = &self.tuning.mpc;
-        let climb_now = -self.state.vel_ned_mps.z;
-        let accel_up = p.z_vel_pid[0] * (climb_up_mps - climb_now);
+    /// The thrust that makes `climb_up_mps` at `attitude`: the hover thrust times the
+    /// vertical acceleration asked for, a PI of the climb-rate error (MPC_Z_VEL_P_ACC,
+    /// MPC_Z_VEL_I_ACC, the integral within ±g/2), over the cosine of the tilt: a
+    /// climb-rate loop like ArduPilot's guided angle mode runs (its integral makes the
+    /// climb asked for, drag or not).
+    fn climb_thrust(
+        &mut self,
+        attitude: &nalgebra::UnitQuaternion<f64>,
+        climb_up_mps: f64,
+        dt: f64,
+    ) -> f64 {
+        let p = self.tuning.mpc;
         let g = crate::profile::GRAVITY_MPS2;
+        let error = climb_up_mps - (-self.state.vel_ned_mps.z);
+        self.climb_integral_mps2 =
+            (self.climb_integral_mps2 + p.z_vel_pid[1] * error * dt).clamp(-0.5 * g, 0.5 * g);
+        let accel_up = p.z_vel_pid[0] * error + self.climb_integral_mps2;
         let cos_tilt = (attitude * nalgebra::Vector3::z()).z.clamp(0.1, 1.0);
         (p.thr_hover * (g + accel_up) / g / cos_tilt).clamp(p.thr_min, p.thr_max)
     }

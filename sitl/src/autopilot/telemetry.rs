@@ -394,6 +394,18 @@ impl Vehicle {
         if !self.ekf_ready(now) {
             health.remove(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK);
         }
+        let mut sensors = sensors;
+        if self.is_ardupilot() {
+            // ArduPilot's geofence bit: present and enabled with FENCE_ENABLE, healthy
+            // unless breached (MAVProxy's fence module reads it).
+            let fence = MavSysStatusSensor::MAV_SYS_STATUS_GEOFENCE;
+            if self.params.value("FENCE_ENABLE") != 0.0 {
+                sensors |= fence;
+            }
+            if !self.geofence.breached() {
+                health |= fence;
+            }
+        }
         MavMessage::SYS_STATUS(SYS_STATUS_DATA {
             onboard_control_sensors_present: sensors,
             onboard_control_sensors_enabled: sensors,
