@@ -309,8 +309,7 @@ impl EmulatedVehicle {
                     })
                 } else {
                     problems.push(format!(
-                        "{}ekf_settle_s must be a finite number in [0, 600] s, got {settle}",
-                        names.vehicle
+                        "{est}ekf_settle_s must be a finite number in [0, 600] s, got {settle}"
                     ));
                     None
                 }

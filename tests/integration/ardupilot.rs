@@ -471,3 +471,49 @@ fn the_emulated_arducopter_reads_guided_thrust_as_arducopter_does() {
     let status = c.vehicle.status();
     assert!(status.landed && !status.armed);
 }
+
+#[test]
+fn an_ardupilot_vehicle_that_never_leaves_pre_arm_ends_demo_with_exit_3_naming_what_it_waits_for() {
+    let dir = std::env::temp_dir().join(format!("ringswarm-ap-prearm-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/mixed-autopilots.toml"),
+    )
+    .unwrap();
+    // Vehicle 2 (ArduPilot) on the ground, its EKF never settling within the flight.
+    let mut parts: Vec<String> = text.split("[[vehicle]]").map(str::to_owned).collect();
+    assert_eq!(parts.len(), 7);
+    parts[2] = parts[2].replace("in_air = true", "in_air = false");
+    let text = parts
+        .join("[[vehicle]]")
+        .replace(
+            "duration_s = 60.0",
+            "duration_s = 60.0\nhandshake_timeout_s = 10.0",
+        )
+        .replace(
+            "[formation]",
+            "[emulator]\nekf_settle_s = 600.0\n\n[formation]",
+        );
+    let path = dir.join("scenario.toml");
+    std::fs::write(&path, text).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_ringswarm"))
+        .args([
+            "demo",
+            "--scenario",
+            path.to_str().unwrap(),
+            "--no-plots",
+            "--out",
+            dir.join("run").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains(
+            "handshake not complete after 10.0 s: vehicle 2 not flying (streaming: waiting for its position estimate (no GPS_GLOBAL_ORIGIN yet)); the vehicles that flew were landed"
+        ),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

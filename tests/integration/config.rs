@@ -798,3 +798,40 @@ fn the_gate_counts_the_hop_between_shards_and_the_lead_must_exceed_two_hops() {
         "{err}"
     );
 }
+
+#[test]
+fn each_vehicle_s_autopilot_is_read_by_name_and_ardupilot_flies_attitude_setpoints_only() {
+    use ringswarm::vehicle::{Autopilot, AutopilotChoice};
+    let setup = load("mixed-autopilots.toml").validate().unwrap();
+    let px4 = AutopilotChoice::Only(Autopilot::Px4);
+    let ap = AutopilotChoice::Only(Autopilot::ArduPilot);
+    let chosen: Vec<AutopilotChoice> = setup.links.iter().map(|l| l.autopilot).collect();
+    assert_eq!(chosen, [px4, ap, px4, ap, px4, ap]);
+    // Without the key: whatever the first heartbeat says.
+    let sim1 = load("paper-sim1.toml").validate().unwrap();
+    assert!(
+        sim1.links
+            .iter()
+            .all(|l| l.autopilot == AutopilotChoice::Auto)
+    );
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("config/mixed-autopilots.toml"),
+    )
+    .unwrap()
+    .replacen("autopilot = \"px4\"", "autopilot = \"apm\"", 1)
+    .replace(
+        "link_timeout_ms = 1500",
+        "link_timeout_ms = 1500\nsetpoint = \"acceleration\"",
+    );
+    let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
+    assert!(
+        err.contains(
+            "vehicle[0].autopilot = \"apm\" is not one of \"auto\", \"px4\", \"ardupilot\""
+        ),
+        "{err}"
+    );
+    assert!(
+        err.contains("vehicle[1].autopilot = \"ardupilot\" is flown with attitude setpoints only: swarm.setpoint = \"acceleration\" is PX4's"),
+        "{err}"
+    );
+}
