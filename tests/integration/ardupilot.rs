@@ -294,11 +294,13 @@ struct Copter {
 
 impl Copter {
     fn new(settle_s: f64) -> Self {
-        let vehicle = ringswarm_sitl::autopilot::Vehicle::new(
-            arducopter(settle_s),
-            ringswarm_sitl::world::World::default(),
-        )
-        .unwrap();
+        Self::with(arducopter(settle_s))
+    }
+
+    fn with(cfg: VehicleConfig) -> Self {
+        let vehicle =
+            ringswarm_sitl::autopilot::Vehicle::new(cfg, ringswarm_sitl::world::World::default())
+                .unwrap();
         Self {
             vehicle,
             now: SimTime::ZERO,
@@ -308,12 +310,12 @@ impl Copter {
     }
 
     fn send(&mut self, msg: &MavMessage) {
+        self.send_on(ringswarm_sitl::autopilot::LinkId::Offboard, msg);
+    }
+
+    fn send_on(&mut self, link: ringswarm_sitl::autopilot::LinkId, msg: &MavMessage) {
         let bytes = self.encoder.encode(msg);
-        self.vehicle.handle_datagram(
-            self.now,
-            ringswarm_sitl::autopilot::LinkId::Offboard,
-            &bytes,
-        );
+        self.vehicle.handle_datagram(self.now, link, &bytes);
     }
 
     /// COMMAND_LONG `command` with `params`; its COMMAND_ACK result.
@@ -516,4 +518,31 @@ fn an_ardupilot_vehicle_that_never_leaves_pre_arm_ends_demo_with_exit_3_naming_w
         "{err}"
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn with_a_key_the_emulated_arducopter_takes_unsigned_frames_on_channel_0_only() {
+    use ringswarm_sitl::autopilot::LinkId;
+    let cfg = VehicleConfig {
+        signing: Some(ringswarm_sitl::keystore::StoredKey {
+            key: ringswarm_wire::signing::SigningKey::from_bytes([7; 32]),
+            timestamp: 1,
+        }),
+        ..arducopter(0.0)
+    };
+    let mut c = Copter::with(cfg);
+    c.run(0.1, None);
+    // The offboard link is SITL's SERIAL0, channel 0: unsigned commands are taken.
+    assert_eq!(c.command(176, [1.0, 4.0, 0.0, 0.0, 0.0, 0.0, 0.0]), Some(0));
+    assert_eq!(c.vehicle.status().counters.unsigned_refused, 0);
+    // On the ground-station link (channel 1) the same unsigned frame is refused.
+    let land = MavMessage::COMMAND_LONG(mavlink::dialects::common::COMMAND_LONG_DATA {
+        target_system: 1,
+        target_component: 1,
+        command: mavlink::dialects::common::MavCmd::MAV_CMD_NAV_LAND,
+        ..Default::default()
+    });
+    c.send_on(LinkId::Gcs, &land);
+    assert_eq!(c.vehicle.status().counters.unsigned_refused, 1);
+    assert_eq!(c.vehicle.status().mode, FlightMode::Offboard);
 }

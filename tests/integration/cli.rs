@@ -345,8 +345,8 @@ fn demo_names_an_unknown_scenario_and_the_known_ones() {
     assert!(
         stderr(&out).contains(
             "unknown scenario \"nope\" (known: paper-sim1, paper-sim2, hexagon-x500, \
-             hexagon-x500-wrong-model, hexagon-x500-noisy, ground-start, link-loss, lossy, \
-             big-ring; or a path to a .toml file)"
+             hexagon-x500-wrong-model, hexagon-x500-noisy, ground-start, mixed-autopilots, \
+             link-loss, lossy, big-ring; or a path to a .toml file)"
         ),
         "{}",
         stderr(&out)

@@ -32,7 +32,7 @@ impl Vehicle {
         for frame in frames(bytes, key.as_ref()) {
             match frame {
                 Ok(frame) => {
-                    if !self.admit(&frame) {
+                    if !self.admit(&frame, link) {
                         continue;
                     }
                     vouched |= self.io.signing.is_none() || frame.signature.is_some();

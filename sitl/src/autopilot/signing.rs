@@ -19,23 +19,40 @@ use ringswarm_wire::codec::Frame;
 use ringswarm_wire::signing::{PX4_UNSIGNED_ALLOWED, Signing, SigningKey};
 
 use super::{LinkId, Vehicle, VehicleEvent};
+
+/// What ArduPilot takes unsigned on a signed link: RADIO_STATUS (109) and RADIO (166).
+const ARDUPILOT_UNSIGNED_ALLOWED: [u32; 2] = [109, 166];
 use crate::keystore::StoredKey;
 
 impl Vehicle {
-    /// PX4's link id of `link` in signatures (its MAVLink instance number).
-    pub(super) fn signing_link_id(link: LinkId) -> u8 {
-        match link {
-            LinkId::Gcs => 0,
-            LinkId::Offboard => 1,
+    /// The link id of `link` in signatures: PX4's MAVLink instance number (the GCS link
+    /// is instance 0), ArduPilot's channel number (the offboard link is SERIAL0,
+    /// channel 0).
+    pub(super) fn signing_link_id(&self, link: LinkId) -> u8 {
+        match (self.is_ardupilot(), link) {
+            (false, LinkId::Gcs) | (true, LinkId::Offboard) => 0,
+            (false, LinkId::Offboard) | (true, LinkId::Gcs) => 1,
         }
     }
 
-    /// Whether a decoded frame passes the signing rules; a refusal is counted.
-    pub(super) fn admit(&mut self, frame: &Frame) -> bool {
+    /// Whether a decoded frame on `link` passes the signing rules; a refusal is counted.
+    /// ArduPilot takes everything unsigned on channel 0 (its USB port, "assumed secure":
+    /// SITL's SERIAL0, the offboard link here) and elsewhere only RADIO_STATUS and RADIO
+    /// unsigned (`GCS_Signing.cpp`); PX4 its own list.
+    pub(super) fn admit(&mut self, frame: &Frame, link: LinkId) -> bool {
+        let ardupilot = self.is_ardupilot();
         let Some(signing) = self.io.signing.as_mut() else {
             return true;
         };
-        match signing.accept(&frame.stamp(), &PX4_UNSIGNED_ALLOWED) {
+        if ardupilot && link == LinkId::Offboard && frame.signature.is_none() {
+            return true;
+        }
+        let allowed: &[u32] = if ardupilot {
+            &ARDUPILOT_UNSIGNED_ALLOWED
+        } else {
+            &PX4_UNSIGNED_ALLOWED
+        };
+        match signing.accept(&frame.stamp(), allowed) {
             Ok(()) => true,
             Err(why) => {
                 if frame.signature.is_some() {
@@ -60,10 +77,12 @@ impl Vehicle {
     /// SETUP_SIGNING, already admitted; `signed` says whether its frame was signed.
     pub(super) fn on_setup_signing(&mut self, m: &SETUP_SIGNING_DATA, signed: bool) {
         if self.armed {
-            self.send_statustext(
-                MavSeverity::MAV_SEVERITY_CRITICAL,
-                "MAVLink signing: rejected while armed",
-            );
+            let text = if self.is_ardupilot() {
+                "ERROR: Won't setup signing when armed"
+            } else {
+                "MAVLink signing: rejected while armed"
+            };
+            self.send_statustext(MavSeverity::MAV_SEVERITY_CRITICAL, text);
             return;
         }
         let key = SigningKey::from_bytes(m.secret_key);

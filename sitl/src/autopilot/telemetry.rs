@@ -101,11 +101,8 @@ impl Vehicle {
         if !self.io.links[link as usize].wired {
             return;
         }
-        let signing = self
-            .io
-            .signing
-            .as_mut()
-            .map(|s| (s, Self::signing_link_id(link)));
+        let link_id = self.signing_link_id(link);
+        let signing = self.io.signing.as_mut().map(|s| (s, link_id));
         let mut bytes = self.io.spare.take();
         self.io.links[link as usize]
             .encoder
