@@ -546,3 +546,69 @@ fn with_a_key_the_emulated_arducopter_takes_unsigned_frames_on_channel_0_only() 
     assert_eq!(c.vehicle.status().counters.unsigned_refused, 1);
     assert_eq!(c.vehicle.status().mode, FlightMode::Offboard);
 }
+
+#[test]
+fn vehicles_waiting_on_the_ground_starts_of_others_hold_their_place_in_the_wind() {
+    use nalgebra::{Vector2, Vector3};
+    use ringswarm::driver::lockstep::Lockstep;
+    use ringswarm::swarm::{Swarm, SwarmPhase};
+    // Three PX4 x500s and one ArduCopter whose EKF takes 20 s: the x500s fly from about
+    // 1.2 s and wait for it, in a steady 2 m/s east wind.
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/ground-diamond.toml");
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut parts: Vec<String> = text.split("[[vehicle]]").map(str::to_owned).collect();
+    assert_eq!(parts.len(), 5);
+    parts[4] = parts[4]
+        .replace(
+            "profile = \"x500\"",
+            "profile = \"arducopter\"\nautopilot = \"ardupilot\"",
+        )
+        .replace("mass_kg = 2.0", "mass_kg = 3.0")
+        .replace("hover_throttle = 0.5", "hover_throttle = 0.39");
+    let text = parts.join("[[vehicle]]").replace(
+        "[formation]",
+        "[emulator]\nekf_settle_s = 20.0\n\n[formation]",
+    );
+    let config = ringswarm::config::Config::from_toml(&text).unwrap();
+    let setup = config.validate().unwrap();
+    let (world, mut vehicles) = config.emulator().unwrap();
+    for v in &mut vehicles {
+        v.wind.steady_ned_mps = Vector3::new(0.0, 2.0, 0.0);
+    }
+    let vehicles = vehicles
+        .into_iter()
+        .map(|v| ringswarm_sitl::autopilot::Vehicle::new(v, world).unwrap())
+        .collect();
+    let faults = config.lockstep_faults().unwrap();
+    let mut run = Lockstep::new(Swarm::new(setup), vehicles, faults.conditions)
+        .with_transport(&config.transport_plan().unwrap());
+    // Where each x500 is at 5 s (in the air over its start), and how far it strays while
+    // the swarm waits for the ArduCopter (the handshake).
+    let mut at_5s: Option<Vec<Vector2<f64>>> = None;
+    let mut strayed_m: f64 = 0.0;
+    let mut waited_until = SimTime::ZERO;
+    run.run_until(SimTime::from_secs_f64(30.0), |r| {
+        let waiting = matches!(r.swarm().phase(), SwarmPhase::Handshake);
+        if !waiting || r.now() < SimTime::from_secs_f64(5.0) {
+            return;
+        }
+        waited_until = r.now();
+        let xy: Vec<Vector2<f64>> = r.vehicles()[..3]
+            .iter()
+            .map(|v| v.status().pos_world_ned_m.xy())
+            .collect();
+        let start = at_5s.get_or_insert_with(|| xy.clone());
+        for (p, p0) in xy.iter().zip(start.iter()) {
+            strayed_m = strayed_m.max((p - p0).norm());
+        }
+    });
+    assert!(run.swarm().failure().is_none());
+    assert!(
+        waited_until > SimTime::from_secs_f64(20.0),
+        "{waited_until:?}"
+    );
+    // Held where they took off: measured 0.012 m over the 15 s of waiting (keeping a
+    // zero velocity alone, as before, they drifted 0.45 m with the wind).
+    assert!(strayed_m < 0.05, "strayed {strayed_m} m");
+}

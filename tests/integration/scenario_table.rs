@@ -111,7 +111,7 @@ fn fly(config: &Path, out: &Path) -> serde_json::Value {
 #[test]
 fn every_row_of_the_scenario_table_is_what_demo_flies() {
     let rows = table();
-    assert_eq!(rows.len(), 10, "the table's rows");
+    assert_eq!(rows.len(), 11, "the table's rows");
     let dir = std::env::temp_dir().join(format!("ringswarm-table-{}", std::process::id()));
     let mut wrong = Vec::new();
     for row in &rows {

@@ -84,6 +84,14 @@ pub struct ParamName {
 }
 
 impl ParamName {
+    /// A parameter Copter 4.7 did not rename.
+    pub const fn unrenamed(name: &'static str) -> Self {
+        Self {
+            current: name,
+            legacy: name,
+        }
+    }
+
     /// Both spellings, the current one first (one when they are the same).
     pub fn spellings(&self) -> impl Iterator<Item = &'static str> {
         let legacy = (self.legacy != self.current).then_some(self.legacy);
@@ -107,44 +115,23 @@ pub const MAV_GCS_SYSID: ParamName = ParamName {
     legacy: "SYSID_MYGCS",
 };
 /// Guided-mode options (bit 3: thrust as thrust).
-pub const GUID_OPTIONS: ParamName = ParamName {
-    current: "GUID_OPTIONS",
-    legacy: "GUID_OPTIONS",
-};
+pub const GUID_OPTIONS: ParamName = ParamName::unrenamed("GUID_OPTIONS");
 /// Seconds without a guided setpoint before it levels and holds altitude.
-pub const GUID_TIMEOUT: ParamName = ParamName {
-    current: "GUID_TIMEOUT",
-    legacy: "GUID_TIMEOUT",
-};
+pub const GUID_TIMEOUT: ParamName = ParamName::unrenamed("GUID_TIMEOUT");
 /// The learnt hover throttle (0..1).
-pub const MOT_THST_HOVER: ParamName = ParamName {
-    current: "MOT_THST_HOVER",
-    legacy: "MOT_THST_HOVER",
-};
+pub const MOT_THST_HOVER: ParamName = ParamName::unrenamed("MOT_THST_HOVER");
 /// Whether a throttle is multiplied by 1/cos(tilt) (1, the default) or not (0).
-pub const ATC_ANGLE_BOOST: ParamName = ParamName {
-    current: "ATC_ANGLE_BOOST",
-    legacy: "ATC_ANGLE_BOOST",
-};
+pub const ATC_ANGLE_BOOST: ParamName = ParamName::unrenamed("ATC_ANGLE_BOOST");
 /// Whether the geofence acts (0, 1).
-pub const FENCE_ENABLE: ParamName = ParamName {
-    current: "FENCE_ENABLE",
-    legacy: "FENCE_ENABLE",
-};
+pub const FENCE_ENABLE: ParamName = ParamName::unrenamed("FENCE_ENABLE");
 /// Which fences act (bits: 1 altitude max, 2 circle about home, 4 the uploaded polygons
 /// and circles, 8 altitude min).
-pub const FENCE_TYPE: ParamName = ParamName {
-    current: "FENCE_TYPE",
-    legacy: "FENCE_TYPE",
-};
+pub const FENCE_TYPE: ParamName = ParamName::unrenamed("FENCE_TYPE");
 /// FENCE_TYPE bit 2: the uploaded inclusion polygons and circles.
 pub const FENCE_TYPE_POLYGON: u32 = 4;
 
 /// Seconds a landed, idle, armed vehicle waits before it disarms itself.
-pub const DISARM_DELAY: ParamName = ParamName {
-    current: "DISARM_DELAY",
-    legacy: "DISARM_DELAY",
-};
+pub const DISARM_DELAY: ParamName = ParamName::unrenamed("DISARM_DELAY");
 
 #[cfg(test)]
 mod tests {

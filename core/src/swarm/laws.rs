@@ -3,7 +3,10 @@
 //! the model's would otherwise drift):
 //!
 //! - **Handshake:** each flying vehicle keeps the velocity it had when it was first seen
-//!   flying: `u = K_KEEP·(v_keep − v)`.
+//!   flying: `u = K_KEEP·(v_keep − v)`; one first seen at rest (slower than
+//!   `HOLD_CAPTURE_MPS`: a ground start) holds where it was, with the hold law below, so
+//!   that it does not drift while the swarm waits for the others (ArduPilot's EKF keeps a
+//!   vehicle on the ground for about 40 s after boot).
 //! - **Retargeting:** each re-targeted agent goes to its planned velocity
 //!   (`RETARGET_K_V`), the others keep the velocity they had at the plan.
 //! - **Consensus:** the ring law `u = −αL(p − d) − βLv`, plus, unless `k_vmean = 0`, a
@@ -78,10 +81,25 @@ impl Swarm {
                         && self.law.states[i].is_some()
                         && self.ours_in_air(i)
                     {
-                        self.law.keep_velocity[i] = Some(self.law.horizontal[i].vel_mps);
+                        let h = self.law.horizontal[i];
+                        self.law.keep_velocity[i] = Some(h.vel_mps);
+                        if h.vel_mps.norm() < HOLD_CAPTURE_MPS {
+                            self.law.keep_points[i] = Some(h.pos_m);
+                        }
                     }
                 }
                 self.keep_velocities();
+                for ((a, h), point) in self
+                    .law
+                    .accel
+                    .iter_mut()
+                    .zip(&self.law.horizontal)
+                    .zip(&self.law.keep_points)
+                {
+                    if let Some(p) = point {
+                        *a = -HOLD_K_V * h.vel_mps + HOLD_K_P * (p - h.pos_m);
+                    }
+                }
                 self.setup.saturation
             }
             SwarmPhase::Retargeting(_) => {

@@ -225,6 +225,9 @@ struct LawArrays {
     keep_velocity: Vec<Option<Vector2<f64>>>,
     /// Where a holding vehicle holds.
     hold_points: Vec<Option<Vector2<f64>>>,
+    /// Where a vehicle that first flew at rest holds while the swarm waits for the others
+    /// (the handshake).
+    keep_points: Vec<Option<Vector2<f64>>>,
     /// Each vehicle's horizontal box in the saturation, kept between ticks.
     boxes: Vec<Vector2<f64>>,
 }
@@ -373,6 +376,7 @@ impl Swarm {
                 flown_models,
                 keep_velocity: vec![None; n],
                 hold_points: vec![None; n],
+                keep_points: vec![None; n],
                 boxes: Vec::with_capacity(n),
             },
             setup,

@@ -95,10 +95,7 @@ impl ParamSession {
         let steps = changed
             .iter()
             .map(|&(name, old)| ParamStep {
-                param: ParamName {
-                    current: name,
-                    legacy: name,
-                },
+                param: ParamName::unrenamed(name),
                 action: ParamAction::Set(old),
             })
             .collect();
