@@ -436,5 +436,21 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
         let id = |k: usize| swarm.setup().links[k].system_id;
         line += &format!(" | closest {}-{} {d:.1} m", id(i), id(j));
     }
+    if matches!(swarm.phase(), SwarmPhase::Handshake) {
+        // What the handshake waits for (ArduPilot's EKF, a fence upload, …): the first
+        // vehicle waiting, and how many more.
+        let mut waiting = swarm
+            .links()
+            .iter()
+            .zip(&swarm.setup().links)
+            .filter_map(|(l, cfg)| l.waiting_for().map(|what| (cfg.system_id, what)));
+        if let Some((id, what)) = waiting.next() {
+            line += &format!(" | vehicle {id} {what}");
+            let more = waiting.count();
+            if more > 0 {
+                line += &format!(" (+{more} more waiting)");
+            }
+        }
+    }
     line
 }

@@ -612,3 +612,20 @@ fn vehicles_waiting_on_the_ground_starts_of_others_hold_their_place_in_the_wind(
     // zero velocity alone, as before, they drifted 0.45 m with the wind).
     assert!(strayed_m < 0.05, "strayed {strayed_m} m");
 }
+
+#[test]
+fn an_ardupilot_vehicle_whose_position_stream_never_comes_is_not_armed_and_says_so() {
+    let mut h = Harness::with_vehicle(LinkConfig::new(1), arducopter(1.0));
+    // The origin comes (asked for once), LOCAL_POSITION_NED never does.
+    let mut no_positions = |to_vehicle: bool, m: &MavMessage| {
+        to_vehicle || !matches!(m, MavMessage::LOCAL_POSITION_NED(_))
+    };
+    h.run(Duration::from_secs(10), &mut no_positions);
+    assert!(h.link.state().origin.is_some());
+    assert!(matches!(h.link.phase(), Phase::Streaming(_)));
+    assert_eq!(
+        h.link.waiting_for().as_deref(),
+        Some("waiting for its position stream (LOCAL_POSITION_NED)")
+    );
+    assert!(first_command(&h, 400, 1.0).is_none());
+}
