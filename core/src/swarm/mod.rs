@@ -618,8 +618,8 @@ impl Swarm {
         &self.law.setpoints
     }
 
-    /// Vehicle `i` in the common frame, once its origin is known (whatever the age of its
-    /// position; the control tick uses only fresh ones).
+    /// Vehicle `i` in the common frame, once its origin and a position are known (whatever
+    /// the age of its position; the control tick uses only fresh ones).
     pub fn common_state(&self, i: usize) -> Option<CommonState> {
         if let Some(p) = self.peers.as_ref()
             && !p.plan.is_local(i)
@@ -628,6 +628,9 @@ impl Swarm {
         }
         let state = self.links.get(i)?.state();
         let origin = state.origin?;
+        // No position yet (ArduPilot reports its origin before its first
+        // LOCAL_POSITION_NED): nothing to place.
+        state.last_position?;
         let pos_common_ned_m = match self.slots[i].origin_offset {
             Some((known, offset_ned_m)) if known == origin => offset_ned_m + state.pos_local_ned_m,
             _ => self
