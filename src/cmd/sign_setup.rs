@@ -85,9 +85,16 @@ pub fn run(args: &SignSetupArgs) -> anyhow::Result<()> {
                 for (i, range) in pieces.drain(..) {
                     // Before the key is set nothing can vouch for a sender: the first
                     // frame with the vehicle's id tells where it is (this runs before
-                    // a flight, on a trusted network).
-                    router.vouched(i, from, now);
-                    links[i].1.handle_datagram(&buf[range]);
+                    // a flight, on a trusted network). A datagram without one moves
+                    // nothing: the key is never sent to whoever spoke first.
+                    let piece = &buf[range];
+                    let system_id = links[i].0;
+                    if crate::link::raw_frames(piece)
+                        .any(|f| crate::link::frame_system_id(f) == Some(system_id))
+                    {
+                        router.vouched(i, from, now);
+                    }
+                    links[i].1.handle_datagram(piece);
                 }
             }
         }

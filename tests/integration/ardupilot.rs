@@ -48,6 +48,14 @@ fn first_command(h: &Harness, command: u32, param1: f32) -> Option<usize> {
 #[test]
 fn an_ardupilot_vehicle_is_handshaken_in_its_order_flown_landed_and_given_its_parameters_back() {
     let mut h = Harness::with_vehicle(LinkConfig::new(1), arducopter(3.0));
+    // Its GCS failsafe on (FS_GCS_ENABLE 5, Land), as a user would set it.
+    let set = ringswarm::link::Encoder::new(255, 190).encode(&ringswarm::link::param_set(
+        1,
+        "FS_GCS_ENABLE",
+        5.0,
+    ));
+    h.vehicle
+        .handle_datagram(SimTime::ZERO, ringswarm_sitl::autopilot::LinkId::Gcs, &set);
     h.run(Duration::from_secs(8), &mut deliver_all);
     assert!(h.events.iter().any(|(_, e)| *e
         == LinkEvent::Discovered {
@@ -59,7 +67,8 @@ fn an_ardupilot_vehicle_is_handshaken_in_its_order_flown_landed_and_given_its_pa
         _ => None,
     });
     assert!(hover.is_some_and(|v| (v - 0.39).abs() < 1e-6), "{hover:?}");
-    // GUID_OPTIONS bit 3 set and the coordinator made its ground station (253).
+    // GUID_OPTIONS bit 3 set and, its GCS failsafe being on, the coordinator made its
+    // ground station (253).
     assert_eq!(
         param_writes(&h),
         [
@@ -279,8 +288,17 @@ fn an_ardupilot_vehicle_is_given_the_fence_item_by_item_and_its_geofence_switche
     );
     // ArduPilot asked for each item with MISSION_REQUEST, and holds the polygon.
     assert_eq!(h.vehicle.geofence().items().len(), 4);
-    // FENCE_TYPE's default 7 has the polygon bit already: only FENCE_ENABLE is written.
-    assert_eq!(param_writes(&h)[2..], [("FENCE_ENABLE", 0.0, 1.0, false)]);
+    // Its GCS failsafe off (the default): MAV_GCS_SYSID is left alone. The uploaded fence
+    // alone acts: FENCE_TYPE 7 (with the altitude ceiling and the home circle) → 4.
+    assert_eq!(
+        param_writes(&h),
+        [
+            ("GUID_OPTIONS", 0.0, 8.0, false),
+            ("FENCE_TYPE", 7.0, 4.0, false),
+            ("FENCE_ENABLE", 0.0, 1.0, false)
+        ]
+    );
+    assert_eq!(h.vehicle.params().value("MAV_GCS_SYSID"), 255.0);
     assert_eq!(h.vehicle.params().value("FENCE_ENABLE"), 1.0);
 }
 
@@ -628,4 +646,46 @@ fn an_ardupilot_vehicle_whose_position_stream_never_comes_is_not_armed_and_says_
         Some("waiting for its position stream (LOCAL_POSITION_NED)")
     );
     assert!(first_command(&h, 400, 1.0).is_none());
+}
+
+#[test]
+fn a_vehicle_taken_over_gets_its_parameters_back_at_once_and_one_that_never_answers_the_restore_is_let_go()
+ {
+    use ringswarm_sitl::autopilot::LinkId;
+    let mut h = Harness::with_vehicle(LinkConfig::new(1), arducopter(1.0));
+    h.run(Duration::from_secs(6), &mut deliver_all);
+    assert_eq!(h.link.phase(), Phase::Flying);
+    assert_eq!(h.vehicle.params().value("GUID_OPTIONS"), 8.0);
+    // A pilot's ground station switches it to LOITER (5) in the air.
+    let loiter = ringswarm::link::Encoder::new(255, 190).encode(&ringswarm::link::command_long(
+        &ringswarm::link::Command::SetMode { main: 5, sub: 0 },
+        1,
+        0,
+    ));
+    let now = h.now;
+    h.vehicle.handle_datagram(now, LinkId::Gcs, &loiter);
+    h.run(Duration::from_secs(4), &mut deliver_all);
+    assert_eq!(h.link.phase(), Phase::Overridden);
+    assert!(h.vehicle.status().armed && !h.vehicle.status().landed);
+    assert_eq!(h.vehicle.params().value("GUID_OPTIONS"), 0.0);
+    assert_eq!(
+        param_writes(&h).last(),
+        Some(&("GUID_OPTIONS", 8.0, 0.0, true))
+    );
+
+    // Another one lands and disarms, and its answers to the restore never come.
+    let mut h = Harness::with_vehicle(LinkConfig::new(1), arducopter(1.0));
+    h.run(Duration::from_secs(6), &mut deliver_all);
+    let now = h.now;
+    h.link.land(now);
+    let mut silent_once_disarmed = |to_vehicle: bool, m: &MavMessage| match m {
+        MavMessage::PARAM_VALUE(_) => to_vehicle,
+        _ => true,
+    };
+    h.run(Duration::from_secs(60), &mut silent_once_disarmed);
+    assert_eq!(h.link.phase(), Phase::Done);
+    assert!(h.events.iter().any(|(_, e)| matches!(
+        e,
+        LinkEvent::VehicleSays(t) if t.starts_with("parameters not put back: parameter GUID_OPTIONS")
+    )));
 }

@@ -114,6 +114,8 @@ pub const MAV_GCS_SYSID: ParamName = ParamName {
     current: "MAV_GCS_SYSID",
     legacy: "SYSID_MYGCS",
 };
+/// Whether (and how) the GCS failsafe acts (0: off, the default).
+pub const FS_GCS_ENABLE: ParamName = ParamName::unrenamed("FS_GCS_ENABLE");
 /// Guided-mode options (bit 3: thrust as thrust).
 pub const GUID_OPTIONS: ParamName = ParamName::unrenamed("GUID_OPTIONS");
 /// Seconds without a guided setpoint before it levels and holds altitude.

@@ -63,6 +63,13 @@ pub enum ParamAction {
     Set(f32),
     /// Set these bits of it (an integer bit mask), keeping the others.
     SetBits(u32),
+    /// Set it to `value` only if `flag`, read in an earlier step, is not 0.
+    SetIfOn {
+        /// The value.
+        value: f32,
+        /// The flag (read before).
+        flag: ardupilot::ParamName,
+    },
 }
 
 /// One parameter the handshake reads or writes, by its names.
@@ -243,10 +250,12 @@ impl Autopilot {
     /// The parameters its handshake reads and writes, in order, for a coordinator of
     /// system id `own_system_id`. ArduPilot: its hover throttle and angle boost read (the
     /// thrust written for it depends on both), GUID_OPTIONS bit 3 set (thrust as a
-    /// throttle, not a climb rate) and MAV_GCS_SYSID made the coordinator's (its GCS
-    /// failsafe, when enabled, then watches the coordinator's heartbeat). What is written
-    /// is put back at the end of the flight. With a fence to give (`fenced`), its
-    /// geofence is switched on for the uploaded polygon or circle too (FENCE_TYPE bit 2,
+    /// throttle, not a climb rate), and, only when its GCS failsafe is on (FS_GCS_ENABLE),
+    /// MAV_GCS_SYSID made the coordinator's so that the failsafe watches the coordinator's
+    /// heartbeat (left alone otherwise: it also decides whose MANUAL_CONTROL and RC
+    /// overrides the vehicle takes, an operator's ground station's). What is written is
+    /// put back at the end of the flight. With a fence to give (`fenced`), its geofence is
+    /// switched on for the uploaded polygons and circles alone (FENCE_TYPE 4,
     /// FENCE_ENABLE 1): ArduPilot keeps an uploaded fence but acts on it only then. PX4:
     /// none (its geofence acts on an uploaded fence by GF_ACTION).
     pub fn setup_params(self, own_system_id: u8, fenced: bool) -> Vec<ParamStep> {
@@ -256,9 +265,12 @@ impl Autopilot {
                 let mut steps = self.guided_params(own_system_id);
                 if fenced {
                     steps.extend([
+                        // The uploaded fence only: bits 1 and 2 (FENCE_TYPE's default 7)
+                        // would add a 100 m altitude ceiling and a circle of FENCE_RADIUS
+                        // (150 m in SITL) about home, which a cruising swarm leaves.
                         ParamStep {
                             param: ardupilot::FENCE_TYPE,
-                            action: ParamAction::SetBits(ardupilot::FENCE_TYPE_POLYGON),
+                            action: ParamAction::Set(ardupilot::FENCE_TYPE_POLYGON as f32),
                         },
                         ParamStep {
                             param: ardupilot::FENCE_ENABLE,
@@ -289,8 +301,15 @@ impl Autopilot {
                     action: ParamAction::SetBits(ardupilot::GUID_OPTIONS_THRUST_AS_THRUST),
                 },
                 ParamStep {
+                    param: ardupilot::FS_GCS_ENABLE,
+                    action: ParamAction::Read,
+                },
+                ParamStep {
                     param: ardupilot::MAV_GCS_SYSID,
-                    action: ParamAction::Set(f32::from(own_system_id)),
+                    action: ParamAction::SetIfOn {
+                        value: f32::from(own_system_id),
+                        flag: ardupilot::FS_GCS_ENABLE,
+                    },
                 },
             ],
         }
@@ -376,15 +395,22 @@ mod tests {
             ("MOT_THST_HOVER", ParamAction::Read),
             ("ATC_ANGLE_BOOST", ParamAction::Read),
             ("GUID_OPTIONS", ParamAction::SetBits(8)),
-            ("MAV_GCS_SYSID", ParamAction::Set(253.0)),
+            ("FS_GCS_ENABLE", ParamAction::Read),
+            (
+                "MAV_GCS_SYSID",
+                ParamAction::SetIfOn {
+                    value: 253.0,
+                    flag: ringswarm_wire::ardupilot::FS_GCS_ENABLE,
+                },
+            ),
         ];
         assert_eq!(names(Autopilot::ArduPilot.setup_params(253, false)), guided);
         let fenced = names(Autopilot::ArduPilot.setup_params(253, true));
-        assert_eq!(fenced[..4], guided);
+        assert_eq!(fenced[..5], guided);
         assert_eq!(
-            fenced[4..],
+            fenced[5..],
             [
-                ("FENCE_TYPE", ParamAction::SetBits(4)),
+                ("FENCE_TYPE", ParamAction::Set(4.0)),
                 ("FENCE_ENABLE", ParamAction::Set(1.0))
             ]
         );

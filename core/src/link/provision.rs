@@ -122,7 +122,9 @@ impl Provision {
             }
             if let MavMessage::STATUSTEXT(t) = &frame.msg
                 && let Ok(text) = t.text.to_str()
-                && text.contains("rejected")
+                // PX4: "MAVLink signing: rejected while armed"; ArduPilot: "ERROR: Won't
+                // setup signing when armed".
+                && (text.contains("rejected") || text.contains("Won't setup signing"))
             {
                 self.state = ProvisionState::Refused(text.trim_end_matches('\0').to_owned());
                 return;

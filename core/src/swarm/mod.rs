@@ -793,25 +793,50 @@ impl Swarm {
         self.drain_events_of(now, i);
     }
 
-    fn drain_events_of(&mut self, now: SimTime, i: usize) {
-        let Some(link) = self.links.get_mut(i) else {
-            return;
+    /// The hover throttle vehicle `i` reports of itself (ArduPilot's learnt
+    /// MOT_THST_HOVER): with the hover estimator on, the estimate starts from it (the
+    /// estimator corrects it in the air); with it off, the configured one is flown and a
+    /// disagreement of more than the estimator's significance is warned of.
+    fn take_reported_hover(&mut self, now: SimTime, i: usize, hover_throttle: f64) {
+        let configured = self.setup.models[i].hover_throttle();
+        let differs =
+            (hover_throttle - configured).abs() > model::SIGNIFICANT_FRACTION * configured;
+        let text = if !self.setup.estimate_hover {
+            differs.then(|| {
+                format!(
+                    "reports a hover throttle of {hover_throttle:.3}, the configured {configured:.3} is flown (swarm.estimate_hover is off)"
+                )
+            })
+        } else if self
+            .slots
+            .get_mut(i)
+            .is_some_and(|s| s.flown.seed_hover(hover_throttle))
+        {
+            differs.then(|| {
+                format!(
+                    "reports a hover throttle of {hover_throttle:.3}, not the configured {configured:.3}: the estimate starts from it"
+                )
+            })
+        } else {
+            Some(format!(
+                "reported hover throttle {hover_throttle:.3} is outside the estimator's bounds: the configured one is flown"
+            ))
         };
-        while let Some(event) = link.poll_event() {
+        if let Some(text) = text {
+            self.log.push_vehicle(now, &self.setup.links[i], true, text);
+        }
+    }
+
+    fn drain_events_of(&mut self, now: SimTime, i: usize) {
+        while let Some(event) = self.links.get_mut(i).and_then(VehicleLink::poll_event) {
             self.log.push_vehicle(
                 now,
                 &self.setup.links[i],
                 event.is_warning(),
                 event.to_string(),
             );
-            if let LinkEvent::HoverReported { hover_throttle } = event
-                && let Some(slot) = self.slots.get_mut(i)
-                && !slot.flown.seed_hover(hover_throttle)
-            {
-                let text = format!(
-                    "reported hover throttle {hover_throttle:.3} is outside the estimator's bounds: the configured one is flown"
-                );
-                self.log.push_vehicle(now, &self.setup.links[i], true, text);
+            if let LinkEvent::HoverReported { hover_throttle } = event {
+                self.take_reported_hover(now, i, hover_throttle);
             }
         }
     }

@@ -87,6 +87,8 @@ pub struct VehicleLink {
     params_applied: bool,
     /// The last warning the vehicle sent (STATUSTEXT, severity WARNING or worse).
     last_warning: Option<String>,
+    /// The restore's end was told (and acted on).
+    restore_reported: bool,
 }
 
 impl VehicleLink {
@@ -104,6 +106,7 @@ impl VehicleLink {
             angle_boost: false,
             params_applied: false,
             last_warning: None,
+            restore_reported: false,
             listen_lag: Duration::ZERO,
             timesync_sent_ns: None,
             round_trip: None,
@@ -318,9 +321,7 @@ impl VehicleLink {
         {
             next = next.min(params.poll_timeout());
         }
-        if let Some(restore) = &self.restore
-            && self.phase == Phase::Disarming
-        {
+        if let Some(restore) = &self.restore {
             next = next.min(restore.poll_timeout());
         }
         if let Phase::Streaming(since) = self.phase
@@ -753,10 +754,10 @@ impl VehicleLink {
         Some(format!("waiting for {what}{said}"))
     }
 
-    /// A PARAM_VALUE: the handshake's session while streaming, the restore while
-    /// disarming.
+    /// A PARAM_VALUE: the restore's while it runs, else the handshake's session while
+    /// streaming.
     fn on_param_value(&mut self, now: SimTime, name: &str, value: f32) {
-        let restoring = self.phase == Phase::Disarming;
+        let restoring = self.restore_running();
         let session = if restoring {
             self.restore.as_mut()
         } else if matches!(self.phase, Phase::Streaming(_)) {
@@ -780,17 +781,25 @@ impl VehicleLink {
         self.on_params_progress();
     }
 
+    /// Whether the restore of what the handshake wrote is under way.
+    pub(super) fn restore_running(&self) -> bool {
+        self.restore
+            .as_ref()
+            .is_some_and(|r| !r.done() && r.failure().is_none())
+    }
+
     /// After a parameter answer or timeout: what the session's end means.
     pub(super) fn on_params_progress(&mut self) {
-        if self.phase == Phase::Disarming {
-            if let Some(restore) = &self.restore
-                && (restore.done() || restore.failure().is_some())
-            {
+        if let Some(restore) = &self.restore {
+            if !self.restore_reported && (restore.done() || restore.failure().is_some()) {
+                self.restore_reported = true;
                 if let Some(why) = restore.failure() {
                     let text = format!("parameters not put back: {why}");
                     self.events.push_back(LinkEvent::VehicleSays(text));
                 }
-                self.finish_restored();
+                if self.phase == Phase::Disarming {
+                    self.finish_restored();
+                }
             }
             return;
         }
@@ -886,9 +895,19 @@ impl VehicleLink {
                 Phase::Lost | Phase::Failed | Phase::Discovering | Phase::Done | Phase::Overridden
             )
         {
-            self.phase = Phase::Lost;
-            self.pending = None;
-            self.events.push_back(LinkEvent::Lost);
+            if self.phase == Phase::Disarming && self.restore_running() {
+                // Disarmed on the ground and gone silent (powered off, out of range):
+                // what was not put back is said, and the link is done.
+                self.restore_reported = true;
+                let text = "parameters not put back: the vehicle went silent".to_owned();
+                self.events.push_back(LinkEvent::VehicleSays(text));
+                self.pending = None;
+                self.phase = Phase::Done;
+            } else {
+                self.phase = Phase::Lost;
+                self.pending = None;
+                self.events.push_back(LinkEvent::Lost);
+            }
         }
         if self.phase == Phase::Flying && !self.state_fresh(listened) {
             let age = self.state.last_position.map_or("none".to_owned(), |t| {
@@ -914,7 +933,7 @@ impl VehicleLink {
             self.send_params(sends);
             self.on_params_progress();
         }
-        if self.phase == Phase::Disarming {
+        if self.restore_running() {
             let sends = self
                 .restore
                 .as_mut()

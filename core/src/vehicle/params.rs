@@ -9,7 +9,9 @@
 //!        Read ──► next step;  Set/SetBits already at the value ──► next step
 //!        otherwise ──► Writing: PARAM_SET (the value), again every `retry`
 //!   Writing ──PARAM_VALUE of that name, at the value──► next step (the old value kept
-//!            for the restore) ; at another value ──► Failed (the write refused, named)
+//!            for the restore) ; at another value ──► Failed (the write refused, named);
+//!            at the old value: a late answer to a resent read, or a refusal: waited
+//!            out (the PARAM_SET is resent), and named as a refusal if it stays so
 //!   Reading/Writing ──no answer after `max_attempts` sends──► Failed (named)
 //!  every step done ──► Done
 //! ```
@@ -48,6 +50,8 @@ enum State {
         name: &'static str,
         old: f32,
         value: f32,
+        /// It answered with the old value since the write.
+        still_old: bool,
     },
     Done,
     Failed(String),
@@ -137,6 +141,15 @@ impl ParamSession {
         &self.changed
     }
 
+    /// What to put back: what it changed, and a write in flight (it may have been taken).
+    pub fn to_restore(&self) -> Vec<(&'static str, f32)> {
+        let mut all = self.changed.clone();
+        if let State::Writing { name, old, .. } = self.state {
+            all.push((name, old));
+        }
+        all
+    }
+
     /// When [`ParamSession::handle_timeout`] must be called.
     pub fn poll_timeout(&self) -> SimTime {
         match self.state {
@@ -159,6 +172,15 @@ impl ParamSession {
             };
             let names: Vec<&str> = step.param.spellings().collect();
             let why = match &self.state {
+                State::Writing {
+                    name,
+                    value,
+                    old,
+                    still_old: true,
+                } => format!(
+                    "parameter {name} = {value} refused: the vehicle reads back {old} after {} attempts",
+                    self.attempts
+                ),
                 State::Writing { name, value, .. } => format!(
                     "parameter {name} = {value} not confirmed after {} attempts",
                     self.attempts
@@ -190,7 +212,7 @@ impl ParamSession {
                 self.read.push((spelling, value));
                 let target = match step.action {
                     ParamAction::Read => None,
-                    ParamAction::Set(v) => Some(v),
+                    ParamAction::Set(v) | ParamAction::SetIfOn { value: v, .. } => Some(v),
                     ParamAction::SetBits(bits) => {
                         // An integer mask read as a float: its bits or'ed in.
                         Some(((value.max(0.0) as u32) | bits) as f32)
@@ -202,6 +224,7 @@ impl ParamSession {
                             name: spelling,
                             old: value,
                             value: target,
+                            still_old: false,
                         };
                         self.attempts = 0;
                         self.send(now)
@@ -213,8 +236,19 @@ impl ParamSession {
                 name: writing,
                 old,
                 value: target,
+                ..
             } if writing == name => {
-                if value == target {
+                if value == old {
+                    // A late answer to a read sent twice, or the write not taken: the
+                    // PARAM_SET is resent at the deadline.
+                    self.state = State::Writing {
+                        name: writing,
+                        old,
+                        value: target,
+                        still_old: true,
+                    };
+                    Vec::new()
+                } else if value == target {
                     self.changed.push((writing, old));
                     self.read.retain(|(n, _)| *n != writing);
                     self.read.push((writing, value));
@@ -234,6 +268,14 @@ impl ParamSession {
     fn next(&mut self, now: SimTime) -> Vec<ParamSend> {
         self.step += 1;
         self.attempts = 0;
+        // A step set only when a flag read before is on is skipped while it is off (or
+        // was never read).
+        while let Some(ParamAction::SetIfOn { flag, .. }) =
+            self.steps.get(self.step).map(|s| s.action)
+            && self.value(&flag).is_none_or(|v| v == 0.0)
+        {
+            self.step += 1;
+        }
         if self.step >= self.steps.len() {
             self.state = State::Done;
             self.deadline = None;
@@ -264,7 +306,7 @@ impl ParamSession {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ringswarm_wire::ardupilot::{GUID_OPTIONS, MAV_GCS_SYSID, MOT_THST_HOVER};
+    use ringswarm_wire::ardupilot::{FS_GCS_ENABLE, GUID_OPTIONS, MAV_GCS_SYSID, MOT_THST_HOVER};
 
     fn t(s: f64) -> SimTime {
         SimTime::from_secs_f64(s)
@@ -359,6 +401,38 @@ mod tests {
     }
 
     #[test]
+    fn a_step_whose_flag_is_off_is_skipped() {
+        let steps = |_| {
+            vec![
+                ParamStep {
+                    param: FS_GCS_ENABLE,
+                    action: ParamAction::Read,
+                },
+                ParamStep {
+                    param: MAV_GCS_SYSID,
+                    action: ParamAction::SetIfOn {
+                        value: 253.0,
+                        flag: FS_GCS_ENABLE,
+                    },
+                },
+            ]
+        };
+        let mut off = ParamSession::new(steps(()), Duration::from_millis(500), 3);
+        off.start(t(0.0));
+        assert!(off.on_value(t(0.1), "FS_GCS_ENABLE", 0.0).is_empty());
+        assert!(off.done() && off.changed().is_empty());
+        let mut on = ParamSession::new(steps(()), Duration::from_millis(500), 3);
+        on.start(t(0.0));
+        assert_eq!(
+            on.on_value(t(0.1), "FS_GCS_ENABLE", 5.0),
+            vec![
+                ParamSend::Read("MAV_GCS_SYSID"),
+                ParamSend::Read("SYSID_MYGCS")
+            ]
+        );
+    }
+
+    #[test]
     fn a_value_already_right_is_not_written() {
         let mut s = session();
         s.start(t(0.0));
@@ -370,17 +444,51 @@ mod tests {
     }
 
     #[test]
-    fn a_refused_write_fails_by_name() {
+    fn a_write_read_back_at_another_value_fails_by_name() {
         let mut s = session();
         s.start(t(0.0));
         s.on_value(t(0.1), "MOT_THST_HOVER", 0.4);
         s.on_value(t(0.2), "GUID_OPTIONS", 0.0);
-        s.on_value(t(0.3), "GUID_OPTIONS", 0.0);
+        s.on_value(t(0.3), "GUID_OPTIONS", 4.0);
         assert_eq!(
             s.failure(),
-            Some("parameter GUID_OPTIONS = 8 refused: the vehicle reads back 0")
+            Some("parameter GUID_OPTIONS = 8 refused: the vehicle reads back 4")
         );
         assert!(s.changed().is_empty());
+    }
+
+    #[test]
+    fn a_late_answer_at_the_old_value_is_waited_out_and_a_write_that_stays_old_is_named() {
+        let mut s = session();
+        s.start(t(0.0));
+        s.on_value(t(0.1), "MOT_THST_HOVER", 0.4);
+        // The read of GUID_OPTIONS went unanswered and was sent again.
+        s.handle_timeout(t(0.7));
+        assert_eq!(
+            s.on_value(t(0.8), "GUID_OPTIONS", 0.0),
+            vec![ParamSend::Set {
+                name: "GUID_OPTIONS",
+                value: 8.0
+            }]
+        );
+        // The second read's answer comes after the write: not a refusal.
+        assert!(s.on_value(t(0.85), "GUID_OPTIONS", 0.0).is_empty());
+        assert_eq!(s.failure(), None);
+        assert!(s.on_value(t(0.9), "GUID_OPTIONS", 8.0).len() == 2);
+        assert_eq!(s.changed(), &[("GUID_OPTIONS", 0.0)]);
+        // A vehicle that keeps answering the old value: resent, then named a refusal.
+        let mut s = session();
+        s.start(t(0.0));
+        s.on_value(t(0.1), "MOT_THST_HOVER", 0.4);
+        s.on_value(t(0.2), "GUID_OPTIONS", 0.0);
+        for k in 1..=3 {
+            s.on_value(t(0.2 + 0.5 * f64::from(k) - 0.1), "GUID_OPTIONS", 0.0);
+            s.handle_timeout(t(0.2 + 0.5 * f64::from(k)));
+        }
+        assert_eq!(
+            s.failure(),
+            Some("parameter GUID_OPTIONS = 8 refused: the vehicle reads back 0 after 3 attempts")
+        );
     }
 
     #[test]

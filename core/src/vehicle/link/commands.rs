@@ -49,7 +49,7 @@ impl VehicleLink {
     /// back (the link stays Disarming meanwhile).
     pub(super) fn finish(&mut self, now: SimTime) {
         self.pending = None;
-        if self.restore.is_some() {
+        if self.restore_running() {
             return; // already putting back
         }
         self.events.push_back(LinkEvent::Disarmed);
@@ -59,21 +59,32 @@ impl VehicleLink {
     /// Done with a disarmed vehicle: at once, or once what the handshake wrote on it is put
     /// back (Disarming meanwhile).
     pub(super) fn close(&mut self, now: SimTime) {
+        if self.start_restore(now) {
+            self.phase = Phase::Disarming;
+        } else if !self.restore_running() {
+            self.phase = Phase::Done;
+        } else {
+            self.phase = Phase::Disarming;
+        }
+    }
+
+    /// Starts putting back what the handshake wrote on the vehicle (a write still in
+    /// flight included), once; `true` when it started now.
+    pub(super) fn start_restore(&mut self, now: SimTime) -> bool {
         let changed = self
             .params
             .as_ref()
-            .map(|p| p.changed().to_vec())
+            .map(ParamSession::to_restore)
             .unwrap_or_default();
         if changed.is_empty() || self.restore.is_some() {
-            self.phase = Phase::Done;
-            return;
+            return false;
         }
-        self.phase = Phase::Disarming;
         let mut restore =
             ParamSession::restore(&changed, self.cfg.ack_timeout, self.cfg.max_attempts);
         let sends = restore.start(now);
         self.restore = Some(restore);
         self.send_params(sends);
+        true
     }
 
     /// The restore is over (done or given up): the link is done.
@@ -121,6 +132,9 @@ impl VehicleLink {
             self.start_streaming(now);
         } else {
             self.phase = Phase::Overridden;
+            // Someone else flies it now: its parameters go back at once (ArduPilot's
+            // MAV_GCS_SYSID decides whose RC overrides it takes).
+            self.start_restore(now);
         }
     }
 
