@@ -3,10 +3,11 @@
 //! the model's would otherwise drift):
 //!
 //! - **Handshake:** each flying vehicle keeps the velocity it had when it was first seen
-//!   flying: `u = K_KEEP·(v_keep − v)`; one first seen at rest (slower than
-//!   `HOLD_CAPTURE_MPS`: a ground start) holds where it was, with the hold law below, so
+//!   flying: `u = K_KEEP·(v_keep − v)`; one that took off under the swarm (seen on the
+//!   ground first) holds where it was first seen in the air, with the hold law below, so
 //!   that it does not drift while the swarm waits for the others (ArduPilot's EKF keeps a
-//!   vehicle on the ground for about 40 s after boot).
+//!   vehicle on the ground for about 40 s after boot). A vehicle met in the air keeps its
+//!   velocity, however slow.
 //! - **Retargeting:** each re-targeted agent goes to its planned velocity
 //!   (`RETARGET_K_V`), the others keep the velocity they had at the plan.
 //! - **Consensus:** the ring law `u = −αL(p − d) − βLv`, plus, unless `k_vmean = 0`, a
@@ -77,13 +78,17 @@ impl Swarm {
             }
             SwarmPhase::Handshake => {
                 for i in 0..self.law.accel.len() {
+                    let on_ground = self.links.get(i).is_some_and(|l| l.state().landed);
+                    if self.law.keep_velocity[i].is_none() && on_ground {
+                        self.law.started_on_ground[i] = true;
+                    }
                     if self.law.keep_velocity[i].is_none()
                         && self.law.states[i].is_some()
                         && self.ours_in_air(i)
                     {
                         let h = self.law.horizontal[i];
                         self.law.keep_velocity[i] = Some(h.vel_mps);
-                        if h.vel_mps.norm() < HOLD_CAPTURE_MPS {
+                        if self.law.started_on_ground[i] {
                             self.law.keep_points[i] = Some(h.pos_m);
                         }
                     }

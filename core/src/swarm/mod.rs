@@ -225,9 +225,11 @@ struct LawArrays {
     keep_velocity: Vec<Option<Vector2<f64>>>,
     /// Where a holding vehicle holds.
     hold_points: Vec<Option<Vector2<f64>>>,
-    /// Where a vehicle that first flew at rest holds while the swarm waits for the others
-    /// (the handshake).
+    /// Where a vehicle that took off under the swarm holds while the swarm waits for the
+    /// others (the handshake).
     keep_points: Vec<Option<Vector2<f64>>>,
+    /// Whether each vehicle was seen on the ground before it first flew.
+    started_on_ground: Vec<bool>,
     /// Each vehicle's horizontal box in the saturation, kept between ticks.
     boxes: Vec<Vector2<f64>>,
 }
@@ -377,6 +379,7 @@ impl Swarm {
                 keep_velocity: vec![None; n],
                 hold_points: vec![None; n],
                 keep_points: vec![None; n],
+                started_on_ground: vec![false; n],
                 boxes: Vec::with_capacity(n),
             },
             setup,
