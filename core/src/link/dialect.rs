@@ -262,7 +262,7 @@ impl Autopilot {
         match self {
             Self::Px4 => Vec::new(),
             Self::ArduPilot => {
-                let mut steps = self.guided_params(own_system_id);
+                let mut steps = ardupilot_guided_params(own_system_id);
                 if fenced {
                     steps.extend([
                         // The uploaded fence only: bits 1 and 2 (FENCE_TYPE's default 7)
@@ -280,38 +280,6 @@ impl Autopilot {
                 }
                 steps
             }
-        }
-    }
-
-    /// ArduPilot's parameters for guided attitude control and its ground station.
-    fn guided_params(self, own_system_id: u8) -> Vec<ParamStep> {
-        match self {
-            Self::Px4 => Vec::new(),
-            Self::ArduPilot => vec![
-                ParamStep {
-                    param: ardupilot::MOT_THST_HOVER,
-                    action: ParamAction::Read,
-                },
-                ParamStep {
-                    param: ardupilot::ATC_ANGLE_BOOST,
-                    action: ParamAction::Read,
-                },
-                ParamStep {
-                    param: ardupilot::GUID_OPTIONS,
-                    action: ParamAction::SetBits(ardupilot::GUID_OPTIONS_THRUST_AS_THRUST),
-                },
-                ParamStep {
-                    param: ardupilot::FS_GCS_ENABLE,
-                    action: ParamAction::Read,
-                },
-                ParamStep {
-                    param: ardupilot::MAV_GCS_SYSID,
-                    action: ParamAction::SetIfOn {
-                        value: f32::from(own_system_id),
-                        flag: ardupilot::FS_GCS_ENABLE,
-                    },
-                },
-            ],
         }
     }
 
@@ -361,6 +329,35 @@ impl Autopilot {
             Self::ArduPilot => thrust,
         }
     }
+}
+
+/// ArduPilot's parameters for guided attitude control and its ground station.
+fn ardupilot_guided_params(own_system_id: u8) -> Vec<ParamStep> {
+    vec![
+        ParamStep {
+            param: ardupilot::MOT_THST_HOVER,
+            action: ParamAction::Read,
+        },
+        ParamStep {
+            param: ardupilot::ATC_ANGLE_BOOST,
+            action: ParamAction::Read,
+        },
+        ParamStep {
+            param: ardupilot::GUID_OPTIONS,
+            action: ParamAction::SetBits(ardupilot::GUID_OPTIONS_THRUST_AS_THRUST),
+        },
+        ParamStep {
+            param: ardupilot::FS_GCS_ENABLE,
+            action: ParamAction::Read,
+        },
+        ParamStep {
+            param: ardupilot::MAV_GCS_SYSID,
+            action: ParamAction::SetIfOn {
+                value: f32::from(own_system_id),
+                flag: ardupilot::FS_GCS_ENABLE,
+            },
+        },
+    ]
 }
 
 #[cfg(test)]

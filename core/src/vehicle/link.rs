@@ -138,11 +138,6 @@ impl VehicleLink {
         }
     }
 
-    /// The last warning the vehicle sent (STATUSTEXT, severity WARNING or worse).
-    pub fn last_warning(&self) -> Option<&str> {
-        self.last_warning.as_deref()
-    }
-
     /// Frames from the vehicle refused by the signing rules.
     pub fn refused_frames(&self) -> u64 {
         self.signer.as_ref().map_or(0, |s| s.refused)
@@ -716,17 +711,30 @@ impl VehicleLink {
         self.events.push_back(LinkEvent::Failed(reason));
     }
 
-    /// Whether the handshake may arm (or switch) the vehicle: its origin known, the fence
-    /// held, its parameters set, and its pre-arm checks passed where it reports them.
-    fn ready_to_arm(&self) -> bool {
+    /// What keeps the handshake from arming (or switching) the vehicle, if anything: its
+    /// origin, the fence, its parameters, and, for an autopilot that reports them, a
+    /// position stream that came (arming starts ArduPilot's DISARM_DELAY clock) and its
+    /// pre-arm checks.
+    fn arm_blocker(&self) -> Option<&'static str> {
         let prearm = self.state.dialect().reports_prearm();
-        self.state.origin.is_some()
-            && self.fence_ready()
-            && self.params.as_ref().is_none_or(ParamSession::done)
-            // An autopilot that streams only what it is asked for is armed on a position
-            // stream that came (arming starts its DISARM_DELAY clock).
-            && (!prearm || self.state.last_position.is_some())
-            && (!prearm || self.state.prearm_ok == Some(true))
+        if self.state.origin.is_none() {
+            Some("its position estimate (no GPS_GLOBAL_ORIGIN yet)")
+        } else if !self.fence_ready() {
+            Some("the fence upload")
+        } else if !self.params.as_ref().is_none_or(ParamSession::done) {
+            Some("its parameters")
+        } else if prearm && self.state.last_position.is_none() {
+            Some("its position stream (LOCAL_POSITION_NED)")
+        } else if prearm && self.state.prearm_ok != Some(true) {
+            Some("its pre-arm checks (EKF)")
+        } else {
+            None
+        }
+    }
+
+    /// Whether the handshake may arm (or switch) the vehicle.
+    fn ready_to_arm(&self) -> bool {
+        self.arm_blocker().is_none()
     }
 
     /// What the handshake waits for before it arms, for an operator (`None`: nothing).
@@ -738,19 +746,7 @@ impl VehicleLink {
             .last_warning
             .as_ref()
             .map_or(String::new(), |t| format!("; it last said \"{t}\""));
-        let what = if self.state.origin.is_none() {
-            "its position estimate (no GPS_GLOBAL_ORIGIN yet)"
-        } else if !self.fence_ready() {
-            "the fence upload"
-        } else if !self.params.as_ref().is_none_or(ParamSession::done) {
-            "its parameters"
-        } else if self.state.dialect().reports_prearm() && self.state.last_position.is_none() {
-            "its position stream (LOCAL_POSITION_NED)"
-        } else if self.state.dialect().reports_prearm() && self.state.prearm_ok != Some(true) {
-            "its pre-arm checks (EKF)"
-        } else {
-            "arming"
-        };
+        let what = self.arm_blocker().unwrap_or("arming");
         Some(format!("waiting for {what}{said}"))
     }
 
@@ -798,7 +794,7 @@ impl VehicleLink {
                     self.events.push_back(LinkEvent::VehicleSays(text));
                 }
                 if self.phase == Phase::Disarming {
-                    self.finish_restored();
+                    self.phase = Phase::Done;
                 }
             }
             return;
@@ -819,6 +815,18 @@ impl VehicleLink {
             }
             self.params_applied = true;
         }
+    }
+
+    /// Runs the timers of the handshake's parameter session, or of the restore.
+    fn params_timeout(&mut self, now: SimTime, restore: bool) {
+        let session = if restore {
+            self.restore.as_mut()
+        } else {
+            self.params.as_mut()
+        };
+        let sends = session.map(|p| p.handle_timeout(now)).unwrap_or_default();
+        self.send_params(sends);
+        self.on_params_progress();
     }
 
     pub(super) fn send_params(&mut self, sends: Vec<ParamSend>) {
@@ -925,22 +933,10 @@ impl VehicleLink {
         if matches!(self.phase, Phase::Streaming(_)) {
             let answer = self.fence.as_mut().map(|f| f.handle_timeout(now));
             self.on_fence_answer(answer);
-            let sends = self
-                .params
-                .as_mut()
-                .map(|p| p.handle_timeout(now))
-                .unwrap_or_default();
-            self.send_params(sends);
-            self.on_params_progress();
+            self.params_timeout(now, false);
         }
         if self.restore_running() {
-            let sends = self
-                .restore
-                .as_mut()
-                .map(|p| p.handle_timeout(now))
-                .unwrap_or_default();
-            self.send_params(sends);
-            self.on_params_progress();
+            self.params_timeout(now, true);
         }
         if let Phase::Streaming(since) = self.phase
             && now.saturating_since(since) >= self.cfg.pre_stream

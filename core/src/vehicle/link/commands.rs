@@ -87,11 +87,6 @@ impl VehicleLink {
         true
     }
 
-    /// The restore is over (done or given up): the link is done.
-    pub(super) fn finish_restored(&mut self) {
-        self.phase = Phase::Done;
-    }
-
     /// Heard again after a loss. Before it first flew, the handshake starts over. After,
     /// the vehicle's own decisions win: still armed in OFFBOARD, it is taken on; anything
     /// else it chose (its failsafe's Hold, Return or Land, a disarm) is left alone unless
