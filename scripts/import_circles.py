@@ -65,4 +65,7 @@ for crate, root in roots.items():
     for comp in sccs:
         found = True
         print(crate, ' <-> '.join('::'.join(c[1]) if c[0]=='sib' else c[1] for c in comp))
-if not found: print('no import circle')
+if not found:
+    print("no import circle")
+else:
+    sys.exit(1)

@@ -37,6 +37,9 @@ setup_pid=$!
 step "cargo fmt --check"
 cargo fmt --all --check
 
+step "import circles between modules"
+python3 scripts/import_circles.py
+
 # Clippy runs as the workspace crates' compiler inside the builds below
 # (RUSTC_WORKSPACE_WRAPPER, as `cargo clippy` does for `cargo check`), its lints errors
 # (CLIPPY_ARGS, in the form `cargo clippy` hands them over). The dependencies are then
