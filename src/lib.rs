@@ -19,7 +19,10 @@
 //! - [`view`]: the live view and the replay in a browser (state, web server).
 //! - [`report`]: what the `analyze` and `plan` commands compute and print.
 //! - [`security`]: the signing key file and the signing clock kept across restarts.
-//! - [`cmd`]: one file per subcommand (the I/O edges); [`cli`]: the command line (clap).
+//! - [`flight`]: the flight runner: a swarm flown over real sockets in real time to the
+//!   end, with its run directory, live view and mirrors (`fly` and `demo --realtime`).
+//! - [`cmd`]: one file per subcommand (the I/O edges; none imports another); [`cli`]: the
+//!   command line (clap).
 //! - [`error`]: one error enum per layer, and the flight outcomes' exit codes.
 //!
 //! ```
@@ -40,6 +43,7 @@ pub mod cmd;
 pub mod config;
 pub mod driver;
 pub mod error;
+pub mod flight;
 #[cfg(feature = "emulator")]
 pub mod fuzzing;
 pub mod plot;

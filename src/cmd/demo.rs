@@ -289,9 +289,16 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
         let (fleet, _) = bind_fleet(specs, world, faults, e.seed)
             .await
             .map_err(|e| anyhow::anyhow!("emulated {e}"))?;
-        let shards = spawn_shards(fleet, crate::cmd::sitl::cores(), clock, &stop_rx);
-        let summary =
-            crate::cmd::fly::fly(Swarm::new(setup), &transport, &out, None, &args.live, None).await;
+        let shards = spawn_shards(fleet, crate::driver::cores(), clock, &stop_rx);
+        let summary = crate::flight::fly_over_udp(
+            Swarm::new(setup),
+            &transport,
+            &out,
+            None,
+            &args.live,
+            None,
+        )
+        .await;
         stop_tx.send_replace(true);
         shards.join().await.context("emulated vehicles")?;
         summary

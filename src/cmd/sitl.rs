@@ -307,7 +307,7 @@ async fn serve(
     } else {
         println!("  {}", placements_summary(&fleet));
     }
-    let shards = spawn_shards(fleet, cores(), clock, &shutdown_rx);
+    let shards = spawn_shards(fleet, crate::driver::cores(), clock, &shutdown_rx);
     println!(
         "Ctrl-C stops; on stdin, \"kill N\" powers vehicle N off and \"restart N\" boots it again."
     );
@@ -416,7 +416,7 @@ fn placements_summary(fleet: &[FleetVehicle]) -> String {
     format!(
         "{} vehicles on {} core(s), sending to {} address(es): {}{}",
         fleet.len(),
-        cores(),
+        crate::driver::cores(),
         peers.len(),
         shown.join(", "),
         if peers.len() > shown.len() {
@@ -425,11 +425,6 @@ fn placements_summary(fleet: &[FleetVehicle]) -> String {
             ""
         }
     )
-}
-
-/// The cores to step vehicles on.
-pub(crate) fn cores() -> usize {
-    std::thread::available_parallelism().map_or(1, usize::from)
 }
 
 /// Offboard setpoints each vehicle had taken at the previous fleet line, with the

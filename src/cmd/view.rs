@@ -22,7 +22,7 @@ pub fn run(args: &ViewArgs) -> anyhow::Result<()> {
     let (duration, vehicles) = (replay.duration_s(), replay.setup().vehicles.len());
     let server = WebServer::start(args.web, Content::Replay(Arc::new(replay)))
         .map_err(anyhow::Error::msg)?;
-    announce(server.addr());
+    crate::view::announce(server.addr());
     eprintln!(
         "replaying {} ({vehicles} vehicles, {duration:.1} s); Ctrl-C stops",
         run_dir.display()
@@ -33,18 +33,6 @@ pub fn run(args: &ViewArgs) -> anyhow::Result<()> {
         }
     });
     Ok(())
-}
-
-/// Says where the page is, and that a non-loopback address shows it to the network.
-pub fn announce(addr: std::net::SocketAddr) {
-    eprintln!("web view: http://{addr}/");
-    if !addr.ip().is_loopback() {
-        eprintln!(
-            "note: the web view listens on {} (not the loopback): anyone who can reach this \
-             machine can watch the swarm (the page commands nothing)",
-            addr.ip()
-        );
-    }
 }
 
 /// How often the page gets a new state of a watched swarm.
@@ -91,7 +79,7 @@ fn zenoh(args: &ViewArgs) -> anyhow::Result<()> {
         states,
     };
     let server = WebServer::start(args.web, content).map_err(anyhow::Error::msg)?;
-    announce(server.addr());
+    crate::view::announce(server.addr());
     eprintln!(
         "watching swarm \"{}\" ({} shards, {} vehicles) over Zenoh; Ctrl-C stops",
         layout.swarm,

@@ -93,3 +93,8 @@ impl<F: FnMut(&Swarm, SimTime)> Observer for F {
 
 /// Observes nothing.
 impl Observer for () {}
+
+/// The cores to step emulated vehicles on: the machine's parallelism.
+pub fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, usize::from)
+}

@@ -10,3 +10,15 @@ pub mod state;
 
 pub use server::{Content, LiveFeed, WebServer};
 pub use state::ViewState;
+
+/// Says where the page is, and that a non-loopback address shows it to the network.
+pub fn announce(addr: std::net::SocketAddr) {
+    eprintln!("web view: http://{addr}/");
+    if !addr.ip().is_loopback() {
+        eprintln!(
+            "note: the web view listens on {} (not the loopback): anyone who can reach this \
+             machine can watch the swarm (the page commands nothing)",
+            addr.ip()
+        );
+    }
+}
