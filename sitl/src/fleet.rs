@@ -25,13 +25,11 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use mio::{Events, Interest, Poll, Token};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use tokio::sync::{mpsc, watch};
 use tokio::time::MissedTickBehavior;
 
 use crate::autopilot::{LinkId, Vehicle, VehicleConfig, VehicleEvent, VehicleStatus};
-use crate::delay_line::DelayLine;
+use crate::faulty_line::FaultyLine;
 use crate::key_writer::{KeyStore, KeyWriter};
 use crate::keystore::StoredKey;
 use crate::link_faults::LinkFaults;
@@ -135,8 +133,8 @@ struct Slot {
     default_peers: Vec<SocketAddr>,
     partners: Vec<Partner>,
     faults: Vec<LinkFaults>,
-    rng: ChaCha8Rng,
-    delayed: DelayLine<Delayed>,
+    /// The links' fault draws and the datagrams they hold back.
+    delayed: FaultyLine<Delayed>,
     /// Buffers of delivered delayed datagrams, for the next ones.
     spare: Vec<Vec<u8>>,
     key_file: Option<PathBuf>,
@@ -206,8 +204,7 @@ async fn run_fleet(
             partners: defaults.iter().copied().map(Partner::new).collect(),
             default_peers: defaults,
             faults,
-            rng: ChaCha8Rng::seed_from_u64(v.seed),
-            delayed: DelayLine::new(DELAYED_PER_VEHICLE),
+            delayed: FaultyLine::new(DELAYED_PER_VEHICLE, v.seed),
             spare: Vec::new(),
             key_file: v.key_file,
             keys: keys.clone(),
@@ -553,7 +550,7 @@ impl Slot {
         if !self.alive || link >= self.sockets.len() {
             return;
         }
-        for delay in self.faults[link].copies(&mut self.rng) {
+        for delay in self.delayed.draw(&self.faults[link]) {
             if delay.is_zero() {
                 if self.vehicle.handle_datagram(now, self.ids[link], bytes) {
                     self.partners[link].on_datagram(from);
@@ -575,7 +572,7 @@ impl Slot {
 
     /// Holds a datagram back until `due`; a full line drops it.
     fn hold(&mut self, due: SimTime, link: usize, from: Option<SocketAddr>, bytes: Vec<u8>) {
-        if let Err(dropped) = self.delayed.push(due, Delayed { link, from, bytes }) {
+        if let Err(dropped) = self.delayed.hold(due, Delayed { link, from, bytes }) {
             self.spare.push(dropped.bytes);
         }
     }
@@ -607,7 +604,7 @@ impl Slot {
         while let Some(tx) = self.vehicle.poll_transmit() {
             // A link this vehicle does not serve sends nothing.
             if let Some(link) = self.ids.iter().position(|id| *id == tx.link) {
-                for copy in self.faults[link].copies(&mut self.rng) {
+                for copy in self.delayed.draw(&self.faults[link]) {
                     if copy.is_zero() {
                         self.send(link, &tx.bytes);
                     } else {
@@ -674,8 +671,7 @@ mod tests {
             default_peers: vec![peer],
             partners: vec![Partner::new(peer)],
             faults: vec![LinkFaults::default()],
-            rng: ChaCha8Rng::seed_from_u64(1),
-            delayed: DelayLine::new(DELAYED_PER_VEHICLE),
+            delayed: FaultyLine::new(DELAYED_PER_VEHICLE, 1),
             spare: Vec::new(),
             key_file: None,
             keys: KeyWriter::spawn().store(),

@@ -28,6 +28,7 @@ pub mod autopilot;
 pub mod config_file;
 pub mod control;
 pub mod delay_line;
+pub mod faulty_line;
 pub mod fleet;
 pub mod key_writer;
 pub mod keystore;

@@ -1,14 +1,13 @@
 //! Drivers: what moves bytes and time between the sans-IO machines.
 //!
-//! - [`lockstep`]: the coordinator and N emulated vehicles in one process, virtual time,
-//!   encoded MAVLink frames in between, seeded latency and loss. Deterministic.
+//! - [`lockstep`]: the coordinator (or the shards of one swarm, their messages on a
+//!   simulated bus) and N emulated vehicles in one process, virtual time, encoded
+//!   MAVLink frames in between, seeded latency and loss. Deterministic.
 //! - [`udp`]: tokio, a socket per vehicle or per MAVLink network, for real PX4 or
 //!   `ringswarm sitl` vehicles.
 //! - [`serial`]: a coordinator socket that is a serial port to one vehicle (companion
 //!   mode), read and written by threads of its own.
 //! - [`mirror`]: every datagram of a UDP flight copied to extra addresses, read-only.
-//! - [`shards`]: several shards of one swarm in one process, in lockstep with the
-//!   vehicles, their messages on a bus with seeded latency and loss. Deterministic.
 //! - `zenoh_bus` (feature `zenoh`): the messages between shards over a Zenoh peer
 //!   session, on a thread of its own.
 //! - [`listening`]: how far behind its sockets the UDP driver is, so that its own stall
@@ -22,8 +21,6 @@ pub mod listening;
 pub mod lockstep;
 pub mod mirror;
 pub mod serial;
-#[cfg(feature = "emulator")]
-pub mod shards;
 pub mod signals;
 pub mod udp;
 #[cfg(feature = "zenoh")]

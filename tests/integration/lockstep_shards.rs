@@ -6,7 +6,6 @@ use nalgebra::Vector2;
 use ringswarm::config::Config;
 use ringswarm::distributed::{ShardPlan, Watch};
 use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
-use ringswarm::driver::shards::ShardedLockstep;
 use ringswarm::swarm::{PlanDecision, Swarm, SwarmPhase};
 use ringswarm_sitl::autopilot::Vehicle;
 use ringswarm_sitl::link_faults::LinkFaults;
@@ -43,7 +42,7 @@ fn one_process() -> Lockstep {
     )
 }
 
-fn sharded(owner: &[usize], watch: Watch, bus: LinkConditions) -> ShardedLockstep {
+fn sharded(owner: &[usize], watch: Watch, bus: LinkConditions) -> Lockstep {
     sharded_with(owner, watch, bus, |_| {})
 }
 
@@ -52,7 +51,7 @@ fn sharded_with(
     watch: Watch,
     bus: LinkConditions,
     edit: impl Fn(&mut ringswarm::swarm::SwarmSetup),
-) -> ShardedLockstep {
+) -> Lockstep {
     build(&config(), owner, (watch, 100.0), bus, edit)
 }
 
@@ -63,7 +62,7 @@ fn build(
     (watch, tile_m): (Watch, f64),
     bus: LinkConditions,
     edit: impl Fn(&mut ringswarm::swarm::SwarmSetup),
-) -> ShardedLockstep {
+) -> Lockstep {
     let mut setup = config.validate().unwrap();
     edit(&mut setup);
     let count = owner.iter().max().unwrap() + 1;
@@ -75,7 +74,7 @@ fn build(
             Swarm::new_shard(setup.clone(), plan).unwrap()
         })
         .collect();
-    ShardedLockstep::new(shards, vehicles(config), LinkConditions::default(), bus).unwrap()
+    Lockstep::sharded(shards, vehicles(config), LinkConditions::default(), bus).unwrap()
 }
 
 fn bus_ms(latency_ms: f64, jitter_ms: f64, loss_pct: f64) -> LinkConditions {
@@ -128,7 +127,7 @@ fn global_events(swarm: &Swarm) -> Vec<String> {
         .collect()
 }
 
-fn run(mut flight: ShardedLockstep, seconds: u64) -> (ShardedLockstep, bool) {
+fn run(mut flight: Lockstep, seconds: u64) -> (Lockstep, bool) {
     let mut finite = true;
     flight.run_until(SimTime::from_millis(seconds * 1000), |r| {
         for s in r.shards() {
@@ -142,7 +141,7 @@ fn run(mut flight: ShardedLockstep, seconds: u64) -> (ShardedLockstep, bool) {
 }
 
 /// Every shard's prediction, the same bit for bit.
-fn one_prediction(flight: &ShardedLockstep) -> Vector2<f64> {
+fn one_prediction(flight: &Lockstep) -> Vector2<f64> {
     let first = flight.shards()[0].predicted_final_velocity().unwrap();
     for s in flight.shards() {
         assert_eq!(s.predicted_final_velocity(), Some(first));
@@ -151,7 +150,7 @@ fn one_prediction(flight: &ShardedLockstep) -> Vector2<f64> {
 }
 
 /// Each shard's consensus start; a shard not in consensus fails, with its events.
-fn consensus_starts(flight: &ShardedLockstep) -> Vec<SimTime> {
+fn consensus_starts(flight: &Lockstep) -> Vec<SimTime> {
     flight
         .shards()
         .iter()
@@ -310,7 +309,7 @@ fn a_paused_shard_rejoins_and_every_shard_restarts_consensus_at_one_instant() {
 
 #[test]
 fn the_same_seed_flies_the_same_flight_bit_for_bit() {
-    let sample = |flight: &ShardedLockstep| -> Vec<[f64; 6]> {
+    let sample = |flight: &Lockstep| -> Vec<[f64; 6]> {
         flight
             .vehicles()
             .iter()
@@ -387,7 +386,7 @@ fn fly_with_hop(hop_ms: f64) -> (f64, &'static str) {
         .collect();
     let bus = bus_ms(hop_ms, 0.0, 0.0);
     let flight =
-        ShardedLockstep::new(shards, vehicles(&config), LinkConditions::default(), bus).unwrap();
+        Lockstep::sharded(shards, vehicles(&config), LinkConditions::default(), bus).unwrap();
     let (flight, finite) = run(flight, 55);
     assert!(finite, "{hop_ms} ms");
     let formation = formation_error_m(flight.vehicles(), &offsets());
@@ -422,11 +421,7 @@ fn the_gate_s_hop_limit_sits_below_the_onset_of_trouble() {
 
 /// The closest two vehicles come (m, ellipsoidal, the truth) over `seconds`, checked on
 /// every shard-0 control tick, and the flight.
-fn closest_approach_m(
-    mut flight: ShardedLockstep,
-    seconds: u64,
-    config: &Config,
-) -> (f64, ShardedLockstep) {
+fn closest_approach_m(mut flight: Lockstep, seconds: u64, config: &Config) -> (f64, Lockstep) {
     let sep = ringswarm::safety::Separation {
         horizontal_m: config.safety.horizontal_m,
         vertical_m: config.safety.vertical_m,

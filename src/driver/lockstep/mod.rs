@@ -1,35 +1,46 @@
-//! The lockstep driver: the swarm machine and the emulator's vehicle machines exchange
-//! encoded MAVLink frames in virtual time, 1 ms at a time, with a seeded latency and loss
-//! on every link. Same seed, same inputs: the same trajectory, bit for bit.
+//! The lockstep driver: one or several swarm machines (one process, or the shards of one
+//! swarm) and the emulator's vehicle machines exchange encoded MAVLink frames in virtual
+//! time, 1 ms at a time, with a seeded latency and loss on every link. Same seed, same
+//! inputs: the same trajectory, bit for bit.
 //!
 //! By default link `i` talks to vehicle `i`. With a transport plan
-//! ([`Lockstep::with_transport`]) datagrams go through the same [`Router`] as over UDP:
-//! each vehicle has a virtual address (its configured one, or a unique one in
-//! 10.0.0.0/8), a network's vehicles are told apart by system id and found from their
-//! frames, and what the router cannot deliver is dropped.
+//! ([`Lockstep::with_transport`]) datagrams go through the same router as over UDP
+//! (`routing`). Shards ([`Lockstep::sharded`]) each fly their own vehicles and tell each
+//! other the rest over a simulated bus (`bus`).
+//!
+//! ```text
+//!  step: vehicles (physics, autopilot) ─► their datagrams into the MAVLink line
+//!        ─► deliver what is due ─► each coordinator: timers, control tick, datagrams
+//!        into the line, shard messages onto the bus ─► deliver what is due
+//! ```
 
-use std::time::{Duration, Instant};
+mod bus;
+mod phase_times;
+mod routing;
 
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
+use std::time::Duration;
+
 use ringswarm_sitl::autopilot::{LinkId, PHYSICS_STEP, Vehicle};
-use ringswarm_sitl::delay_line::DelayLine;
+use ringswarm_sitl::faulty_line::FaultyLine;
 pub use ringswarm_sitl::link_faults::LinkConditions;
 use ringswarm_wire::time::SimTime;
 
-use std::collections::HashMap;
-use std::net::{IpAddr, SocketAddr};
-use std::ops::Range;
-
 use super::{Intake, Observer};
-use crate::link::router::{Router, TransportPlan};
+use crate::distributed::ShardPlan;
+use crate::link::router::TransportPlan;
 use crate::swarm::Swarm;
+pub use bus::BusCounts;
+use bus::ShardBus;
+use phase_times::PhaseClock;
+pub use phase_times::PhaseTimes;
+use routing::Routing;
 
-/// Datagrams in flight at once, both ways, over all links: a full line drops (and
-/// counts) what comes next rather than growing without limit.
+/// Datagrams in flight at once, both ways, over all links (and payloads on the shards'
+/// bus): a full line drops (and counts) what comes next rather than growing without
+/// limit.
 const IN_FLIGHT_CAPACITY: usize = 1 << 20;
 
-/// A datagram in flight.
+/// A datagram in flight between vehicle `index` and its coordinator.
 #[derive(Debug, Clone)]
 struct InFlight {
     to_vehicle: bool,
@@ -37,56 +48,26 @@ struct InFlight {
     bytes: Vec<u8>,
 }
 
-/// Datagrams through a [`Router`], between virtual addresses.
-#[derive(Debug)]
-struct Routing {
-    router: Router,
-    /// Vehicle `j`'s address.
-    addresses: Vec<SocketAddr>,
-    /// And back.
-    vehicle_at: HashMap<SocketAddr, usize>,
-    /// The coordinator socket vehicle `j` sends to.
-    socket_of: Vec<usize>,
-    pieces: Vec<(usize, Range<usize>)>,
-}
-
-/// Wall time the lockstep loop spent in each of its phases, kept once asked for
-/// ([`Lockstep::keep_phase_times`]): where a benchmark's time goes.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct PhaseTimes {
-    /// The vehicles' steps: physics, inner loops, autopilot, telemetry built and encoded.
-    pub vehicles: Duration,
-    /// The coordinator's timers and control ticks: the law, the saturation, setpoints
-    /// built and encoded.
-    pub coordinator: Duration,
-    /// Datagrams carried both ways: the link conditions, decoding, each side's handling
-    /// of what it received. An observer's work counts in the phase that calls it.
-    pub delivery: Duration,
-}
-
-/// The clock behind [`PhaseTimes`].
-#[derive(Debug, Clone, Copy)]
-struct PhaseClock {
-    times: PhaseTimes,
-    lap_start: Instant,
-}
-
-/// The coordinator and its vehicles in one virtual world.
+/// The coordinators and their vehicles in one virtual world.
 #[derive(Debug)]
 pub struct Lockstep {
-    swarm: Swarm,
+    /// One swarm machine, or one per shard.
+    coordinators: Vec<Swarm>,
     vehicles: Vec<Vehicle>,
+    /// The coordinator of each vehicle (all 0 in one process).
+    owner: Vec<usize>,
     now: SimTime,
-    in_flight: DelayLine<InFlight>,
+    in_flight: FaultyLine<InFlight>,
     conditions: LinkConditions,
-    rng: ChaCha8Rng,
     silenced: Vec<Vec<(SimTime, SimTime)>>,
-    /// The coordinator's own stall ([`Lockstep::stall_coordinator`]), and what arrived
-    /// for it meanwhile, unread.
+    /// The coordinators' stall ([`Lockstep::stall_coordinator`]), and what arrived for
+    /// them meanwhile, unread.
     stall: Option<(SimTime, SimTime)>,
     unread: Vec<(usize, Vec<u8>)>,
     routing: Option<Routing>,
-    /// Datagrams from the swarm the router had no address for.
+    /// The bus between shards.
+    bus: Option<ShardBus>,
+    /// Datagrams from a swarm the router had no address for.
     unsent: u64,
     /// Step the vehicles on every core (see [`Lockstep::set_parallel`]).
     parallel: bool,
@@ -99,23 +80,52 @@ const PARALLEL_FROM: usize = 128;
 
 impl Lockstep {
     /// Pairs the swarm's links with `vehicles` (link `i` talks to vehicle `i`'s offboard link).
-    pub fn new(swarm: Swarm, mut vehicles: Vec<Vehicle>, conditions: LinkConditions) -> Self {
+    pub fn new(swarm: Swarm, vehicles: Vec<Vehicle>, conditions: LinkConditions) -> Self {
+        let owner = vec![0; vehicles.len()];
+        Self::with_coordinators(vec![swarm], vehicles, owner, conditions)
+    }
+
+    /// Shards (each built with [`Swarm::new_shard`] over the same ring) and every
+    /// vehicle of the ring; `mavlink` on each vehicle's link, `bus` between shards.
+    ///
+    /// # Errors
+    /// When the shards' plans do not agree on who flies whom, or a vehicle is missing.
+    pub fn sharded(
+        shards: Vec<Swarm>,
+        vehicles: Vec<Vehicle>,
+        mavlink: LinkConditions,
+        bus: LinkConditions,
+    ) -> Result<Self, String> {
+        let owner = agreed_owners(&shards, vehicles.len())?;
+        let count = shards.len();
+        let mut run = Self::with_coordinators(shards, vehicles, owner, mavlink);
+        run.bus = Some(ShardBus::new(count, bus, IN_FLIGHT_CAPACITY));
+        Ok(run)
+    }
+
+    fn with_coordinators(
+        coordinators: Vec<Swarm>,
+        mut vehicles: Vec<Vehicle>,
+        owner: Vec<usize>,
+        conditions: LinkConditions,
+    ) -> Self {
         let n = vehicles.len();
         // Only the offboard links are carried: nothing is built for the ground station's.
         for v in &mut vehicles {
             v.set_link_wired(LinkId::Gcs, false);
         }
         Self {
-            swarm,
+            coordinators,
             vehicles,
+            owner,
             now: SimTime::ZERO,
-            in_flight: DelayLine::new(IN_FLIGHT_CAPACITY),
-            rng: ChaCha8Rng::seed_from_u64(conditions.seed),
+            in_flight: FaultyLine::new(IN_FLIGHT_CAPACITY, conditions.seed),
             conditions,
             silenced: vec![Vec::new(); n],
             stall: None,
             unread: Vec::new(),
             routing: None,
+            bus: None,
             unsent: 0,
             parallel: n >= PARALLEL_FROM,
             clock: None,
@@ -125,23 +135,17 @@ impl Lockstep {
     /// From now on, adds up the wall time of each phase of the loop ([`PhaseTimes`]); a
     /// few clock reads per step, and the flight is the same.
     pub fn keep_phase_times(&mut self) {
-        self.clock = Some(PhaseClock {
-            times: PhaseTimes::default(),
-            lap_start: Instant::now(),
-        });
+        self.clock = Some(PhaseClock::start());
     }
 
     /// The phase times kept so far (none unless [`Lockstep::keep_phase_times`] was called).
     pub fn phase_times(&self) -> Option<PhaseTimes> {
-        self.clock.map(|c| c.times)
+        self.clock.map(|c| c.times())
     }
 
-    /// Adds the time since the last lap to one phase.
     fn lap(&mut self, phase: fn(&mut PhaseTimes) -> &mut Duration) {
         if let Some(clock) = &mut self.clock {
-            let now = Instant::now();
-            *phase(&mut clock.times) += now - clock.lap_start;
-            clock.lap_start = now;
+            clock.lap(phase);
         }
     }
 
@@ -155,24 +159,7 @@ impl Lockstep {
     /// Routes every datagram as `plan` says (vehicle `j` sits at its route's address, or
     /// at a unique virtual one, and sends to its route's socket).
     pub fn with_transport(mut self, plan: &TransportPlan) -> Self {
-        let addresses: Vec<SocketAddr> = plan
-            .routes
-            .iter()
-            .enumerate()
-            .map(|(j, r)| {
-                r.address.unwrap_or_else(|| {
-                    let [_, a, b, c] = (j as u32).to_be_bytes();
-                    SocketAddr::new(IpAddr::from([10, a, b, c]), 14580)
-                })
-            })
-            .collect();
-        self.routing = Some(Routing {
-            router: Router::new(plan),
-            vehicle_at: addresses.iter().enumerate().map(|(j, a)| (*a, j)).collect(),
-            addresses,
-            socket_of: plan.routes.iter().map(|r| r.socket).collect(),
-            pieces: Vec::new(),
-        });
+        self.routing = Some(Routing::new(plan));
         self
     }
 
@@ -209,14 +196,48 @@ impl Lockstep {
         self.now
     }
 
-    /// The swarm machine.
+    /// The swarm machine (the first shard's, when sharded).
     pub fn swarm(&self) -> &Swarm {
-        &self.swarm
+        &self.coordinators[0]
+    }
+
+    /// Every swarm machine: the one of one process, or each shard's.
+    pub fn shards(&self) -> &[Swarm] {
+        &self.coordinators
     }
 
     /// The emulated vehicles.
     pub fn vehicles(&self) -> &[Vehicle] {
         &self.vehicles
+    }
+
+    /// What crossed the bus between shards (nothing in one process).
+    pub fn bus_counts(&self) -> BusCounts {
+        self.bus
+            .as_ref()
+            .map_or_else(BusCounts::default, ShardBus::counts)
+    }
+
+    /// Takes shard `s` down over `[from, until)`: it runs nothing, sends nothing, and
+    /// what is sent to it (MAVLink or bus) is lost, as when its process is killed. (It
+    /// comes back with its state as it was, as a process paused rather than restarted.)
+    /// Nothing in one process.
+    pub fn take_down(&mut self, s: usize, from: SimTime, until: SimTime) {
+        if let Some(bus) = &mut self.bus {
+            bus.take_down(s, from, until);
+        }
+    }
+
+    /// Cuts the bus between shards `a` and `b` (both ways) over `[from, until)`: each
+    /// still hears the others, as a mesh with one broken link.
+    pub fn cut(&mut self, a: usize, b: usize, from: SimTime, until: SimTime) {
+        if let Some(bus) = &mut self.bus {
+            bus.cut(a, b, from, until);
+        }
+    }
+
+    fn is_down(&self, s: usize) -> bool {
+        self.bus.as_ref().is_some_and(|b| b.is_down(s, self.now))
     }
 
     /// Drops everything vehicle `i` sends and receives between `from` and `until` (in
@@ -248,13 +269,17 @@ impl Lockstep {
         if now < until {
             return;
         }
-        self.swarm.set_listen_lag(now, now.saturating_since(from));
-        self.swarm.handle_timeout(now);
+        for swarm in &mut self.coordinators {
+            swarm.set_listen_lag(now, now.saturating_since(from));
+            swarm.handle_timeout(now);
+        }
         for (j, bytes) in std::mem::take(&mut self.unread) {
             self.deliver_to_swarm(now, j, &bytes, observer);
             self.recycle(false, j, bytes);
         }
-        self.swarm.set_listen_lag(now, Duration::ZERO);
+        for swarm in &mut self.coordinators {
+            swarm.set_listen_lag(now, Duration::ZERO);
+        }
         self.stall = None;
     }
 
@@ -264,11 +289,12 @@ impl Lockstep {
     }
 
     /// Runs until virtual time `end`; `observer` sees every datagram the swarm sends or
-    /// receives (when it is sent, and when it is delivered) and the swarm after each step.
+    /// receives (when it is sent, and when it is delivered) and the swarm (the first
+    /// shard's, when sharded) after each step.
     pub fn run_observed(&mut self, end: SimTime, observer: &mut impl Observer) {
         while self.now < end {
             self.step_observed(observer);
-            observer.swarm(&self.swarm, self.now);
+            observer.swarm(&self.coordinators[0], self.now);
         }
     }
 
@@ -276,16 +302,7 @@ impl Lockstep {
         self.now = self.now + PHYSICS_STEP;
         let now = self.now;
         self.lap(|t| &mut t.delivery); // the caller's observer, between steps
-        if self.parallel {
-            use rayon::iter::{IntoParallelRefMutIterator, ParallelIterator};
-            self.vehicles
-                .par_iter_mut()
-                .for_each(|v| v.handle_timeout(now));
-        } else {
-            for v in &mut self.vehicles {
-                v.handle_timeout(now);
-            }
-        }
+        self.step_vehicles(now);
         self.lap(|t| &mut t.vehicles);
         for i in 0..self.vehicles.len() {
             while let Some(tx) = self.vehicles[i].poll_transmit() {
@@ -305,22 +322,50 @@ impl Lockstep {
             return;
         }
         self.wake_from_stall(now, observer);
-        if now >= self.swarm.poll_timeout() {
-            self.swarm.handle_timeout(now);
-        }
-        while let Some((i, bytes)) = self.swarm.poll_transmit() {
-            observer.datagram(now, i, true, &bytes);
-            match self.vehicle_reached_by(i) {
-                Some(j) => self.send(true, j, bytes),
-                None => {
-                    self.unsent += 1;
-                    self.swarm.recycle(i, bytes);
-                }
+        for s in 0..self.coordinators.len() {
+            if !self.is_down(s) {
+                self.step_coordinator(s, now, observer);
             }
         }
         self.lap(|t| &mut t.coordinator);
         self.deliver(now, observer);
         self.lap(|t| &mut t.delivery);
+    }
+
+    fn step_vehicles(&mut self, now: SimTime) {
+        if self.parallel {
+            use rayon::iter::{IntoParallelRefMutIterator, ParallelIterator};
+            self.vehicles
+                .par_iter_mut()
+                .for_each(|v| v.handle_timeout(now));
+        } else {
+            for v in &mut self.vehicles {
+                v.handle_timeout(now);
+            }
+        }
+    }
+
+    /// Coordinator `s`'s timers and tick, its datagrams into the line and its messages
+    /// onto the bus.
+    fn step_coordinator(&mut self, s: usize, now: SimTime, observer: &mut impl Observer) {
+        if now >= self.coordinators[s].poll_timeout() {
+            self.coordinators[s].handle_timeout(now);
+        }
+        while let Some((i, bytes)) = self.coordinators[s].poll_transmit() {
+            observer.datagram(now, i, true, &bytes);
+            match self.vehicle_reached_by(i) {
+                Some(j) => self.send(true, j, bytes),
+                None => {
+                    self.unsent += 1;
+                    self.coordinators[s].recycle(i, bytes);
+                }
+            }
+        }
+        if let Some(bus) = &mut self.bus {
+            while let Some(message) = self.coordinators[s].poll_shard_message() {
+                bus.publish(now, s, &message, &self.coordinators);
+            }
+        }
     }
 
     /// Puts a datagram from a third party on vehicle `index`'s link, delivered with the
@@ -350,14 +395,13 @@ impl Lockstep {
 
     /// The vehicle a datagram for link `i` reaches.
     fn vehicle_reached_by(&self, i: usize) -> Option<usize> {
-        let Some(r) = &self.routing else {
-            return Some(i);
-        };
-        let (_, to) = r.router.destination(i)?;
-        r.vehicle_at.get(&to).copied()
+        match &self.routing {
+            Some(r) => r.vehicle_reached_by(i),
+            None => Some(i),
+        }
     }
 
-    /// Hands a datagram from vehicle `j` to the swarm (through the router, if any).
+    /// Hands a datagram from vehicle `j` to its coordinator (through the router, if any).
     fn deliver_to_swarm(
         &mut self,
         now: SimTime,
@@ -365,62 +409,57 @@ impl Lockstep {
         bytes: &[u8],
         observer: &mut impl Observer,
     ) {
+        let swarm = &mut self.coordinators[self.owner[j]];
         let Some(r) = self.routing.as_mut() else {
             observer.datagram(now, j, false, bytes);
-            self.swarm.handle_datagram(now, j, bytes);
+            swarm.handle_datagram(now, j, bytes);
             return;
         };
         let (socket, from) = (r.socket_of[j], r.addresses[j]);
         let mut intake = Intake {
-            swarm: &mut self.swarm,
+            swarm,
             router: &mut r.router,
             pieces: &mut r.pieces,
         };
         intake.deliver(socket, from, bytes, now, observer);
     }
 
-    fn is_silenced(&self, i: usize) -> bool {
+    /// Whether vehicle `i`'s link carries nothing now: silenced, or its shard down.
+    fn is_cut_off(&self, i: usize) -> bool {
         self.silenced[i]
             .iter()
             .any(|&(from, until)| self.now >= from && self.now < until)
+            || self.is_down(self.owner[i])
     }
 
     fn send(&mut self, to_vehicle: bool, index: usize, bytes: Vec<u8>) {
-        if self.is_silenced(index) {
+        if self.is_cut_off(index) {
             self.recycle(to_vehicle, index, bytes);
             return;
         }
-        let mut copies = self.conditions.faults.copies(&mut self.rng);
-        let mut bytes = Some(bytes);
-        while let Some(delay) = copies.next() {
-            // The last copy takes the buffer itself: a clean link copies nothing.
-            let copy = if copies.len() == 0 {
-                bytes.take()
-            } else {
-                bytes.clone()
-            };
-            if let Some(bytes) = copy {
-                let held = InFlight {
-                    to_vehicle,
-                    index,
-                    bytes,
-                };
-                // A full line drops the datagram, as a router's full queue does.
-                if let Err(dropped) = self.in_flight.push(self.now + delay, held) {
-                    self.recycle(to_vehicle, index, dropped.bytes);
-                }
-            }
-        }
-        // Lost on the way: back to where it came from.
-        if let Some(bytes) = bytes {
-            self.recycle(to_vehicle, index, bytes);
+        let held = InFlight {
+            to_vehicle,
+            index,
+            bytes,
+        };
+        let mut lost = None;
+        self.in_flight.send(
+            self.now,
+            &self.conditions.faults,
+            held,
+            InFlight::clone,
+            |d| lost = Some(d),
+        );
+        // Lost on the way (or the line full): back to where it came from.
+        if let Some(d) = lost {
+            self.recycle(d.to_vehicle, d.index, d.bytes);
         }
     }
 
     /// Gives a delivered (or lost) datagram's buffer back to its sender.
     fn recycle(&mut self, to_vehicle: bool, index: usize, bytes: Vec<u8>) {
         if to_vehicle {
-            self.swarm.recycle(index, bytes);
+            self.coordinators[self.owner[index]].recycle(index, bytes);
         } else if let Some(v) = self.vehicles.get_mut(index) {
             v.recycle(bytes);
         }
@@ -430,6 +469,8 @@ impl Lockstep {
         while let Some(d) = self.in_flight.pop_due(now) {
             if d.to_vehicle {
                 self.vehicles[d.index].handle_datagram(now, LinkId::Offboard, &d.bytes);
+            } else if self.is_down(self.owner[d.index]) {
+                // Its shard's process is gone: lost.
             } else if self.coordinator_stalled() {
                 self.unread.push((d.index, d.bytes));
                 continue;
@@ -438,5 +479,40 @@ impl Lockstep {
             }
             self.recycle(d.to_vehicle, d.index, d.bytes);
         }
+        if let Some(bus) = &mut self.bus {
+            bus.deliver(now, &mut self.coordinators);
+        }
     }
+}
+
+/// Each vehicle's shard, as every shard's plan gives it.
+///
+/// # Errors
+/// A swarm of one process among the shards, plans that do not cover every vehicle, or
+/// plans that disagree.
+fn agreed_owners(shards: &[Swarm], n: usize) -> Result<Vec<usize>, String> {
+    let plans: Vec<&ShardPlan> = shards
+        .iter()
+        .map(|s| {
+            s.shard_plan()
+                .ok_or("a swarm of one process among the shards")
+        })
+        .collect::<Result<_, _>>()?;
+    let owner: Vec<usize> = (0..n)
+        .map(|i| plans.first().and_then(|p| p.owner(i)))
+        .collect::<Option<_>>()
+        .ok_or(format!("the shards' plans do not cover the {n} vehicles"))?;
+    for (s, p) in plans.iter().enumerate() {
+        if p.this() != s || p.shards() != shards.len() {
+            return Err(format!(
+                "shard {s}'s plan is shard {} of {}",
+                p.this(),
+                p.shards()
+            ));
+        }
+        if (0..n).any(|i| p.owner(i) != Some(owner[i])) {
+            return Err(format!("shard {s}'s plan gives the vehicles other owners"));
+        }
+    }
+    Ok(owner)
 }
