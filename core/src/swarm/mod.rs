@@ -35,6 +35,7 @@
 //! saturation sees it. Every link event and swarm decision goes to the event log
 //! (`events.rs`).
 
+mod agreement;
 mod events;
 mod fence;
 mod guard;

@@ -120,7 +120,7 @@ impl Swarm {
         if let Some(p) = self.peers.as_mut() {
             // Every shard re-targets its own vehicles (if any), then consensus starts at
             // an instant agreed anew among shards that have all planned.
-            p.planned = true;
+            p.agreement.set_planned();
             p.reweigh(&self.law.w);
             self.new_round(now);
             self.phase = SwarmPhase::Retargeting(now);

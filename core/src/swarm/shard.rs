@@ -35,16 +35,13 @@ use std::time::Duration;
 use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 
+use super::agreement::{Heard, StartAgreement, SwarmClock};
 use super::{CommonState, Swarm, SwarmPhase};
 use crate::distributed::{
     MemberPhase, PlanVelocities, ShardMessage, ShardPlan, ShardReport, TileInterest, VehicleReport,
     Watch, WeightedSum,
 };
 use crate::vehicle::Phase;
-
-/// How long after the start a shard's report must show that it started too: a few
-/// control ticks of any rate the config allows.
-const AGREEMENT_SETTLED: Duration = Duration::from_millis(100);
 
 /// Messages kept for the driver at most: one that does not poll loses the oldest.
 const OUTBOX_CAPACITY: usize = 1 << 16;
@@ -75,26 +72,13 @@ pub(super) struct Peers {
     pub(super) tiles: Option<TileInterest>,
     /// Each watched remote vehicle's latest report.
     pub(super) remote: Vec<Option<RemoteVehicle>>,
-    /// This shard's proposal in the current round.
-    proposal: Option<SimTime>,
-    /// The start this shard adopts and vouches for (it sees every vehicle flying).
-    agreed: Option<SimTime>,
-    /// When the current round started: proposals before it belong to an earlier one.
-    round_since: SimTime,
-    /// A start that came without the agreement of every shard is void, and so is every
-    /// proposal up to it.
-    void_until: Option<SimTime>,
-    /// The start adopted in the current round, and this shard's sum at it.
-    started: Option<(SimTime, WeightedSum)>,
-    /// Whether the prediction of the current round was made.
-    predicted: bool,
+    /// The agreement on one start (and plan) instant with the other shards.
+    pub(super) agreement: StartAgreement,
     /// This shard's `Σ wᵢ vᵢ` on the last control tick.
     now_sum: WeightedSum,
     /// With a `[target]`: the adopted plan instant and this shard's vehicles' velocities
     /// and top speeds then (ring order), once taken.
     pub(super) plan_own: Option<(SimTime, Vec<OwnPlanInput>)>,
-    /// With a `[target]`: whether this shard has made the flight's plan.
-    pub(super) planned: bool,
     outbox: VecDeque<ShardMessage>,
     /// Messages refused: from this shard's own index, out of range, or older than the
     /// one kept.
@@ -109,33 +93,41 @@ impl Peers {
         let n = w.len();
         let saturation_weights = saturation_weights(&plan, w);
         let tiles = (plan.watch() == Watch::Horizon).then(|| TileInterest::new(plan.tile_m()));
+        let agreement = StartAgreement::new(plan.this(), plan.start_lead());
         Self {
             plan,
             saturation_weights,
             reports: vec![None; shards],
             tiles,
             remote: vec![None; n],
-            proposal: None,
-            agreed: None,
-            round_since: SimTime::ZERO,
-            void_until: None,
-            started: None,
-            predicted: false,
+            agreement,
             now_sum: WeightedSum::default(),
             plan_own: None,
-            planned: false,
             outbox: VecDeque::new(),
             refused: 0,
             dropped: 0,
         }
     }
 
+    fn clock(&self) -> SwarmClock {
+        SwarmClock {
+            epoch_us: self.plan.epoch_us(),
+        }
+    }
+
+    fn heard(&self) -> Heard<'_> {
+        Heard {
+            reports: &self.reports,
+            clock: self.clock(),
+        }
+    }
+
     fn to_swarm_us(&self, t: SimTime) -> u64 {
-        self.plan.epoch_us().saturating_add(t.as_micros())
+        self.clock().to_swarm_us(t)
     }
 
     fn local_time_of(&self, us: u64) -> SimTime {
-        SimTime::from_micros(us.saturating_sub(self.plan.epoch_us()))
+        self.clock().local_time_of(us)
     }
 
     fn push(&mut self, message: ShardMessage) {
@@ -173,7 +165,7 @@ impl Peers {
                     "shard {s} flies {} of its {} vehicles",
                     r.flying, r.vehicles
                 )),
-                Some((_, r)) if self.started_without(r) => Some(format!(
+                Some((_, r)) if self.agreement.started_without(r, self.clock()) => Some(format!(
                     "shard {s} did not start consensus at the adopted instant"
                 )),
                 _ => None,
@@ -183,41 +175,7 @@ impl Peers {
 
     /// The earliest start proposed in this round, this shard's own included.
     pub(super) fn adopted_start(&self) -> Option<SimTime> {
-        let others = self.reports.iter().flatten().filter_map(|(_, r)| {
-            // A plan instant and a consensus start are never taken for each other.
-            (r.planned == self.planned).then_some(())?;
-            r.start_us
-                .map(|us| self.local_time_of(us))
-                .filter(|t| *t >= self.round_since)
-        });
-        self.proposal
-            .into_iter()
-            .chain(others)
-            .filter(|t| self.void_until.is_none_or(|v| *t > v))
-            .min()
-    }
-
-    /// Whether `r`, sent well after this shard started consensus, shows that its shard
-    /// did not start at the same instant (it missed the agreement): the swarm is split,
-    /// and the shards that started hold until all agree again.
-    fn started_without(&self, r: &ShardReport) -> bool {
-        let Some((start, _)) = self.started else {
-            return false;
-        };
-        let start_us = self.to_swarm_us(start);
-        !r.ended
-            && r.sent_us > start_us.saturating_add(AGREEMENT_SETTLED.as_micros() as u64)
-            && r.start_us != Some(start_us)
-    }
-
-    /// Whether every other shard's latest report vouches for `start`.
-    fn all_agree(&self, start: SimTime) -> bool {
-        let start_us = self.to_swarm_us(start);
-        self.reports.iter().enumerate().all(|(s, r)| {
-            s == self.plan.this()
-                || r.as_ref()
-                    .is_some_and(|(_, r)| r.start_us == Some(start_us) && r.planned == self.planned)
-        })
+        self.agreement.adopted(self.heard())
     }
 
     /// With a `[target]`: every vehicle's velocity at the adopted plan instant and its
@@ -581,12 +539,7 @@ impl Swarm {
     /// A new round of the start agreement (a hold began).
     pub(super) fn new_round(&mut self, now: SimTime) {
         if let Some(p) = self.peers.as_mut() {
-            p.round_since = now;
-            p.proposal = None;
-            p.agreed = None;
-            p.void_until = None;
-            p.started = None;
-            p.predicted = false;
+            p.agreement.new_round(now);
         }
     }
 
@@ -596,25 +549,14 @@ impl Swarm {
         let Some(p) = self.peers.as_mut() else {
             return true;
         };
-        if p.proposal
-            .is_none_or(|t| p.void_until.is_some_and(|v| t <= v))
-        {
-            p.proposal = Some(now + p.plan.start_lead());
-        }
-        p.agreed = p.adopted_start();
-        match p.agreed {
-            Some(t) if now >= t => {
-                if p.all_agree(t) {
-                    return true;
-                }
-                // The instant came without every shard's word: void, and propose anew.
-                p.void_until = Some(now);
-                p.proposal = Some(now + p.plan.start_lead());
-                p.agreed = p.adopted_start();
-                false
-            }
-            _ => false,
-        }
+        let clock = p.clock();
+        p.agreement.due(
+            now,
+            Heard {
+                reports: &p.reports,
+                clock,
+            },
+        )
     }
 
     /// Starts consensus now (one process) or at the instant every shard adopts.
@@ -627,16 +569,14 @@ impl Swarm {
     /// Whether this shard has proposed a start in the current round (always false in one
     /// process, which starts at once).
     pub(super) fn start_proposed(&self) -> bool {
-        self.peers.as_ref().is_some_and(|p| p.proposal.is_some())
+        self.peers.as_ref().is_some_and(|p| p.agreement.proposed())
     }
 
     /// Not every vehicle flies in this shard's view: it vouches for no start (its
     /// proposal stays, for when they fly again).
     pub(super) fn withdraw_start(&mut self) {
-        if let Some(p) = self.peers.as_mut()
-            && p.started.is_none()
-        {
-            p.agreed = None;
+        if let Some(p) = self.peers.as_mut() {
+            p.agreement.withdraw();
         }
     }
 
@@ -646,10 +586,15 @@ impl Swarm {
     pub(super) fn shard_start(&mut self, now: SimTime) -> Option<SimTime> {
         let own = self.local_sum();
         let p = self.peers.as_mut()?;
-        let start = p.adopted_start().unwrap_or(now);
-        p.started = Some((start, own));
-        p.predicted = false;
-        Some(start)
+        let clock = p.clock();
+        Some(p.agreement.start(
+            now,
+            own,
+            Heard {
+                reports: &p.reports,
+                clock,
+            },
+        ))
     }
 
     /// This shard's `Σ wᵢ vᵢ` over its own vehicles' states flown on this tick.
@@ -676,15 +621,12 @@ impl Swarm {
         let Some(p) = self.peers.as_ref() else {
             return;
         };
-        let Some((start, own)) = p.started else {
+        let Some((start, own)) = p.agreement.awaits_prediction() else {
             return;
         };
-        if p.predicted {
-            return;
-        }
         if let Some(v) = p.prediction(start, own) {
             if let Some(p) = self.peers.as_mut() {
-                p.predicted = true;
+                p.agreement.set_predicted();
             }
             self.predicted_final_velocity = Some(v);
             self.log.push(
@@ -741,7 +683,7 @@ impl Swarm {
     /// prediction.
     pub(super) fn shard_mean_integral(&self, now: SimTime) -> Option<Vector2<f64>> {
         let p = self.peers.as_ref()?;
-        let (start, own) = p.started?;
+        let (start, own) = p.agreement.started()?;
         let target = self.predicted_final_velocity?;
         let (mean_at_start, _) = p.start_means(start, own)?;
         let (mean_now, _) = self.shard_means(now)?;
@@ -816,7 +758,7 @@ impl Swarm {
                 | SwarmPhase::Holding(_)
                 | SwarmPhase::Consensus(_)
         );
-        let start = p.started.map(|(t, _)| t).or(p.agreed);
+        let start = p.agreement.vouched();
         let report =
             ShardReport {
                 shard: u16::try_from(p.plan.this()).unwrap_or(u16::MAX),
@@ -826,10 +768,10 @@ impl Swarm {
                 lost,
                 ended,
                 start_us: start.filter(|_| in_round).map(|t| p.to_swarm_us(t)),
-                start_sum: p.started.map(|(_, s)| s).filter(|_| in_round),
+                start_sum: p.agreement.started().map(|(_, s)| s).filter(|_| in_round),
                 now_sum: own,
                 top_speed_mps: top_speed,
-                planned: p.planned,
+                planned: p.agreement.planned(),
                 plan_velocities: p.plan_own.as_ref().filter(|_| !p.others_planned()).map(
                     |(at, v)| PlanVelocities {
                         at_us: p.to_swarm_us(*at),
