@@ -258,7 +258,6 @@ pub fn coordinator_inbound(bytes: &[u8]) -> Vec<crate::vehicle::Phase> {
     }
     swarm
         .links()
-        .iter()
         .map(crate::vehicle::VehicleLink::phase)
         .collect()
 }

@@ -224,7 +224,7 @@ pub async fn run_swarm<O: Observer>(
         });
     }
     let mut pieces = Vec::new();
-    let mut unsent = vec![0u64; swarm.links().len()];
+    let mut unsent = vec![0u64; swarm.vehicle_count()];
     let mut listening = Listening::new(running.len());
     drop(tx);
     loop {

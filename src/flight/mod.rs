@@ -78,7 +78,7 @@ pub async fn fly_over_udp(
         .with_context(|| format!("create the run directory {}", out.display()))?;
     eprintln!(
         "flying {} vehicles; Ctrl-C (or SIGTERM, SIGHUP) lands them, twice stops at once. Run directory: {}",
-        swarm.links().len(),
+        swarm.vehicle_count(),
         out.display()
     );
     let (command_tx, command_rx) = watch::channel(DriverCommand::Fly);

@@ -31,7 +31,6 @@ impl FlyObserver {
         };
         let newest = swarm
             .links()
-            .iter()
             .filter_map(crate::vehicle::VehicleLink::signing_timestamp)
             .max()
             .unwrap_or(signing.start);
@@ -76,7 +75,6 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
     };
     let links: String = swarm
         .links()
-        .iter()
         .map(|l| match l.phase() {
             Phase::Discovering => '?',
             Phase::Streaming(_) => 's',
@@ -111,7 +109,6 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
         // vehicle waiting, and how many more.
         let mut waiting = swarm
             .links()
-            .iter()
             .zip(&swarm.setup().links)
             .filter_map(|(l, cfg)| l.waiting_for().map(|what| (cfg.system_id, what)));
         if let Some((id, what)) = waiting.next() {

@@ -100,7 +100,7 @@ impl RunTracker {
     /// Takes the swarm's state at `now`. Vehicles whose origin is not known yet make the
     /// snapshot incomplete and it is skipped.
     pub fn observe(&mut self, swarm: &Swarm, now: SimTime) {
-        let n = swarm.links().len();
+        let n = swarm.vehicle_count();
         self.pos.clear();
         let mut vel = Vector2::zeros();
         for i in 0..n {
@@ -228,7 +228,7 @@ impl Summary {
             .filter(|(p, _)| p.norm() > 0.0)
             .map(|(p, a)| (a - p).norm() / p.norm());
         Self {
-            vehicles: swarm.links().len(),
+            vehicles: swarm.vehicle_count(),
             control_rate_hz: 1.0 / swarm.setup().control_interval.as_secs_f64(),
             predicted_final_velocity: predicted.map(|v| [v.x, v.y]),
             achieved_final_velocity: achieved.map(|v| [v.x, v.y]),
@@ -344,8 +344,7 @@ impl ModelReport {
                 let (drag, drag_std, fed) = swarm.drag_estimate(i)?;
                 let b = swarm.disturbance_estimate_mps2(i)?;
                 let autopilot = swarm
-                    .links()
-                    .get(i)
+                    .link(i)
                     .and_then(|l| l.state().autopilot)
                     .map(|a| a.key());
                 Some(Self {

@@ -233,7 +233,7 @@ impl Recorder {
         let mut sinks = Sinks::create(files)?;
         writeln!(sinks.buffer(EVENTS), "t_s,system_id,network,level,event")?;
         let header = format!("{CSV_HEADER}\n");
-        for i in 0..swarm.links().len() {
+        for i in 0..swarm.vehicle_count() {
             match text {
                 RowText::Writer => rows::push_text(sinks.buffer(FIRST_CSV + i), &header),
                 RowText::Inline => sinks
@@ -244,10 +244,10 @@ impl Recorder {
         Ok(Self {
             dir: dir.to_owned(),
             sinks: Some(sinks),
-            vehicles: swarm.links().len(),
+            vehicles: swarm.vehicle_count(),
             events_written: 0,
             epoch_us,
-            tracker: RunTracker::new(swarm.links().len()),
+            tracker: RunTracker::new(swarm.vehicle_count()),
             trace: Trace::new(TRACE_PERIOD, TRACE_SAMPLES),
             last_tick: 0,
             error: None,
@@ -329,7 +329,8 @@ impl Recorder {
             return Ok(());
         };
         for i in 0..self.vehicles {
-            let link = &swarm.links()[i];
+            let link_state = swarm.link(i).map(|l| l.state());
+            let attitude = link_state.and_then(|l| l.attitude);
             let Some(s) = swarm.common_state(i) else {
                 continue;
             };
@@ -348,13 +349,12 @@ impl Recorder {
                     s.vel_enu_mps.y,
                     s.vel_enu_mps.z,
                 ],
-                attitude_wijk: link.state().attitude.as_ref().map_or([f64::NAN; 4], wijk),
+                attitude_wijk: attitude.as_ref().map_or([f64::NAN; 4], wijk),
                 command_enu_mps2: [c.x, c.y, c.z],
                 setpoint_wijk: wijk(&sp.attitude_ned_frd),
                 thrust_norm: sp.thrust_norm,
-                heard_age_ms: link
-                    .state()
-                    .last_heard
+                heard_age_ms: link_state
+                    .and_then(|l| l.last_heard)
                     .map_or(f64::NAN, |t| now.saturating_since(t).as_secs_f64() * 1e3),
             };
             match self.text {

@@ -66,7 +66,7 @@ impl Trace {
         if !self.due(now) {
             return;
         }
-        let states: Option<Vec<_>> = (0..swarm.links().len())
+        let states: Option<Vec<_>> = (0..swarm.vehicle_count())
             .map(|i| swarm.common_state(i))
             .collect();
         let Some(states) = states else {
@@ -85,14 +85,13 @@ impl Trace {
             .iter()
             .enumerate()
             .map(|(i, s)| {
-                let rpy =
-                    swarm.links()[i]
-                        .state()
-                        .attitude
-                        .map_or(Vector3::repeat(f64::NAN), |q| {
-                            let (r, p, y) = q.euler_angles();
-                            Vector3::new(r, p, y)
-                        });
+                let rpy = swarm.link(i).and_then(|l| l.state().attitude).map_or(
+                    Vector3::repeat(f64::NAN),
+                    |q| {
+                        let (r, p, y) = q.euler_angles();
+                        Vector3::new(r, p, y)
+                    },
+                );
                 Sample {
                     pos_m: s.pos_enu_m,
                     vel_mps: s.vel_enu_mps,

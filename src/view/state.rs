@@ -171,7 +171,7 @@ impl ViewState {
     /// The live swarm at `now`; `figures` is the run's latest snapshot of its figures.
     pub fn of_swarm(swarm: &Swarm, now: SimTime, figures: Option<Snapshot>) -> Self {
         let setup = swarm.setup();
-        let n = swarm.links().len();
+        let n = swarm.vehicle_count();
         let states: Vec<_> = (0..n).map(|i| swarm.common_state(i)).collect();
         let xy: Vec<_> = states.iter().map(|s| s.map(|s| s.pos_enu_m.xy())).collect();
         let w: Vec<f64> = (0..n).map(|i| setup.ring.w(i)).collect();
@@ -180,7 +180,6 @@ impl ViewState {
         let active = swarm.safety_active_rows();
         let vehicles = swarm
             .links()
-            .iter()
             .enumerate()
             .map(|(i, link)| {
                 let state = link.state();

@@ -216,12 +216,8 @@ fn a_mixed_ring_of_px4_and_ardupilot_vehicles_flies_one_prediction_into_formatio
         }
     });
     // Each vehicle spoke its own autopilot; ArduPilot's flew with thrust as a throttle.
-    let autopilots: Vec<Option<Autopilot>> = run
-        .swarm()
-        .links()
-        .iter()
-        .map(|l| l.state().autopilot)
-        .collect();
+    let autopilots: Vec<Option<Autopilot>> =
+        run.swarm().links().map(|l| l.state().autopilot).collect();
     let (px4, ap) = (Some(Autopilot::Px4), Some(Autopilot::ArduPilot));
     assert_eq!(autopilots, [px4, ap, px4, ap, px4, ap]);
     assert_eq!(

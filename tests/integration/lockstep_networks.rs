@@ -57,7 +57,6 @@ fn two_networks_with_overlapping_ids_fly_the_own_socket_flight_bit_for_bit() {
         networked
             .swarm()
             .links()
-            .iter()
             .all(|l| l.phase() == Phase::Flying),
         "every vehicle flies"
     );

@@ -52,11 +52,7 @@ fn six_vehicles_are_handshaken_and_consensus_starts_with_the_papers_prediction()
     let SwarmPhase::Consensus(start) = run.swarm().phase() else {
         panic!(
             "consensus did not start: {:?}",
-            run.swarm()
-                .links()
-                .iter()
-                .map(|l| l.phase())
-                .collect::<Vec<_>>()
+            run.swarm().links().map(|l| l.phase()).collect::<Vec<_>>()
         )
     };
     // Discovery at the first heartbeat, 1.2 s of stream, then arm and OFFBOARD.

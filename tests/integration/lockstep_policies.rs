@@ -75,12 +75,7 @@ fn with_retake_a_lost_vehicle_makes_the_others_hover_and_the_swarm_resumes_when_
     // Heard again at 13 s: 1.2 s of stream, arm (already armed), OFFBOARD, then resume.
     let resumed = resumed_at.expect("never resumed").as_secs_f64();
     assert!((14.2..14.6).contains(&resumed), "resumed at {resumed} s");
-    assert!(
-        run.swarm()
-            .links()
-            .iter()
-            .all(|l| l.phase() == Phase::Flying)
-    );
+    assert!(run.swarm().links().all(|l| l.phase() == Phase::Flying));
     assert!(run.vehicles()[2].status().mode == FlightMode::Offboard);
     // The new consensus starts from a hovering swarm: its predicted velocity is small.
     let predicted = run.swarm().predicted_final_velocity().unwrap();
@@ -102,7 +97,7 @@ fn by_default_a_vehicle_that_failsafed_is_left_to_its_own_decision() {
         if r.now() > secs(13.0) && v.mode == FlightMode::Offboard {
             retaken = true;
         }
-        if overridden_at.is_none() && r.swarm().links()[2].phase() == Phase::Overridden {
+        if overridden_at.is_none() && r.swarm().link(2).unwrap().phase() == Phase::Overridden {
             overridden_at = Some(r.now());
         }
     });
@@ -160,7 +155,7 @@ fn policy_land_lands_and_disarms_every_vehicle_including_the_lost_one() {
             s.height_m
         );
     }
-    assert!(run.swarm().links().iter().all(|l| l.phase() == Phase::Done));
+    assert!(run.swarm().links().all(|l| l.phase() == Phase::Done));
     // About 105 m to descend at 1.5 m/s, the last 10 m slower: 75-80 s after 11.5 s.
     assert!(
         (80.0..100.0).contains(&finished),

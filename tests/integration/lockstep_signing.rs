@@ -62,11 +62,7 @@ fn signed_flight_is_the_unsigned_flight_bit_for_bit_and_every_frame_is_signed() 
         "signed {a:?}\nunsigned {b:?}"
     );
     assert!(
-        signed
-            .swarm()
-            .links()
-            .iter()
-            .all(|l| l.phase() == Phase::Flying),
+        signed.swarm().links().all(|l| l.phase() == Phase::Flying),
         "every vehicle flies"
     );
     // 6 links × 12 s × 50 Hz setpoints and 2 × 50 Hz telemetry: well over 20 000 frames.
@@ -75,7 +71,7 @@ fn signed_flight_is_the_unsigned_flight_bit_for_bit_and_every_frame_is_signed() 
         census.authentic, census.frames,
         "every frame signed and authentic"
     );
-    for (link, vehicle) in signed.swarm().links().iter().zip(signed.vehicles()) {
+    for (link, vehicle) in signed.swarm().links().zip(signed.vehicles()) {
         assert_eq!(link.refused_frames(), 0);
         let c = vehicle.status().counters;
         assert_eq!((c.unsigned_refused, c.signature_refused), (0, 0));
@@ -115,7 +111,7 @@ fn a_vehicle_with_another_key_or_none_never_obeys_and_is_named() {
     );
     // The coordinator refuses vehicle 2's frames (signed with its key) and vehicle 4's
     // (unsigned): each named once.
-    let links = run.swarm().links();
+    let links: Vec<_> = run.swarm().links().collect();
     assert_eq!(links[1].phase(), Phase::Discovering);
     assert!(links[1].refused_frames() > 100);
     assert_eq!(links[3].phase(), Phase::Discovering);
@@ -145,7 +141,7 @@ fn the_vehicles_authentic_frames_from_another_link_id_are_refused() {
     let key = SigningKey::from_bytes([0x77; 32]);
     let mut run = build(Some(&key), &vec![Some(key.clone()); 6]);
     run.run_until(SimTime::from_millis(2_000), |_| {});
-    let before = run.swarm().links()[0].refused_frames();
+    let before = run.swarm().link(0).unwrap().refused_frames();
     assert_eq!(before, 0);
     let mut gcs_clock =
         ringswarm_wire::signing::Signing::new(key.clone(), common::START + 500_000_000);
@@ -162,11 +158,11 @@ fn the_vehicles_authentic_frames_from_another_link_id_are_refused() {
         run.inject(false, 0, bytes);
     }
     run.run_until(SimTime::from_millis(2_100), |_| {});
-    assert_eq!(run.swarm().links()[0].refused_frames(), 10);
+    assert_eq!(run.swarm().link(0).unwrap().refused_frames(), 10);
     assert!(run.swarm().events().iter().any(|e| {
         e.system_id == Some(1)
             && e.text
                 .contains("signed on link id 0, but the vehicle talks to us on link id 1")
     }));
-    assert_eq!(run.swarm().links()[0].phase(), Phase::Flying);
+    assert_eq!(run.swarm().link(0).unwrap().phase(), Phase::Flying);
 }

@@ -121,7 +121,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         Router::new(&plan),
         command_rx,
         move |swarm: &Swarm, now: SimTime| {
-            if all_flying_at.is_none() && swarm.links().iter().all(|l| l.phase() == Phase::Flying) {
+            if all_flying_at.is_none() && swarm.links().all(|l| l.phase() == Phase::Flying) {
                 all_flying_at = Some(now);
                 eprintln!("all flying at {:.3} s", now.as_secs_f64());
             }
@@ -168,7 +168,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
     command_tx.send_replace(DriverCommand::Stop);
     stop_tx.send_replace(true);
     let (swarm, _) = swarm_task.await.unwrap().unwrap();
-    assert!(swarm.links().iter().all(|l| l.phase() == Phase::Flying));
+    assert!(swarm.links().all(|l| l.phase() == Phase::Flying));
     shards.join().await.unwrap();
     // Vehicle 4's first frames went to its default peer, not to the coordinator: it was
     // found only because the coordinator spoke first.

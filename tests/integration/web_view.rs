@@ -352,7 +352,7 @@ impl Observer for Recording<'_> {
 
     fn swarm(&mut self, swarm: &Swarm, now: SimTime) {
         self.recorder.sample(swarm, now);
-        let positions: Option<Vec<[f64; 3]>> = (0..swarm.links().len())
+        let positions: Option<Vec<[f64; 3]>> = (0..swarm.vehicle_count())
             .map(|i| swarm.common_state(i).map(|s| s.pos_enu_m.into()))
             .collect();
         if let Some(p) = positions {

@@ -227,6 +227,11 @@ impl ShardPlan {
         self.read_elsewhere.get(i).copied().unwrap_or(false)
     }
 
+    /// How many vehicles the swarm has.
+    pub fn vehicle_count(&self) -> usize {
+        self.owner.len()
+    }
+
     /// How many vehicles shard `s` flies.
     pub fn vehicles_of(&self, s: usize) -> usize {
         self.owner.iter().filter(|o| **o == s).count()

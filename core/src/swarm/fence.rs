@@ -33,7 +33,7 @@ impl Swarm {
             .map_or(BRAKING_SHARE_WITHOUT_FILTER, |s| s.braking_share);
         let envelope = &self.setup.envelope;
         let mut worst: Option<(usize, f64, nalgebra::Vector3<f64>)> = None;
-        for i in 0..self.links.len() {
+        for i in 0..self.slots.len() {
             let Some(s) = self.law.states[i] else {
                 continue;
             };

@@ -27,7 +27,7 @@ impl Swarm {
     /// The fastest of the vehicles `which` picks that have a fresh state here, scaled as
     /// [`Self::own_top_speed_mps`].
     fn top_speed_mps(&self, which: impl Fn(usize) -> bool) -> f64 {
-        (0..self.links.len())
+        (0..self.slots.len())
             .filter(|i| which(*i))
             .filter_map(|i| self.law.states[i])
             .map(|s| {
@@ -60,7 +60,7 @@ impl Swarm {
                     .filter(|v| v.is_finite())
                     .fold(0.0, f64::max);
                 let fastest = self.top_speed_mps(|_| true).max(reported);
-                let own: Vec<nalgebra::Vector2<f64>> = (0..self.links.len())
+                let own: Vec<nalgebra::Vector2<f64>> = (0..self.slots.len())
                     .filter(|i| !self.is_remote(*i))
                     .filter_map(|i| self.law.states[i])
                     .map(|s| s.pos_enu_m.xy())

@@ -61,13 +61,14 @@ impl Swarm {
             | SwarmPhase::Ended(_)
             | SwarmPhase::Landing(_)
             | SwarmPhase::Stopped(_) => {
-                for ((a, h), hold) in self
+                for ((a, h), slot) in self
                     .law
                     .accel
                     .iter_mut()
                     .zip(&self.law.horizontal)
-                    .zip(&mut self.law.hold_points)
+                    .zip(&mut self.slots)
                 {
+                    let hold = &mut slot.hold_point;
                     if hold.is_none() && h.vel_mps.norm() < HOLD_CAPTURE_MPS {
                         *hold = Some(h.pos_m);
                     }
@@ -78,30 +79,29 @@ impl Swarm {
             }
             SwarmPhase::Handshake => {
                 for i in 0..self.law.accel.len() {
-                    let on_ground = self.links.get(i).is_some_and(|l| l.state().landed);
-                    if self.law.keep_velocity[i].is_none() && on_ground {
-                        self.law.started_on_ground[i] = true;
+                    let in_air = self.ours_in_air(i);
+                    let slot = &mut self.slots[i];
+                    let on_ground = slot.link().is_some_and(|l| l.state().landed);
+                    if slot.keep_velocity.is_none() && on_ground {
+                        slot.started_on_ground = true;
                     }
-                    if self.law.keep_velocity[i].is_none()
-                        && self.law.states[i].is_some()
-                        && self.ours_in_air(i)
-                    {
+                    if slot.keep_velocity.is_none() && self.law.states[i].is_some() && in_air {
                         let h = self.law.horizontal[i];
-                        self.law.keep_velocity[i] = Some(h.vel_mps);
-                        if self.law.started_on_ground[i] {
-                            self.law.keep_points[i] = Some(h.pos_m);
+                        slot.keep_velocity = Some(h.vel_mps);
+                        if slot.started_on_ground {
+                            slot.keep_point = Some(h.pos_m);
                         }
                     }
                 }
                 self.keep_velocities();
-                for ((a, h), point) in self
+                for ((a, h), slot) in self
                     .law
                     .accel
                     .iter_mut()
                     .zip(&self.law.horizontal)
-                    .zip(&self.law.keep_points)
+                    .zip(&self.slots)
                 {
-                    if let Some(p) = point {
+                    if let Some(p) = slot.keep_point {
                         *a = -HOLD_K_V * h.vel_mps + HOLD_K_P * (p - h.pos_m);
                     }
                 }
@@ -123,14 +123,16 @@ impl Swarm {
     /// `u = K_KEEP·(v_keep − v)` for every vehicle with a velocity to keep, zero for the
     /// others.
     fn keep_velocities(&mut self) {
-        for ((a, h), keep) in self
+        for ((a, h), slot) in self
             .law
             .accel
             .iter_mut()
             .zip(&self.law.horizontal)
-            .zip(&self.law.keep_velocity)
+            .zip(&self.slots)
         {
-            *a = keep.map_or(Vector2::zeros(), |v| KEEP_K_V * (v - h.vel_mps));
+            *a = slot
+                .keep_velocity
+                .map_or(Vector2::zeros(), |v| KEEP_K_V * (v - h.vel_mps));
         }
     }
 

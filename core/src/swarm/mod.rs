@@ -48,11 +48,11 @@ mod safety;
 mod scheduler;
 mod setup;
 mod shard;
+mod slot;
 mod tick;
 pub mod timing;
 
 use nalgebra::{Vector2, Vector3};
-use ringswarm_wire::geo::Geodetic;
 use ringswarm_wire::time::SimTime;
 
 use std::fmt;
@@ -71,6 +71,7 @@ pub use setup::{
     BREACH_SHARE, BreachAction, EndAction, FenceSetup, LossPolicy, PlanDecision, Retargeted,
     SAFETY_GAMMA, SafetySetup, SetpointKind, SwarmSetup, TargetVelocity,
 };
+use slot::{Member, VehicleSlot};
 
 /// Largest speed (m/s) a start velocity or target velocity may have, and the speed
 /// limit the planner assumes for a vehicle that states none.
@@ -221,65 +222,20 @@ struct LawArrays {
     /// The vehicle model each command is made for (the configured one, corrected by
     /// the flown estimates).
     flown_models: Vec<VehicleModel>,
-    /// The velocity each vehicle holds while the swarm waits for the others (taken when
-    /// it first flies on our commands), and the re-target stage's planned velocity.
-    keep_velocity: Vec<Option<Vector2<f64>>>,
-    /// Where a holding vehicle holds.
-    hold_points: Vec<Option<Vector2<f64>>>,
-    /// Where a vehicle that took off under the swarm holds while the swarm waits for the
-    /// others (the handshake).
-    keep_points: Vec<Option<Vector2<f64>>>,
-    /// Whether each vehicle was seen on the ground before it first flew.
-    started_on_ground: Vec<bool>,
     /// Each vehicle's horizontal box in the saturation, kept between ticks.
     boxes: Vec<Vector2<f64>>,
-}
-
-/// What the swarm keeps of one vehicle between ticks, besides its link and its entries
-/// in the law's arrays (which the pure laws take as slices).
-#[derive(Debug, Clone)]
-struct VehicleSlot {
-    /// Its origin with its NED offset (m) from the common reference, projected once when
-    /// the origin is learnt (not at every use: the projection costs trigonometry).
-    origin_offset: Option<(Geodetic, Vector3<f64>)>,
-    /// Whether it has been inside the fence's altitude band (by its margin): from then on
-    /// the band counts for it (a swarm climbing into the band from the ground is not
-    /// stopped by it).
-    fence_band_reached: bool,
-    /// A non-finite command isolated it (handed to its own Hold).
-    isolated: bool,
-    /// The model flown for it: hover thrust, drag, disturbance and response estimates.
-    flown: FlownModel,
-    /// Its altitude loop's integral.
-    altitude_integral: f64,
-    /// Its vertical command (m/s², up).
-    u_z: f64,
-}
-
-impl VehicleSlot {
-    fn new(flown: FlownModel) -> Self {
-        Self {
-            origin_offset: None,
-            fence_band_reached: false,
-            isolated: false,
-            flown,
-            altitude_integral: 0.0,
-            u_z: 0.0,
-        }
-    }
 }
 
 /// The swarm.
 #[derive(Debug, Clone)]
 pub struct Swarm {
     setup: SwarmSetup,
-    links: Vec<VehicleLink>,
     phase: SwarmPhase,
     next_control: SimTime,
     predicted_final_velocity: Option<Vector2<f64>>,
     /// The safety filter, its inputs' buffers, what it did, and the closest pair.
     safety: safety::SafetyWork,
-    /// What the swarm keeps of each vehicle besides its link and the law's arrays.
+    /// Each vehicle: its link (or its shard's report of it) and what the laws keep of it.
     slots: Vec<VehicleSlot>,
     /// The law's inputs and outputs, an entry per vehicle.
     law: LawArrays,
@@ -320,20 +276,15 @@ impl Swarm {
     pub fn new(setup: SwarmSetup) -> Self {
         let n = setup.links.len();
         let w = (0..n).map(|i| setup.ring.w(i)).collect();
-        let links: Vec<VehicleLink> = setup
-            .links
-            .iter()
-            .zip(&setup.models)
-            .map(|(cfg, model)| {
-                let level = attitude_thrust_from_acceleration(Vector3::zeros(), 0.0, model);
-                match setup.setpoint {
-                    SetpointKind::Attitude => VehicleLink::new(cfg.clone(), level),
-                    SetpointKind::Acceleration => {
-                        VehicleLink::new(cfg.clone(), Setpoint::Acceleration(Vector3::zeros()))
-                    }
+        let links = setup.links.iter().zip(&setup.models).map(|(cfg, model)| {
+            let level = attitude_thrust_from_acceleration(Vector3::zeros(), 0.0, model);
+            match setup.setpoint {
+                SetpointKind::Attitude => VehicleLink::new(cfg.clone(), level),
+                SetpointKind::Acceleration => {
+                    VehicleLink::new(cfg.clone(), Setpoint::Acceleration(Vector3::zeros()))
                 }
-            })
-            .collect();
+            }
+        });
         let setpoints = setup
             .models
             .iter()
@@ -363,6 +314,10 @@ impl Swarm {
                     setup.control_interval.as_secs_f64(),
                 )
             })
+            .collect::<Vec<_>>();
+        let slots = links
+            .zip(flown)
+            .map(|(link, flown)| VehicleSlot::new(Member::Local(link), flown))
             .collect();
         let flown_models = setup.models.clone();
         let setup_interval = setup.control_interval;
@@ -377,19 +332,14 @@ impl Swarm {
                 setpoints,
                 states: vec![None; n],
                 flown_models,
-                keep_velocity: vec![None; n],
-                hold_points: vec![None; n],
-                keep_points: vec![None; n],
-                started_on_ground: vec![false; n],
                 boxes: Vec::with_capacity(n),
             },
             setup,
-            links,
             phase: SwarmPhase::Handshake,
             next_control: SimTime::ZERO,
             predicted_final_velocity: None,
             safety: safety::SafetyWork::new(n),
-            slots: flown.into_iter().map(VehicleSlot::new).collect(),
+            slots,
             saturated_ticks: 0,
             consensus_ticks: 0,
             scheduler: LinkScheduler::new(n),
@@ -429,7 +379,8 @@ impl Swarm {
         }
         let mut swarm = Self::new(setup);
         for i in (0..n).filter(|i| !plan.is_local(*i)) {
-            // Never due: a remote vehicle's link is its own shard's.
+            // Flown by its own shard: no link here, never due.
+            swarm.slots[i].member = Member::Remote(None);
             swarm.scheduler.schedule(i, SimTime::MAX);
         }
         swarm.peers = Some(Box::new(shard::Peers::new(plan, &swarm.law.w)));
@@ -447,9 +398,20 @@ impl Swarm {
         self.phase
     }
 
-    /// The links.
-    pub fn links(&self) -> &[VehicleLink] {
-        &self.links
+    /// How many vehicles the swarm has (flown here or, in a shard, elsewhere).
+    pub fn vehicle_count(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Vehicle `i`'s link, when this process flies it.
+    pub fn link(&self, i: usize) -> Option<&VehicleLink> {
+        self.slots.get(i)?.link()
+    }
+
+    /// The links of the vehicles this process flies (every vehicle without shards), in
+    /// vehicle order.
+    pub fn links(&self) -> impl Iterator<Item = &VehicleLink> {
+        self.slots.iter().filter_map(VehicleSlot::link)
     }
 
     /// The setup.
@@ -562,7 +524,7 @@ impl Swarm {
         if land {
             self.land_because(now, reason);
         } else {
-            self.law.hold_points.iter_mut().for_each(|p| *p = None);
+            self.forget_hold_points();
             self.phase = SwarmPhase::Stopped(now);
         }
     }
@@ -574,22 +536,24 @@ impl Swarm {
                 .push(now, false, "landing every vehicle".to_owned());
             self.phase = SwarmPhase::Landing(now);
         }
-        for i in 0..self.links.len() {
-            if !self.is_remote(i) {
-                self.links[i].land(now);
-            }
+        for link in self.slots.iter_mut().filter_map(VehicleSlot::link_mut) {
+            link.land(now);
         }
         self.after_all_links(now);
+    }
+
+    /// Every holding vehicle takes a new hold point when it has braked.
+    pub(super) fn forget_hold_points(&mut self) {
+        self.slots.iter_mut().for_each(|s| s.hold_point = None);
     }
 
     /// Whether every vehicle has landed and disarmed (or was never armed), or can no
     /// longer be reached (failed).
     pub fn is_finished(&self) -> bool {
         matches!(self.phase, SwarmPhase::Landing(_))
-            && self.links.iter().enumerate().all(|(i, l)| {
-                self.is_remote(i)
-                    || matches!(l.phase(), Phase::Done | Phase::Failed | Phase::Overridden)
-            })
+            && self
+                .links()
+                .all(|l| matches!(l.phase(), Phase::Done | Phase::Failed | Phase::Overridden))
     }
 
     /// The final velocity predicted at the start of consensus (m/s, ENU).
@@ -625,17 +589,16 @@ impl Swarm {
     /// Vehicle `i` in the common frame, once its origin and a position are known (whatever
     /// the age of its position; the control tick uses only fresh ones).
     pub fn common_state(&self, i: usize) -> Option<CommonState> {
-        if let Some(p) = self.peers.as_ref()
-            && !p.plan.is_local(i)
-        {
-            return p.remote.get(i).copied().flatten().map(|r| r.state);
-        }
-        let state = self.links.get(i)?.state();
+        let slot = self.slots.get(i)?;
+        let Some(link) = slot.link() else {
+            return slot.remote().map(|r| r.state);
+        };
+        let state = link.state();
         let origin = state.origin?;
         // No position yet (ArduPilot reports its origin before its first
         // LOCAL_POSITION_NED): nothing to place.
         state.last_position?;
-        let pos_common_ned_m = match self.slots[i].origin_offset {
+        let pos_common_ned_m = match slot.origin_offset {
             Some((known, offset_ned_m)) if known == origin => offset_ned_m + state.pos_local_ned_m,
             _ => self
                 .setup
@@ -653,10 +616,7 @@ impl Swarm {
     ///
     /// Costs the link's work only: nothing here visits the other links.
     pub fn handle_datagram(&mut self, now: SimTime, i: usize, bytes: &[u8]) -> bool {
-        if self.is_remote(i) {
-            return false;
-        }
-        let Some(link) = self.links.get_mut(i) else {
+        let Some(link) = self.slots.get_mut(i).and_then(VehicleSlot::link_mut) else {
             return false;
         };
         let taken = link.handle_datagram(now, bytes);
@@ -681,9 +641,8 @@ impl Swarm {
     /// Gives a sent datagram's buffer back to link `i` (any link will do: the buffer is
     /// only memory) so that the next frame reuses it.
     pub fn recycle(&mut self, i: usize, bytes: Vec<u8>) {
-        let n = self.links.len();
-        if n > 0 {
-            self.links[i % n].recycle(bytes);
+        if let Some(link) = self.slots.get_mut(i).and_then(VehicleSlot::link_mut) {
+            link.recycle(bytes);
         }
     }
 
@@ -691,10 +650,13 @@ impl Swarm {
     pub fn poll_transmit(&mut self) -> Option<(usize, Vec<u8>)> {
         loop {
             let i = self.scheduler.next_output()?;
-            let Some(bytes) = self.links[i].poll_transmit() else {
+            let Some(link) = self.slots[i].link_mut() else {
                 continue;
             };
-            if self.links[i].has_output() {
+            let Some(bytes) = link.poll_transmit() else {
+                continue;
+            };
+            if link.has_output() {
                 self.scheduler.has_output(i);
             }
             return Some((i, bytes));
@@ -715,8 +677,7 @@ impl Swarm {
         }
         let shrank = lag < self.listen_lag;
         self.listen_lag = lag;
-        for link in &mut self.links {
-            // A remote vehicle's placeholder link is never driven: the lag changes nothing.
+        for link in self.slots.iter_mut().filter_map(VehicleSlot::link_mut) {
             link.set_listen_lag(lag);
         }
         if shrank {
@@ -759,8 +720,10 @@ impl Swarm {
             self.after_all_links(now);
         }
         while let Some(i) = self.scheduler.next_due(now) {
-            if now >= self.links[i].poll_timeout() {
-                self.links[i].handle_timeout(now);
+            if let Some(link) = self.slots[i].link_mut()
+                && now >= link.poll_timeout()
+            {
+                link.handle_timeout(now);
             }
             // Scheduled again here.
             self.after_link(now, i);
@@ -770,30 +733,30 @@ impl Swarm {
 
     /// After something that may have touched every link (landing): O(N), rare.
     fn after_all_links(&mut self, now: SimTime) {
-        for i in 0..self.links.len() {
+        for i in 0..self.slots.len() {
             self.after_link(now, i);
         }
     }
 
     /// After link `i` ran: its output, its next deadline, its events.
     fn after_link(&mut self, now: SimTime, i: usize) {
-        if self.is_remote(i) {
-            return;
-        }
-        let Some(link) = self.links.get(i) else {
+        let Some(slot) = self.slots.get_mut(i) else {
             return;
         };
-        if let Some(origin) = link.state().origin
-            && self.slots[i]
-                .origin_offset
-                .is_none_or(|(known, _)| known != origin)
+        let Some(link) = slot.link() else {
+            return;
+        };
+        let (origin, output, deadline) =
+            (link.state().origin, link.has_output(), link.poll_timeout());
+        if let Some(origin) = origin
+            && slot.origin_offset.is_none_or(|(known, _)| known != origin)
         {
-            self.slots[i].origin_offset = Some((origin, self.setup.frame.offset_ned_m(&origin)));
+            slot.origin_offset = Some((origin, self.setup.frame.offset_ned_m(&origin)));
         }
-        if link.has_output() {
+        if output {
             self.scheduler.has_output(i);
         }
-        self.scheduler.schedule(i, link.poll_timeout());
+        self.scheduler.schedule(i, deadline);
         self.drain_events_of(now, i);
     }
 
@@ -832,7 +795,12 @@ impl Swarm {
     }
 
     fn drain_events_of(&mut self, now: SimTime, i: usize) {
-        while let Some(event) = self.links.get_mut(i).and_then(VehicleLink::poll_event) {
+        while let Some(event) = self
+            .slots
+            .get_mut(i)
+            .and_then(VehicleSlot::link_mut)
+            .and_then(VehicleLink::poll_event)
+        {
             self.log.push_vehicle(
                 now,
                 &self.setup.links[i],

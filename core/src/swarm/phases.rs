@@ -43,7 +43,7 @@ impl Swarm {
         // Over the vehicles known here (all of them in one process); with shards, the
         // others through their shard's report (shard.rs).
         let known = |i: &usize| self.is_known(*i);
-        let n = self.links.len();
+        let n = self.slots.len();
         let all_flying = (0..n)
             .filter(known)
             .all(|i| self.member_phase(i) == Phase::Flying && self.law.states[i].is_some())
@@ -178,7 +178,7 @@ impl Swarm {
                             true,
                             format!("a vehicle is lost{why}: the others brake and hold"),
                         );
-                        self.law.hold_points.iter_mut().for_each(|p| *p = None);
+                        self.forget_hold_points();
                         self.phase = SwarmPhase::Holding(now);
                         self.new_round(now);
                     }
@@ -212,14 +212,14 @@ impl Swarm {
     }
 
     fn handshake_over(&mut self, now: SimTime) -> bool {
-        let failed = (0..self.links.len())
+        let failed = (0..self.slots.len())
             .filter(|i| self.is_known(*i))
             .any(|i| self.member_phase(i) == Phase::Failed);
         let timed_out = now >= SimTime::ZERO + self.setup.handshake_timeout;
         if !(failed || timed_out) {
             return false;
         }
-        let not_flying: Vec<(u8, String)> = (0..self.links.len())
+        let not_flying: Vec<(u8, String)> = (0..self.slots.len())
             .filter_map(|i| {
                 let cfg = &self.setup.links[i];
                 if !self.is_known(i) {
@@ -236,7 +236,7 @@ impl Swarm {
                     "no usable position".to_owned()
                 } else {
                     // What its handshake still waits for, when it knows.
-                    let waiting = self.links.get(i).and_then(|l| l.waiting_for());
+                    let waiting = self.link(i).and_then(|l| l.waiting_for());
                     match waiting {
                         Some(what) => format!("{}: {what}", phase.name()),
                         None => phase.name().to_owned(),
@@ -356,7 +356,7 @@ impl Swarm {
             EndAction::Hold => {
                 self.log
                     .push(now, false, "duration over: holding".to_owned());
-                self.law.hold_points.iter_mut().for_each(|p| *p = None);
+                self.forget_hold_points();
                 self.phase = SwarmPhase::Ended(now);
             }
         }

@@ -26,7 +26,7 @@ impl Swarm {
             .flatten()
             .map(|s| s.vel_enu_mps.xy())
             .collect();
-        let limits = (0..self.links.len())
+        let limits = (0..self.slots.len())
             .map(|i| self.vehicle_speed_limit_mps(i))
             .collect();
         self.plan_from(now, velocities, limits);
@@ -42,7 +42,7 @@ impl Swarm {
             if !self.start_due(now) {
                 return;
             }
-            let own: Vec<super::shard::OwnPlanInput> = (0..self.links.len())
+            let own: Vec<super::shard::OwnPlanInput> = (0..self.slots.len())
                 .filter(|i| !self.is_remote(*i))
                 .map(|i| {
                     let v = self.law.states[i].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
@@ -75,13 +75,13 @@ impl Swarm {
             return;
         };
         // Stage 1: the others keep these velocities, with feedback.
-        for (keep, v) in self.law.keep_velocity.iter_mut().zip(&velocities) {
-            *keep = Some(*v);
+        for (slot, v) in self.slots.iter_mut().zip(&velocities) {
+            slot.keep_velocity = Some(*v);
         }
         let decision = match self.planned_ring(&target, velocities, &limits) {
             Ok((ring, retarget)) => {
                 let k = ring.k();
-                self.law.w = (0..self.links.len()).map(|i| ring.w(i)).collect();
+                self.law.w = (0..self.slots.len()).map(|i| ring.w(i)).collect();
                 self.setup.ring = ring;
                 PlanDecision::Planned { k, retarget }
             }
@@ -101,7 +101,7 @@ impl Swarm {
             }
             for (j, (agent, v)) in retarget.iter().enumerate() {
                 let sep = if j == 0 { "" } else { ", " };
-                let was = self.law.keep_velocity[*agent].unwrap_or_default();
+                let was = self.slots[*agent].keep_velocity.unwrap_or_default();
                 text.push_str(&format!(
                     "{sep}vehicle {} re-targeted to ({:.3}, {:.3}) m/s (by {:.3} m/s)",
                     self.setup.links[*agent].system_id,

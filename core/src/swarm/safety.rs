@@ -7,6 +7,7 @@ use ringswarm_wire::time::SimTime;
 
 use super::{BREACH_SHARE, BreachAction, SafetySetup, StopReason, Swarm, SwarmPhase};
 use crate::safety::{Agent, Outcome, Settings, Side};
+use crate::vehicle::VehicleLink;
 
 /// The attitude response counted for a vehicle not measured yet (s): the emulated
 /// x500's measured `L + T` is 0.18–0.20 s, PX4 SIH's 0.28–0.36 s (docs/math.md).
@@ -87,7 +88,7 @@ impl Swarm {
         let consensus = matches!(self.phase, SwarmPhase::Consensus(_));
         let period_s = self.setup.control_interval.as_secs_f64();
         let mut age_s: f64 = 0.0;
-        for i in 0..self.links.len() {
+        for i in 0..self.slots.len() {
             if self.law.states[i].is_some() && self.ours_in_air(i) {
                 age_s = age_s.max(self.command_age_s(i, now) - period_s);
             } else if self.law.states[i].is_some()
@@ -102,7 +103,7 @@ impl Swarm {
         }
         self.safety.agents.clear();
         self.safety.xy.clear();
-        for i in 0..self.links.len() {
+        for i in 0..self.slots.len() {
             // A remote vehicle flown through its own shard's copy of this filter is a
             // variable too: a pair split between shards is solved here as one process
             // solves it, and each shard flies only its own vehicle's part.
@@ -253,12 +254,12 @@ impl Swarm {
     /// a fit beyond [`MAX_RESPONSE_S`] is not trusted, and then the round trip plus
     /// [`UNMEASURED_RESPONSE_S`] is counted.
     pub(super) fn command_age_s(&self, i: usize, now: SimTime) -> f64 {
-        let state = self.links[i]
-            .state()
-            .last_position
+        let link = self.link(i);
+        let state = link
+            .and_then(|l| l.state().last_position)
             .map_or(0.0, |at| now.saturating_since(at).as_secs_f64());
-        let round_trip = self.links[i]
-            .round_trip()
+        let round_trip = link
+            .and_then(VehicleLink::round_trip)
             .map_or(0.0, |rtt| rtt.as_secs_f64());
         // A fit beyond a second is no attitude loop a swarm flies with (the emulator's
         // ideal vehicles, which have none, fit 4.5 s): not counted.

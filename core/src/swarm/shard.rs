@@ -36,6 +36,7 @@ use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 
 use super::agreement::{Heard, StartAgreement, SwarmClock};
+use super::slot::{Member, RemoteVehicle};
 use super::{CommonState, Swarm, SwarmPhase};
 use crate::distributed::{
     MemberPhase, PlanVelocities, ShardMessage, ShardPlan, ShardReport, TileInterest, VehicleReport,
@@ -45,18 +46,6 @@ use crate::vehicle::Phase;
 
 /// Messages kept for the driver at most: one that does not poll loses the oldest.
 const OUTBOX_CAPACITY: usize = 1 << 16;
-
-/// What is known of a remote vehicle.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct RemoteVehicle {
-    pub(super) phase: Phase,
-    pub(super) landed: bool,
-    /// When its shard received the position (this shard's clock).
-    pub(super) measured: SimTime,
-    /// When its shard sent it (its control tick, this shard's clock).
-    pub(super) sent: SimTime,
-    pub(super) state: CommonState,
-}
 
 /// The shard's side of the swarm.
 #[derive(Debug, Clone)]
@@ -70,8 +59,6 @@ pub(super) struct Peers {
     pub(super) reports: Vec<Option<(SimTime, ShardReport)>>,
     /// The tiles read for the safety filter (`Watch::Horizon` only).
     pub(super) tiles: Option<TileInterest>,
-    /// Each watched remote vehicle's latest report.
-    pub(super) remote: Vec<Option<RemoteVehicle>>,
     /// The agreement on one start (and plan) instant with the other shards.
     pub(super) agreement: StartAgreement,
     /// This shard's `Σ wᵢ vᵢ` on the last control tick.
@@ -90,7 +77,6 @@ pub(super) struct Peers {
 impl Peers {
     pub(super) fn new(plan: ShardPlan, w: &[f64]) -> Self {
         let shards = plan.shards();
-        let n = w.len();
         let saturation_weights = saturation_weights(&plan, w);
         let tiles = (plan.watch() == Watch::Horizon).then(|| TileInterest::new(plan.tile_m()));
         let agreement = StartAgreement::new(plan.this(), plan.start_lead());
@@ -99,7 +85,6 @@ impl Peers {
             saturation_weights,
             reports: vec![None; shards],
             tiles,
-            remote: vec![None; n],
             agreement,
             now_sum: WeightedSum::default(),
             plan_own: None,
@@ -198,7 +183,7 @@ impl Peers {
             lists.push(Some((v.vel_mps.iter(), v.limit_mps.iter())));
         }
         let mut own = own.iter();
-        let n = self.remote.len();
+        let n = self.plan.vehicle_count();
         let mut inputs = PlanInputs {
             velocities_mps: Vec::with_capacity(n),
             limits_mps: Vec::with_capacity(n),
@@ -325,7 +310,9 @@ fn from_f32(v: [f32; 3]) -> Vector3<f64> {
 impl Swarm {
     /// Whether vehicle `i` is flown by another shard.
     pub(super) fn is_remote(&self, i: usize) -> bool {
-        self.peers.as_ref().is_some_and(|p| !p.plan.is_local(i))
+        self.slots
+            .get(i)
+            .is_some_and(super::slot::VehicleSlot::is_remote)
     }
 
     /// Whether vehicle `i`'s state is known here: flown here, or a watched remote one.
@@ -349,15 +336,7 @@ impl Swarm {
 
     /// Vehicle `i`'s link phase: its link's, or its shard's report of it.
     pub(super) fn member_phase(&self, i: usize) -> Phase {
-        match self.peers.as_ref() {
-            Some(p) if !p.plan.is_local(i) => p
-                .remote
-                .get(i)
-                .copied()
-                .flatten()
-                .map_or(Phase::Discovering, |r| r.phase),
-            _ => self.links[i].phase(),
-        }
+        self.slots[i].phase()
     }
 
     /// A remote vehicle's state, when fresh, carried forward to `now` at its velocity:
@@ -367,8 +346,7 @@ impl Swarm {
     /// error: 0.3 m at 15 m/s and 20 ms). Its age at that tick is kept, as this shard's
     /// own vehicles' ages are.
     pub(super) fn remote_fresh_state(&self, i: usize, now: SimTime) -> Option<CommonState> {
-        let p = self.peers.as_ref()?;
-        let r = p.remote.get(i).copied().flatten()?;
+        let r = self.slots.get(i)?.remote()?;
         let age = now.saturating_since(r.measured);
         let hop = now.saturating_since(r.sent).as_secs_f64();
         (age <= self.setup.links[i].state_timeout).then(|| CommonState {
@@ -390,10 +368,8 @@ impl Swarm {
         };
         !p.plan.is_local(i)
             && self.computable_now(i)
-            && p.remote
-                .get(i)
-                .copied()
-                .flatten()
+            && self.slots[i]
+                .remote()
                 .is_some_and(|r| r.phase == Phase::Flying && !r.landed)
     }
 
@@ -418,13 +394,7 @@ impl Swarm {
 
     /// When a remote vehicle's position was measured.
     pub(super) fn remote_measured(&self, i: usize) -> Option<SimTime> {
-        self.peers
-            .as_ref()?
-            .remote
-            .get(i)
-            .copied()
-            .flatten()
-            .map(|r| r.measured)
+        self.slots.get(i)?.remote().map(|r| r.measured)
     }
 
     /// Takes a message from another shard.
@@ -437,7 +407,7 @@ impl Swarm {
                 let i = usize::from(v.vehicle);
                 // A nearby vehicle's tile may have been left since the state was sent:
                 // any remote vehicle's state is taken under the horizon.
-                let nearby = p.tiles.is_some() && i < p.remote.len() && !p.plan.is_local(i);
+                let nearby = p.tiles.is_some() && i < self.slots.len() && !p.plan.is_local(i);
                 if !(p.plan.is_watched(i) || nearby) {
                     p.refused += 1;
                     return;
@@ -445,7 +415,12 @@ impl Swarm {
                 let sent = p.local_time_of(v.sent_us);
                 let measured =
                     SimTime::from_micros(sent.as_micros().saturating_sub(u64::from(v.age_us)));
-                if p.remote[i].is_some_and(|r| r.sent > sent) {
+                let Some(Member::Remote(known)) = self.slots.get_mut(i).map(|s| &mut s.member)
+                else {
+                    p.refused += 1;
+                    return;
+                };
+                if known.is_some_and(|r| r.sent > sent) {
                     p.refused += 1;
                     return;
                 }
@@ -458,7 +433,7 @@ impl Swarm {
                     p.refused += 1;
                     return;
                 }
-                p.remote[i] = Some(RemoteVehicle {
+                *known = Some(RemoteVehicle {
                     phase: link_phase(v.phase),
                     landed: v.landed,
                     measured,
@@ -600,7 +575,7 @@ impl Swarm {
     /// This shard's `Σ wᵢ vᵢ` over its own vehicles' states flown on this tick.
     fn local_sum(&self) -> WeightedSum {
         let mut sum = WeightedSum::default();
-        for i in 0..self.links.len() {
+        for i in 0..self.slots.len() {
             if self.is_remote(i) {
                 continue;
             }
@@ -700,12 +675,15 @@ impl Swarm {
         let mut flying = 0u16;
         let mut lost = 0u16;
         let mut messages = Vec::new();
-        for i in 0..self.links.len() {
+        for i in 0..self.slots.len() {
             if self.is_remote(i) {
                 continue;
             }
             vehicles = vehicles.saturating_add(1);
-            let phase = self.links[i].phase();
+            let Some(link) = self.slots[i].link() else {
+                continue;
+            };
+            let phase = link.phase();
             let fresh = self.law.states[i].is_some();
             if phase == Phase::Flying && fresh && !self.slots[i].isolated {
                 flying = flying.saturating_add(1);
@@ -722,11 +700,9 @@ impl Swarm {
                 .peers
                 .as_ref()
                 .is_some_and(|p| p.plan.is_read_elsewhere(i));
-            if let (true, Some(s), Some(at)) = (
-                read,
-                self.common_state(i),
-                self.links[i].state().last_position,
-            ) {
+            if let (true, Some(s), Some(at)) =
+                (read, self.common_state(i), link.state().last_position)
+            {
                 messages.push((i, s, at, member));
             }
         }
@@ -740,12 +716,13 @@ impl Swarm {
         p.now_sum = own;
         for (i, s, at, member) in messages {
             let age_us = now.saturating_since(at).as_micros();
+            let landed = self.slots[i].link().is_some_and(|l| l.state().landed);
             let report = VehicleReport {
                 vehicle: u16::try_from(i).unwrap_or(u16::MAX),
                 sent_us: p.to_swarm_us(now),
                 age_us: u32::try_from(age_us).unwrap_or(u32::MAX),
                 phase: member,
-                landed: self.links[i].state().landed,
+                landed,
                 pos_enu_m: to_f32(s.pos_enu_m),
                 vel_enu_mps: to_f32(s.vel_enu_mps),
             };

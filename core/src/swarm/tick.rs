@@ -6,6 +6,7 @@ use nalgebra::Vector3;
 use ringswarm_wire::time::SimTime;
 
 use super::model::HorizontalDrive;
+use super::slot::{Member, VehicleSlot};
 use super::{Swarm, SwarmPhase};
 use crate::consensus::HorizontalState;
 use crate::control::{
@@ -24,8 +25,8 @@ impl Swarm {
     /// policy on the next tick.
     pub(super) fn control(&mut self, now: SimTime) {
         self.control_ticks += 1;
-        for i in 0..self.links.len() {
-            if self.is_remote(i) {
+        for i in 0..self.slots.len() {
+            let Some(link) = self.slots[i].link() else {
                 self.law.states[i] = self.remote_fresh_state(i, now);
                 if self.law.states[i].is_some()
                     && let Some(at) = self.remote_measured(i)
@@ -33,13 +34,13 @@ impl Swarm {
                     self.timing.remote_state_age(at, now);
                 }
                 continue;
-            }
-            if self.links[i].phase() == Phase::Flying
-                && let Some(at) = self.links[i].state().last_position
+            };
+            if link.phase() == Phase::Flying
+                && let Some(at) = link.state().last_position
             {
                 self.timing.state_age(at, now);
             }
-            self.law.states[i] = if self.links[i].state_fresh(now) {
+            self.law.states[i] = if link.state_fresh(now) {
                 self.common_state(i)
             } else {
                 None
@@ -107,12 +108,19 @@ impl Swarm {
         self.filter_for_safety(now);
         self.isolate_non_finite(now, "the saturated command");
         self.integrate_altitude();
-        for (i, link) in self.links.iter_mut().enumerate() {
-            if self.peers.as_ref().is_some_and(|p| !p.plan.is_local(i)) {
+        for i in 0..self.slots.len() {
+            let VehicleSlot {
+                member: Member::Local(link),
+                flown,
+                isolated,
+                ..
+            } = &mut self.slots[i]
+            else {
                 continue;
-            }
+            };
+            let isolated = *isolated;
             // No usable state (or isolated): level at hover thrust, never a motor cut.
-            let command = if self.law.states[i].is_some() && !self.slots[i].isolated {
+            let command = if self.law.states[i].is_some() && !isolated {
                 self.law.commands[i]
             } else {
                 Vector3::zeros()
@@ -122,9 +130,9 @@ impl Swarm {
             let usable = self.setup.setpoint == SetpointKind::Attitude
                 && link.phase() == Phase::Flying
                 && !link.state().landed
-                && !self.slots[i].isolated
+                && !isolated
                 && self.law.states[i].is_some();
-            self.slots[i].flown.attitude_tick(
+            flown.attitude_tick(
                 now.as_secs_f64(),
                 &sp.attitude_ned_frd,
                 link.state().attitude,
@@ -155,9 +163,7 @@ impl Swarm {
                         HorizontalDrive::TiltPerVertical(direction.xy() / direction.z.max(0.1))
                     }
                 };
-                self.slots[i]
-                    .flown
-                    .commanded(sp.thrust_norm * tilt_cos(&q), horizontal);
+                flown.commanded(sp.thrust_norm * tilt_cos(&q), horizontal);
             }
         }
         self.publish(now);
@@ -166,24 +172,24 @@ impl Swarm {
 
     /// Whether vehicle `i` flies on our commands in the air now.
     pub(super) fn ours_in_air(&self, i: usize) -> bool {
-        if self.is_remote(i) {
+        let Some(link) = self.slots[i].link() else {
             return false;
-        }
-        let link = &self.links[i];
+        };
         link.phase() == Phase::Flying && !link.state().landed && !self.slots[i].isolated
     }
 
     /// Feeds each vehicle's hover thrust estimator with its latest report and takes the
     /// model to fly this tick.
     fn observe_models(&mut self, now: SimTime) {
-        for i in 0..self.links.len() {
+        for i in 0..self.slots.len() {
             if self.is_remote(i) {
                 continue;
             }
             let ours = self.ours_in_air(i);
             let trusted = self.slots[i].flown.trusted();
             let drag_trusted = self.slots[i].flown.drag_trusted();
-            if let (Some(s), Some(at)) = (self.law.states[i], self.links[i].state().last_position) {
+            let position_at = self.slots[i].link().and_then(|l| l.state().last_position);
+            if let (Some(s), Some(at)) = (self.law.states[i], position_at) {
                 self.slots[i].flown.observe(at, s.vel_enu_mps, ours);
             }
             if !drag_trusted && self.slots[i].flown.drag_trusted() {
@@ -221,7 +227,7 @@ impl Swarm {
             return;
         }
         let dt = self.setup.control_interval.as_secs_f64();
-        for i in 0..self.links.len() {
+        for i in 0..self.slots.len() {
             let Some(s) = self.law.states[i] else {
                 continue;
             };
@@ -254,7 +260,9 @@ impl Swarm {
                 let reason = format!("{what} is not a finite number: isolated");
                 self.log
                     .push_vehicle(now, &self.setup.links[i], true, reason.clone());
-                self.links[i].hold_on_own(now, &reason);
+                if let Some(link) = self.slots[i].link_mut() {
+                    link.hold_on_own(now, &reason);
+                }
             }
         }
     }
