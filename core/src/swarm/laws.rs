@@ -72,8 +72,7 @@ impl Swarm {
                     if hold.is_none() && h.vel_mps.norm() < HOLD_CAPTURE_MPS {
                         *hold = Some(h.pos_m);
                     }
-                    *a = -HOLD_K_V * h.vel_mps
-                        + hold.map_or(Vector2::zeros(), |p| HOLD_K_P * (p - h.pos_m));
+                    *a = hold_acceleration(h.vel_mps, h.pos_m, *hold);
                 }
                 SaturationMode::Clip
             }
@@ -101,8 +100,8 @@ impl Swarm {
                     .zip(&self.law.horizontal)
                     .zip(&self.slots)
                 {
-                    if let Some(p) = slot.keep_point {
-                        *a = -HOLD_K_V * h.vel_mps + HOLD_K_P * (p - h.pos_m);
+                    if slot.keep_point.is_some() {
+                        *a = hold_acceleration(h.vel_mps, h.pos_m, slot.keep_point);
                     }
                 }
                 self.setup.saturation
@@ -130,9 +129,7 @@ impl Swarm {
             .zip(&self.law.horizontal)
             .zip(&self.slots)
         {
-            *a = slot
-                .keep_velocity
-                .map_or(Vector2::zeros(), |v| KEEP_K_V * (v - h.vel_mps));
+            *a = keep_acceleration(h.vel_mps, slot.keep_velocity);
         }
     }
 
@@ -177,5 +174,54 @@ impl Swarm {
             None => (self.mean_velocity_integral + error * dt_s).map(|x| x.clamp(-limit, limit)),
         };
         Some(-k * error - k_i * self.mean_velocity_integral)
+    }
+}
+
+/// The braking and holding law: `u = −HOLD_K_V·v + HOLD_K_P·(p_hold − p)` (m/s², ENU),
+/// the position term only once a hold point is taken.
+pub(super) fn hold_acceleration(
+    vel_mps: Vector2<f64>,
+    pos_m: Vector2<f64>,
+    hold_point: Option<Vector2<f64>>,
+) -> Vector2<f64> {
+    -HOLD_K_V * vel_mps + hold_point.map_or(Vector2::zeros(), |p| HOLD_K_P * (p - pos_m))
+}
+
+/// Velocity keeping: `u = K_KEEP·(v_keep − v)`, zero without a velocity to keep.
+pub(super) fn keep_acceleration(vel_mps: Vector2<f64>, keep: Option<Vector2<f64>>) -> Vector2<f64> {
+    keep.map_or(Vector2::zeros(), |v| KEEP_K_V * (v - vel_mps))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_braking_vehicle_without_a_hold_point_only_damps_its_velocity() {
+        let u = hold_acceleration(Vector2::new(2.0, -1.0), Vector2::new(5.0, 5.0), None);
+        assert_eq!(u, Vector2::new(-2.0 * HOLD_K_V, HOLD_K_V));
+    }
+
+    #[test]
+    fn a_holding_vehicle_is_pulled_back_to_its_point() {
+        // At rest 2 m east and 1 m south of its point: pulled west and north.
+        let u = hold_acceleration(
+            Vector2::zeros(),
+            Vector2::new(2.0, -1.0),
+            Some(Vector2::zeros()),
+        );
+        assert_eq!(u, Vector2::new(-2.0 * HOLD_K_P, HOLD_K_P));
+        // About critically damped: K_V² ≈ 4·K_P.
+        assert!((HOLD_K_V * HOLD_K_V / (4.0 * HOLD_K_P) - 1.0).abs() < 0.05);
+    }
+
+    #[test]
+    fn velocity_keeping_pushes_towards_the_kept_velocity() {
+        let u = keep_acceleration(Vector2::new(1.0, 1.0), Some(Vector2::new(3.0, 0.5)));
+        assert_eq!(u, KEEP_K_V * Vector2::new(2.0, -0.5));
+        assert_eq!(
+            keep_acceleration(Vector2::new(1.0, 1.0), None),
+            Vector2::zeros()
+        );
     }
 }

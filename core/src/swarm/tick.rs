@@ -1,6 +1,15 @@
-//! One control tick: fresh states into the common frame, the phase's law, the altitude
-//! loop, the flown models, isolation of what cannot be computed, the swarm-wide
-//! saturation, and a setpoint for each link.
+//! One control tick, as named stages in order:
+//!
+//! ```text
+//!  gather_states ─► (horizon, phase transition, shard prediction) ─► observe_models
+//!  ─► fill_law_inputs ─► (divergence guard, fence) ─► horizontal_law (laws.rs)
+//!  ─► compose_commands (altitude loop, drag, disturbance) ─► isolate_non_finite
+//!  ─► saturate ─► filter_for_safety (safety.rs) ─► isolate_non_finite
+//!  ─► integrate_altitude ─► stream_setpoints ─► publish (shards)
+//! ```
+//!
+//! Each stage reads what the ones before wrote into the law's arrays; the per-vehicle
+//! arithmetic is in pure functions ([`compose_command`], [`command_to_fly`]).
 
 use nalgebra::Vector3;
 use ringswarm_wire::time::SimTime;
@@ -25,6 +34,32 @@ impl Swarm {
     /// policy on the next tick.
     pub(super) fn control(&mut self, now: SimTime) {
         self.control_ticks += 1;
+        self.gather_states(now);
+        self.update_horizon(now);
+        self.transition(now);
+        self.shard_prediction(now);
+        self.observe_models(now);
+        self.fill_law_inputs();
+        self.watch_divergence(now);
+        self.watch_fence(now);
+        let saturation = self.horizontal_law(now);
+        self.compose_commands();
+        self.isolate_non_finite(now, "the law's command");
+        self.law.law_commands.copy_from_slice(&self.law.commands);
+        self.saturate(saturation);
+        // On the saturated commands, inside the same envelope: the saturation after it
+        // would change nothing.
+        self.filter_for_safety(now);
+        self.isolate_non_finite(now, "the saturated command");
+        self.integrate_altitude();
+        self.stream_setpoints(now);
+        self.publish(now);
+        // The links' events are drained by `handle_timeout` right after.
+    }
+
+    /// Each vehicle's state in the common frame, `None` unless fresh: its link's, or
+    /// its shard's report carried to `now`. The ages flown on are timed.
+    fn gather_states(&mut self, now: SimTime) {
         for i in 0..self.slots.len() {
             let Some(link) = self.slots[i].link() else {
                 self.law.states[i] = self.remote_fresh_state(i, now);
@@ -46,10 +81,10 @@ impl Swarm {
                 None
             };
         }
-        self.update_horizon(now);
-        self.transition(now);
-        self.shard_prediction(now);
-        self.observe_models(now);
+    }
+
+    /// The horizontal law's inputs: each state's x/y (zero when unknown) and offset.
+    fn fill_law_inputs(&mut self) {
         for (i, state) in self.law.states.iter().enumerate() {
             let s = state.unwrap_or_default();
             self.law.horizontal[i] = HorizontalState {
@@ -58,25 +93,34 @@ impl Swarm {
                 offset_m: self.setup.offsets_m[i],
             };
         }
-        self.watch_divergence(now);
-        self.watch_fence(now);
-        let saturation = self.horizontal_law(now);
+    }
+
+    /// Each vehicle's command from the horizontal law's output, its altitude loop, the
+    /// drag fed forward and the disturbance estimate.
+    fn compose_commands(&mut self) {
         for (i, state) in self.law.states.iter().enumerate() {
             let s = state.unwrap_or_default();
+            let slot = &mut self.slots[i];
             let u_z = self.setup.altitude_gains.acceleration_with(
                 s.pos_enu_m.z,
                 s.vel_enu_mps.z,
                 self.setup.altitude_m,
-                self.slots[i].altitude_integral,
+                slot.altitude_integral,
             );
-            self.slots[i].u_z = u_z;
-            let drag = s.vel_enu_mps * self.slots[i].flown.drag_fed_forward_per_s();
-            let b = self.slots[i].flown.disturbance_mps2();
-            self.law.commands[i] =
-                Vector3::new(self.law.accel[i].x - b.x, self.law.accel[i].y - b.y, u_z) + drag;
+            slot.u_z = u_z;
+            self.law.commands[i] = compose_command(
+                self.law.accel[i],
+                u_z,
+                s.vel_enu_mps,
+                slot.flown.drag_fed_forward_per_s(),
+                slot.flown.disturbance_mps2(),
+            );
         }
-        self.isolate_non_finite(now, "the law's command");
-        self.law.law_commands.copy_from_slice(&self.law.commands);
+    }
+
+    /// The swarm-wide saturation (`conserve` keeps `Σ wᵢuᵢ`; in a shard, over the
+    /// commands it computes), counted on consensus ticks.
+    fn saturate(&mut self, saturation: crate::control::SaturationMode) {
         if self.peers.is_some() {
             // A vehicle whose command cannot be computed here (its state or a neighbour's
             // is not read) has none to saturate with.
@@ -103,11 +147,11 @@ impl Swarm {
             self.saturated_ticks +=
                 u64::from(summary.horizontal_limited + summary.vertical_limited > 0);
         }
-        // On the saturated commands, inside the same envelope: the saturation after it
-        // would change nothing.
-        self.filter_for_safety(now);
-        self.isolate_non_finite(now, "the saturated command");
-        self.integrate_altitude();
+    }
+
+    /// Each link flown here gets its setpoint (level at hover thrust without a usable
+    /// state, never a motor cut), and its flown model what was commanded.
+    fn stream_setpoints(&mut self, now: SimTime) {
         for i in 0..self.slots.len() {
             let VehicleSlot {
                 member: Member::Local(link),
@@ -119,26 +163,22 @@ impl Swarm {
                 continue;
             };
             let isolated = *isolated;
-            // No usable state (or isolated): level at hover thrust, never a motor cut.
-            let command = if self.law.states[i].is_some() && !isolated {
-                self.law.commands[i]
-            } else {
-                Vector3::zeros()
-            };
+            let state_known = self.law.states[i].is_some();
+            let command = command_to_fly(self.law.commands[i], state_known, isolated);
             let sp = attitude_thrust_from_acceleration(command, 0.0, &self.law.flown_models[i]);
             self.law.setpoints[i] = sp;
             let usable = self.setup.setpoint == SetpointKind::Attitude
                 && link.phase() == Phase::Flying
                 && !link.state().landed
                 && !isolated
-                && self.law.states[i].is_some();
+                && state_known;
             flown.attitude_tick(
                 now.as_secs_f64(),
                 &sp.attitude_ned_frd,
                 link.state().attitude,
                 usable,
             );
-            if self.law.states[i].is_some() || link.phase() == Phase::Flying {
+            if state_known || link.phase() == Phase::Flying {
                 match self.setup.setpoint {
                     SetpointKind::Attitude => link.set_setpoint(now, sp),
                     SetpointKind::Acceleration => {
@@ -166,8 +206,6 @@ impl Swarm {
                 flown.commanded(sp.thrust_norm * tilt_cos(&q), horizontal);
             }
         }
-        self.publish(now);
-        // The links' events are drained by `handle_timeout` right after.
     }
 
     /// Whether vehicle `i` flies on our commands in the air now.
@@ -265,5 +303,60 @@ impl Swarm {
                 }
             }
         }
+    }
+}
+
+/// A vehicle's command (m/s², ENU, z up): the horizontal law's `accel` less the
+/// disturbance estimate `disturbance`, the altitude loop's `u_z`, plus the drag fed
+/// forward (`drag_per_s` times the velocity, on every axis).
+pub(super) fn compose_command(
+    accel: nalgebra::Vector2<f64>,
+    u_z: f64,
+    vel_enu_mps: Vector3<f64>,
+    drag_per_s: f64,
+    disturbance: nalgebra::Vector2<f64>,
+) -> Vector3<f64> {
+    Vector3::new(accel.x - disturbance.x, accel.y - disturbance.y, u_z) + vel_enu_mps * drag_per_s
+}
+
+/// What a vehicle is flown on: its command, or none (level at hover thrust) when its
+/// state is unknown or it is isolated.
+pub(super) fn command_to_fly(
+    command: Vector3<f64>,
+    state_known: bool,
+    isolated: bool,
+) -> Vector3<f64> {
+    if state_known && !isolated {
+        command
+    } else {
+        Vector3::zeros()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector2;
+
+    #[test]
+    fn a_command_is_the_law_less_the_disturbance_with_the_drag_fed_forward() {
+        // accel (1, −2), disturbance (0.5, 0.25), u_z 0.3, v (2, 4, −1) at 0.1 1/s:
+        // x 1 − 0.5 + 0.2 = 0.7; y −2 − 0.25 + 0.4 = −1.85; z 0.3 − 0.1 = 0.2.
+        let u = compose_command(
+            Vector2::new(1.0, -2.0),
+            0.3,
+            Vector3::new(2.0, 4.0, -1.0),
+            0.1,
+            Vector2::new(0.5, 0.25),
+        );
+        assert!((u - Vector3::new(0.7, -1.85, 0.2)).norm() < 1e-15, "{u}");
+    }
+
+    #[test]
+    fn without_a_state_or_once_isolated_the_vehicle_flies_level() {
+        let u = Vector3::new(1.0, 2.0, 3.0);
+        assert_eq!(command_to_fly(u, true, false), u);
+        assert_eq!(command_to_fly(u, false, false), Vector3::zeros());
+        assert_eq!(command_to_fly(u, true, true), Vector3::zeros());
     }
 }
