@@ -283,7 +283,7 @@ fn check_setpoint(msg: &MavMessage) {
 }
 
 /// The coordinator's configuration parser and every path that takes its numbers: the
-/// validation, the bandwidth gate, the transport plan, the emulator's vehicles, places
+/// validation, the bandwidth gate, the transport layout, the emulator's vehicles, places
 /// and link faults (lockstep and real time), the split into shards and each shard's plan,
 /// and a lockstep flight's first steps.
 pub fn coordinator_config(bytes: &[u8]) {
@@ -292,7 +292,7 @@ pub fn coordinator_config(bytes: &[u8]) {
     };
     let _ = config.validate();
     let _ = config.bandwidth_check();
-    let _ = config.transport_plan();
+    let _ = config.transport_layout();
     let _ = config.emulator();
     let _ = config.emulator_placements();
     let _ = config.link_faults();

@@ -1,9 +1,9 @@
-//! The tokio UDP driver of many vehicles: one task steps a whole shard of vehicles on a
-//! common 1 ms tick and, on the same tick, asks the shard's own readiness poller (mio,
+//! The tokio UDP driver of many vehicles: one task (a worker) steps a whole group of vehicles on a
+//! common 1 ms tick and, on the same tick, asks the worker's own readiness poller (mio,
 //! outside tokio's reactor, polled without waiting) which sockets have something to read,
 //! and reads those. The sockets are not in the reactor, so arriving datagrams never wake
-//! the shard's thread (at a thousand vehicles a shard's context switches fell from about
-//! ten per tick to four), and there is no task or channel hop per datagram; run one shard
+//! the worker's thread (at a thousand vehicles a worker's context switches fell from about
+//! ten per tick to four), and there is no task or channel hop per datagram; run one worker
 //! per core. A datagram waits at most one tick, as it would for the next 1 ms physics step
 //! anyway.
 //!
@@ -47,7 +47,7 @@ pub enum VehicleControl {
     Restart,
 }
 
-/// One vehicle of a shard.
+/// One vehicle of a worker (a task stepping a group of vehicles).
 pub struct FleetVehicle {
     /// The machine.
     pub vehicle: Vehicle,
@@ -76,7 +76,7 @@ pub struct VehicleSpec {
 
 /// Builds every vehicle of `specs` in `world` and binds its links with `faults` (vehicle
 /// `i`'s fault draws seeded `seed + i`): the one place a fleet is made, for `sitl` and
-/// `demo --realtime`. Returns the fleet for [`spawn_shards`] and each vehicle's status.
+/// `demo --realtime`. Returns the fleet for [`spawn_workers`] and each vehicle's status.
 ///
 /// # Errors
 /// A configuration the emulator refuses, or a port that cannot be bound, naming the
@@ -119,13 +119,13 @@ struct Delayed {
     bytes: Vec<u8>,
 }
 
-/// One link's socket or serial line, registered with the shard's poller.
+/// One link's socket or serial line, registered with the worker's poller.
 enum Port {
     Udp(mio::net::UdpSocket),
     Pty(PtyLink),
 }
 
-/// A vehicle while the shard runs.
+/// A vehicle while the worker runs.
 struct Slot {
     vehicle: Vehicle,
     sockets: Vec<Port>,
@@ -138,7 +138,7 @@ struct Slot {
     /// Buffers of delivered delayed datagrams, for the next ones.
     spare: Vec<Vec<u8>>,
     key_file: Option<PathBuf>,
-    /// Where changed keys go to be written, off the shard's thread.
+    /// Where changed keys go to be written, off the worker's thread.
     keys: KeyStore,
     status: watch::Sender<VehicleStatus>,
     alive: bool,
@@ -146,7 +146,7 @@ struct Slot {
     dropped_sends: u64,
     /// Frames read from a serial line, reused from read to read.
     serial_frames: Vec<Vec<u8>>,
-    /// How long before the shard's start the vehicle booted: vehicles started together
+    /// How long before the worker's start the vehicle booted: vehicles started together
     /// would send every stream in the same millisecond (a thousand datagrams at once);
     /// PX4 instances boot apart, and so do these.
     boot_offset: std::time::Duration,
@@ -156,14 +156,14 @@ struct Slot {
 const MAX_DATAGRAM: usize = 2048;
 
 /// Datagrams read from one socket per tick: a flood on one socket delays only its own
-/// vehicle, never the shard's other vehicles (what is left is read at the next tick).
+/// vehicle, never the worker's other vehicles (what is left is read at the next tick).
 const READS_PER_TICK: usize = 64;
 
 /// Datagrams one vehicle holds back under a latency fault, both ways together: 10 s (the
 /// longest latency) of a busy link's traffic. A full line drops, as a router's queue does.
 const DELAYED_PER_VEHICLE: usize = 4096;
 
-/// Runs a shard of vehicles, each with its boot offset, until `shutdown` turns true.
+/// Runs a worker's vehicles, each with its boot offset, until `shutdown` turns true.
 /// `controls` carries `(index in vehicles, request)`.
 async fn run_fleet(
     vehicles: Vec<(std::time::Duration, FleetVehicle)>,
@@ -175,7 +175,7 @@ async fn run_fleet(
     let (mut poll, mut events) = match Poll::new() {
         Ok(poll) => (poll, Events::with_capacity(EVENTS_PER_POLL)),
         Err(e) => {
-            tracing::error!(error = %e, vehicles = vehicles.len(), "no readiness poller: this shard's vehicles do not run");
+            tracing::error!(error = %e, vehicles = vehicles.len(), "no readiness poller: this worker's vehicles do not run");
             return;
         }
     };
@@ -291,7 +291,7 @@ fn token(slot: usize, link: usize) -> Token {
 }
 
 /// A vehicle's sockets taken out of tokio's reactor (so that no datagram wakes the
-/// shard's thread) and registered with the shard's poller instead, under [`token`]s for
+/// worker's thread) and registered with the worker's poller instead, under [`token`]s for
 /// slot `slot`.
 fn polled_sockets(
     poll: &Poll,
@@ -365,21 +365,21 @@ enum Read {
     More(usize),
 }
 
-/// Running shards: their tasks and, per vehicle in the order given, how to reach it.
-pub struct Shards {
-    /// One task per shard.
+/// Running workers: their tasks and, per vehicle in the order given, how to reach it.
+pub struct Workers {
+    /// One task per worker.
     tasks: Vec<tokio::task::JoinHandle<()>>,
-    /// Per vehicle: its shard's control channel and its index there.
+    /// Per vehicle: its worker's control channel and its index there.
     controls: Vec<(mpsc::Sender<(usize, VehicleControl)>, usize)>,
     /// Writes the vehicles' keys.
     keys: KeyWriter,
 }
 
-impl Shards {
-    /// Sends `request` to vehicle `i` (in the order given to [`spawn_shards`]).
+impl Workers {
+    /// Sends `request` to vehicle `i` (in the order given to [`spawn_workers`]).
     ///
     /// # Errors
-    /// No such vehicle, or its shard has stopped.
+    /// No such vehicle, or its worker has stopped.
     pub async fn control(&self, i: usize, request: VehicleControl) -> Result<(), String> {
         let (tx, at) = self
             .controls
@@ -390,10 +390,10 @@ impl Shards {
             .map_err(|_| "the vehicle's task has stopped".to_owned())
     }
 
-    /// Waits for every shard.
+    /// Waits for every worker.
     ///
     /// # Errors
-    /// A shard that panicked.
+    /// A worker that panicked.
     pub async fn join(self) -> io::Result<()> {
         let mut result = Ok(());
         for task in self.tasks {
@@ -401,7 +401,7 @@ impl Shards {
                 result = Err(io::Error::other(e));
             }
         }
-        // The shards stored their keys as they stopped; wait until they are on disk.
+        // The workers stored their keys as they stopped; wait until they are on disk.
         let keys = self.keys;
         tokio::task::spawn_blocking(move || keys.finish())
             .await
@@ -410,22 +410,22 @@ impl Shards {
     }
 }
 
-/// Spreads `vehicles` over `shards` tasks (vehicle `i` in shard `i mod shards`) on the
+/// Spreads `vehicles` over `workers` tasks (vehicle `i` in worker `i mod workers`) on the
 /// current tokio runtime; one per core keeps every core busy.
-pub fn spawn_shards(
+pub fn spawn_workers(
     vehicles: Vec<FleetVehicle>,
-    shards: usize,
+    workers: usize,
     clock: SimClock,
     shutdown: &watch::Receiver<bool>,
-) -> Shards {
-    let shards = shards.clamp(1, vehicles.len().max(1));
+) -> Workers {
+    let workers = workers.clamp(1, vehicles.len().max(1));
     let mut fleets: Vec<Vec<(std::time::Duration, FleetVehicle)>> =
-        (0..shards).map(|_| Vec::new()).collect();
+        (0..workers).map(|_| Vec::new()).collect();
     let mut placed = Vec::with_capacity(vehicles.len());
     for (i, v) in vehicles.into_iter().enumerate() {
-        let shard = i % shards;
-        placed.push((shard, fleets[shard].len()));
-        fleets[shard].push((spread(i), v));
+        let worker = i % workers;
+        placed.push((worker, fleets[worker].len()));
+        fleets[worker].push((spread(i), v));
     }
     let keys = KeyWriter::spawn();
     let mut senders = Vec::new();
@@ -436,12 +436,12 @@ pub fn spawn_shards(
         let run = run_fleet(fleet, clock, rx, shutdown.clone(), keys.store());
         tasks.push(tokio::spawn(run));
     }
-    Shards {
+    Workers {
         keys,
         tasks,
         controls: placed
             .into_iter()
-            .map(|(shard, at)| (senders[shard].clone(), at))
+            .map(|(worker, at)| (senders[worker].clone(), at))
             .collect(),
     }
 }
@@ -454,7 +454,7 @@ fn spread(i: usize) -> std::time::Duration {
 }
 
 impl Slot {
-    /// The vehicle's time when the shard's clock says `now`.
+    /// The vehicle's time when the worker's clock says `now`.
     fn time(&self, now: SimTime) -> SimTime {
         now + self.boot_offset
     }
@@ -487,7 +487,7 @@ impl Slot {
     /// Reads what has arrived on link `link`'s socket, up to [`READS_PER_TICK`]
     /// datagrams, and hands it to the vehicle; a powered-off vehicle's datagrams are read
     /// and dropped. [`Read::More`] when the cap or a socket error (logged) left some
-    /// unread: one vehicle's socket never stops the shard.
+    /// unread: one vehicle's socket never stops the worker.
     fn receive(&mut self, now: SimTime, link: usize, buf: &mut [u8]) -> Read {
         if link >= self.sockets.len() {
             return Read::Drained(0);

@@ -1,5 +1,5 @@
 //! Stores vehicles' signing keys on a thread of its own, so that a slow disk (each file is
-//! written with `fsync`) never stalls the shard whose 1 ms tick steps many vehicles. Keys
+//! written with `fsync`) never stalls the worker whose 1 ms tick steps many vehicles. Keys
 //! are written in the order they were handed over; [`KeyWriter::finish`] waits for the
 //! last one.
 
@@ -19,7 +19,7 @@ pub struct KeyWriter {
     thread: Option<JoinHandle<()>>,
 }
 
-/// A handle that hands keys to a [`KeyWriter`]; cheap to clone, one per shard.
+/// A handle that hands keys to a [`KeyWriter`]; cheap to clone, one per worker.
 #[derive(Debug, Clone)]
 pub struct KeyStore {
     tx: Option<mpsc::Sender<Job>>,
@@ -51,7 +51,7 @@ impl KeyWriter {
         }
     }
 
-    /// A handle for a shard.
+    /// A handle for a worker.
     pub fn store(&self) -> KeyStore {
         KeyStore {
             tx: self.tx.clone(),

@@ -58,7 +58,7 @@ pub struct LinkSocket {
 
 /// The four addresses of one vehicle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct PortPlan {
+pub struct PortLayout {
     /// Where the offboard link listens.
     pub offboard_bind: SocketAddr,
     /// Where it sends until someone talks to it.
@@ -70,8 +70,8 @@ pub struct PortPlan {
 }
 
 /// PX4's SITL ports for vehicle `instance` (0-based) on `host`.
-pub fn px4_ports(instance: u16, host: IpAddr) -> PortPlan {
-    PortPlan {
+pub fn px4_ports(instance: u16, host: IpAddr) -> PortLayout {
+    PortLayout {
         offboard_bind: SocketAddr::new(host, px4::OFFBOARD_LISTEN_PORT + instance),
         offboard_peer: SocketAddr::new(host, px4::OFFBOARD_PEER_PORT + instance),
         gcs_bind: SocketAddr::new(host, px4::GCS_LISTEN_PORT + instance),
@@ -138,7 +138,7 @@ impl SimClock {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Placement {
     /// Offboard and GCS links on the given ports (PX4 SITL's layout).
-    Ports(PortPlan),
+    Ports(PortLayout),
     /// One offboard link bound at `bind` (port 0: any free port), sending to `peer` (the
     /// network's ground station).
     Network {
@@ -203,7 +203,7 @@ async fn bind_one(addr: SocketAddr) -> io::Result<UdpSocket> {
 ///
 /// # Errors
 /// The bind error, with the address that is in use.
-pub async fn bind(plan: &PortPlan) -> io::Result<[UdpSocket; 2]> {
+pub async fn bind(plan: &PortLayout) -> io::Result<[UdpSocket; 2]> {
     Ok([
         bind_one(plan.offboard_bind).await?,
         bind_one(plan.gcs_bind).await?,

@@ -241,7 +241,7 @@ impl Observer for DemoObserver {
 /// `--realtime`: the emulated vehicles on PX4's SITL ports in this process, the
 /// coordinator flying them over real UDP sockets (like `sitl` + `fly` in two terminals).
 fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> {
-    use ringswarm_sitl::fleet::{VehicleSpec, bind_fleet, spawn_shards};
+    use ringswarm_sitl::fleet::{VehicleSpec, bind_fleet, spawn_workers};
     use ringswarm_sitl::udp::SimClock;
     use tokio::sync::watch;
 
@@ -259,7 +259,7 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
     let faults = config
         .link_faults()
         .map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
-    let transport = config.transport_plan().map_err(anyhow::Error::msg)?;
+    let transport = config.transport_layout().map_err(anyhow::Error::msg)?;
     let placements = config
         .emulator_placements()
         .map_err(|e| anyhow::anyhow!("scenario {name}: {e}"))?;
@@ -289,7 +289,7 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
         let (fleet, _) = bind_fleet(specs, world, faults, e.seed)
             .await
             .map_err(|e| anyhow::anyhow!("emulated {e}"))?;
-        let shards = spawn_shards(fleet, crate::driver::cores(), clock, &stop_rx);
+        let workers = spawn_workers(fleet, crate::driver::cores(), clock, &stop_rx);
         let summary = crate::flight::fly_over_udp(
             Swarm::new(setup),
             &transport,
@@ -300,7 +300,7 @@ fn realtime(name: &str, config: &Config, args: &DemoArgs) -> anyhow::Result<()> 
         )
         .await;
         stop_tx.send_replace(true);
-        shards.join().await.context("emulated vehicles")?;
+        workers.join().await.context("emulated vehicles")?;
         summary
     })?;
     runtime.shutdown_background();

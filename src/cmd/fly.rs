@@ -54,7 +54,7 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let transport = config.transport_plan().map_err(anyhow::Error::msg)?;
+    let transport = config.transport_layout().map_err(anyhow::Error::msg)?;
     let (swarm, bus) = match &args.shard {
         None => (Swarm::new(setup), None),
         Some(name) => shard(&config, setup, name)?,

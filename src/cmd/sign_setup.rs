@@ -32,7 +32,7 @@ pub fn run(args: &SignSetupArgs) -> anyhow::Result<()> {
     };
     let signing = FlightSigning::open(key_file).map_err(anyhow::Error::msg)?;
     let own_ids = (config.swarm.gcs_system_id, config.swarm.gcs_component_id);
-    let transport = config.transport_plan().map_err(anyhow::Error::msg)?;
+    let transport = config.transport_layout().map_err(anyhow::Error::msg)?;
     let mut sockets = Vec::new();
     for plan in &transport.sockets {
         let Some(bind) = plan.udp_bind() else {

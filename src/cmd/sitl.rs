@@ -12,7 +12,7 @@ use ringswarm_sitl::autopilot::LinkId;
 use ringswarm_sitl::autopilot::{Personality, VehicleConfig, VehicleStatus};
 use ringswarm_sitl::config_file::SitlConfig;
 use ringswarm_sitl::fleet::{
-    FleetVehicle, Shards, VehicleControl, VehicleSpec, bind_fleet, spawn_shards,
+    FleetVehicle, VehicleControl, VehicleSpec, Workers, bind_fleet, spawn_workers,
 };
 use ringswarm_sitl::keystore::{self, StoredKey};
 use ringswarm_sitl::profile::Profile;
@@ -307,7 +307,7 @@ async fn serve(
     } else {
         println!("  {}", placements_summary(&fleet));
     }
-    let shards = spawn_shards(fleet, crate::driver::cores(), clock, &shutdown_rx);
+    let workers = spawn_workers(fleet, crate::driver::cores(), clock, &shutdown_rx);
     println!(
         "Ctrl-C stops; on stdin, \"kill N\" powers vehicle N off and \"restart N\" boots it again."
     );
@@ -320,7 +320,7 @@ async fn serve(
     let mut tally = SetpointTally::default();
     // One listener for the whole run: a future made anew on every turn of the loop would
     // miss a signal that arrives while the loop body runs. SIGTERM and SIGHUP end the
-    // emulator as Ctrl-C does (shards stopped, the fleet line printed).
+    // emulator as Ctrl-C does (workers stopped, the fleet line printed).
     let mut terminations = crate::driver::signals::Terminations::new()
         .context("install the handlers of SIGINT, SIGTERM and SIGHUP")?;
     loop {
@@ -328,7 +328,7 @@ async fn serve(
             _ = terminations.next() => break,
             line = stdin.next_line(), if stdin_open => match line {
                 Ok(Some(line)) => {
-                    if let Err(err) = apply_control(&line, &system_ids, &shards).await {
+                    if let Err(err) = apply_control(&line, &system_ids, &workers).await {
                         eprintln!("{err:#}");
                     }
                 }
@@ -354,14 +354,14 @@ async fn serve(
         }
     }
     shutdown_tx.send_replace(true);
-    shards.join().await.context("vehicle task")?;
+    workers.join().await.context("vehicle task")?;
     println!("stopped");
     Ok(())
 }
 
 /// Parses `kill N` / `restart N` and sends it to the vehicle with system id N (the
 /// first with that id, when networks repeat it).
-async fn apply_control(line: &str, system_ids: &[u8], shards: &Shards) -> anyhow::Result<()> {
+async fn apply_control(line: &str, system_ids: &[u8], workers: &Workers) -> anyhow::Result<()> {
     let words: Vec<&str> = line.split_whitespace().collect();
     let (request, id) = match words.as_slice() {
         [] => return Ok(()),
@@ -375,7 +375,7 @@ async fn apply_control(line: &str, system_ids: &[u8], shards: &Shards) -> anyhow
     let Some(index) = system_ids.iter().position(|s| *s == id) else {
         bail!("no vehicle with system id {id}");
     };
-    shards
+    workers
         .control(index, request)
         .await
         .map_err(anyhow::Error::msg)

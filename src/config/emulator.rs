@@ -8,7 +8,7 @@ use nalgebra::Vector3;
 use ringswarm_sitl::autopilot::VehicleConfig;
 use ringswarm_sitl::autopilot::estimator::{FaultKind, TelemetryFault};
 use ringswarm_sitl::config_file::{EmulatedVehicle, KeyNames};
-use ringswarm_sitl::udp::{Placement, PortPlan};
+use ringswarm_sitl::udp::{Placement, PortLayout};
 use ringswarm_sitl::world::World;
 use ringswarm_wire::px4;
 use ringswarm_wire::time::SimTime;
@@ -168,9 +168,9 @@ impl Config {
     /// 127.0.0.1.
     ///
     /// # Errors
-    /// The transport's problems ([`Config::transport_plan`]).
+    /// The transport's problems ([`Config::transport_layout`]).
     pub fn emulator_placements(&self) -> Result<Vec<Placement>, String> {
-        let plan = self.transport_plan()?;
+        let plan = self.transport_layout()?;
         let reach = |a: SocketAddr| {
             if a.ip().is_unspecified() {
                 SocketAddr::new(IpAddr::from([127, 0, 0, 1]), a.port())
@@ -202,7 +202,7 @@ impl Config {
                         .ok()
                         .and_then(|i| px4::GCS_LISTEN_PORT.checked_add(i))
                         .ok_or_else(|| format!("vehicle[{i}]: no GCS port for instance {i}"))?;
-                    Placement::Ports(PortPlan {
+                    Placement::Ports(PortLayout {
                         offboard_bind: address,
                         offboard_peer: coordinator,
                         gcs_bind: SocketAddr::new(address.ip(), gcs),

@@ -1,5 +1,5 @@
 //! What a coordinator config means for the transport: the coordinator's UDP sockets and
-//! how each vehicle is reached ([`TransportPlan`]), checked for collisions.
+//! how each vehicle is reached ([`TransportLayout`]), checked for collisions.
 
 use std::collections::{HashMap, HashSet};
 use std::net::SocketAddr;
@@ -8,7 +8,7 @@ use ringswarm_wire::px4;
 
 use super::Config;
 use super::validate::Problems;
-use crate::link::router::{Endpoint, RoutePlan, SERIAL_PEER, SocketPlan, TransportPlan};
+use crate::link::router::{Endpoint, SERIAL_PEER, SocketLayout, TransportLayout, VehicleRoute};
 
 /// Whether two bind/listen addresses take the same port on a common interface
 /// (`0.0.0.0` overlaps every address of its family).
@@ -23,7 +23,7 @@ impl Config {
     /// Every problem, one per line: an unknown or duplicate network, a `bind` on a
     /// networked vehicle, a vehicle without a network whose default port would pass
     /// 65535, two sockets on one port, a coordinator socket on a vehicle's port.
-    pub fn transport_plan(&self) -> Result<TransportPlan, String> {
+    pub fn transport_layout(&self) -> Result<TransportLayout, String> {
         let mut p = Problems::default();
         let plan = self.transport(&mut p);
         if p.0.is_empty() {
@@ -34,7 +34,7 @@ impl Config {
     }
 
     /// Builds the plan, pushing every problem found.
-    pub(super) fn transport(&self, p: &mut Problems) -> TransportPlan {
+    pub(super) fn transport(&self, p: &mut Problems) -> TransportLayout {
         let mut sockets = Vec::new();
         let mut by_name = HashMap::new();
         for (j, n) in self.network.iter().enumerate() {
@@ -47,7 +47,7 @@ impl Config {
             } else if by_name.insert(n.name.as_str(), sockets.len()).is_some() {
                 p.push(format!("network[{j}].name \"{}\" is used twice", n.name));
             }
-            sockets.push(SocketPlan {
+            sockets.push(SocketLayout {
                 endpoint: Endpoint::Udp(n.bind),
                 network: Some(n.name.clone()),
             });
@@ -74,7 +74,7 @@ impl Config {
                         ));
                         continue;
                     };
-                    RoutePlan {
+                    VehicleRoute {
                         socket,
                         address: v.address,
                         system_id: v.system_id,
@@ -88,11 +88,11 @@ impl Config {
                         ));
                         continue;
                     };
-                    sockets.push(SocketPlan {
+                    sockets.push(SocketLayout {
                         endpoint: Endpoint::Udp(bind),
                         network: None,
                     });
-                    RoutePlan {
+                    VehicleRoute {
                         socket: sockets.len() - 1,
                         address: Some(peer),
                         system_id: v.system_id,
@@ -104,14 +104,14 @@ impl Config {
             }
             routes.push(route);
         }
-        let describe = |s: &SocketPlan, k: usize| match &s.network {
+        let describe = |s: &SocketLayout, k: usize| match &s.network {
             Some(name) => format!("network \"{name}\""),
             None => format!(
                 "the coordinator's socket for vehicle[{}]",
                 vehicle_of(&routes, k)
             ),
         };
-        let udp: Vec<(usize, &SocketPlan, SocketAddr)> = sockets
+        let udp: Vec<(usize, &SocketLayout, SocketAddr)> = sockets
             .iter()
             .enumerate()
             .filter_map(|(k, s)| s.udp_bind().map(|bind| (k, s, bind)))
@@ -149,7 +149,7 @@ impl Config {
             }
         }
         self.check_system_ids(p);
-        TransportPlan { sockets, routes }
+        TransportLayout { sockets, routes }
     }
 
     /// System ids: 1..=250 (PX4's MAV_SYS_ID range), unique within each network and
@@ -192,10 +192,10 @@ fn serial_route(
     i: usize,
     v: &super::VehicleSection,
     serial: &super::SerialSection,
-    sockets: &mut Vec<SocketPlan>,
+    sockets: &mut Vec<SocketLayout>,
     devices: &mut HashMap<String, usize>,
     p: &mut Problems,
-) -> RoutePlan {
+) -> VehicleRoute {
     for (set, key) in [
         (v.network.is_some(), "network"),
         (v.address.is_some(), "address"),
@@ -223,14 +223,14 @@ fn serial_route(
             serial.baud
         ));
     }
-    sockets.push(SocketPlan {
+    sockets.push(SocketLayout {
         endpoint: Endpoint::Serial {
             device: serial.device.clone(),
             baud: serial.baud,
         },
         network: None,
     });
-    RoutePlan {
+    VehicleRoute {
         socket: sockets.len() - 1,
         address: Some(SERIAL_PEER),
         system_id: v.system_id,
@@ -238,7 +238,7 @@ fn serial_route(
 }
 
 /// The vehicle whose own socket is `socket`.
-fn vehicle_of(routes: &[RoutePlan], socket: usize) -> usize {
+fn vehicle_of(routes: &[VehicleRoute], socket: usize) -> usize {
     routes.iter().position(|r| r.socket == socket).unwrap_or(0)
 }
 

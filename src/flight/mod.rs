@@ -3,7 +3,7 @@
 //! What `fly` and `demo --realtime` both run, so that no subcommand imports another.
 //!
 //! - [`fly_over_udp`] (this file): binds, records, serves and drives to the end;
-//! - `ports`: binding every socket of a transport plan;
+//! - `ports`: binding every socket of a transport layout;
 //! - `observer`: what the driver tells each tick (run directory, live view, mirrors, the
 //!   status line).
 
@@ -20,7 +20,7 @@ use tokio::sync::watch;
 use crate::cli::LiveArgs;
 use crate::driver::mirror::Mirrors;
 use crate::driver::udp::{DriverCommand, ShardTransport, run_swarm};
-use crate::link::router::{Router, TransportPlan};
+use crate::link::router::{Router, TransportLayout};
 use crate::record::metrics::Summary;
 use crate::record::{Recorder, RowText, RunSetup};
 use crate::security::FlightSigning;
@@ -38,7 +38,7 @@ pub use ports::bind_all;
 /// directory that cannot be written.
 pub async fn fly_over_udp(
     swarm: Swarm,
-    transport: &TransportPlan,
+    transport: &TransportLayout,
     out: &Path,
     signing: Option<FlightSigning>,
     live: &LiveArgs,

@@ -1,4 +1,4 @@
-//! Binding every socket of a transport plan (UDP ports, serial lines), naming the one
+//! Binding every socket of a transport layout (UDP ports, serial lines), naming the one
 //! that cannot be bound.
 
 use anyhow::Context;
@@ -6,14 +6,14 @@ use tokio::net::UdpSocket;
 
 use crate::driver::serial::SerialLine;
 use crate::driver::udp::Port;
-use crate::link::router::{Endpoint, TransportPlan};
+use crate::link::router::{Endpoint, TransportLayout};
 
 /// Binds every socket of the plan, naming the one that cannot be bound.
 ///
 /// # Errors
 /// The first bind error.
 pub async fn bind_all(
-    transport: &TransportPlan,
+    transport: &TransportLayout,
     local: impl Fn(usize) -> bool,
 ) -> anyhow::Result<Vec<Port>> {
     let mut sockets = Vec::with_capacity(transport.sockets.len());

@@ -596,7 +596,7 @@ fn vehicles_waiting_on_the_ground_starts_of_others_hold_their_place_in_the_wind(
         .collect();
     let faults = config.lockstep_faults().unwrap();
     let mut run = Lockstep::new(Swarm::new(setup), vehicles, faults.conditions)
-        .with_transport(&config.transport_plan().unwrap());
+        .with_transport(&config.transport_layout().unwrap());
     // Where each x500 is at 5 s (in the air over its start), and how far it strays while
     // the swarm waits for the ArduCopter (the handshake).
     let mut at_5s: Option<Vec<Vector2<f64>>> = None;
@@ -654,7 +654,7 @@ fn a_vehicle_taken_over_gets_its_parameters_back_at_once_and_one_that_never_answ
     assert_eq!(h.vehicle.params().value("GUID_OPTIONS"), 8.0);
     // A pilot's ground station switches it to LOITER (5) in the air.
     let loiter = ringswarm::link::Encoder::new(255, 190).encode(&ringswarm::link::command_long(
-        &ringswarm::link::Command::SetMode { main: 5, sub: 0 },
+        &ringswarm::link::VehicleCommand::SetMode { main: 5, sub: 0 },
         1,
         0,
     ));

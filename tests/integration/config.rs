@@ -429,7 +429,7 @@ fn a_thousand_vehicles_fit_on_four_networks_with_repeated_ids() {
     let config = Config::from_toml(&text).unwrap();
     let setup = config.validate().unwrap();
     assert_eq!(setup.ring.agents(), 1000);
-    let plan = config.transport_plan().unwrap();
+    let plan = config.transport_layout().unwrap();
     assert_eq!(plan.sockets.len(), 4, "one socket per network");
     assert_eq!(plan.routes[999].socket, 3);
     assert_eq!(plan.routes[999].system_id, 250);
@@ -474,7 +474,7 @@ fn the_shipped_500_vehicle_ring_validates_on_two_networks() {
     let config = load("ring-500.toml");
     let setup = config.validate().unwrap();
     assert_eq!(setup.ring.agents(), 500);
-    let plan = config.transport_plan().unwrap();
+    let plan = config.transport_layout().unwrap();
     assert_eq!(plan.sockets.len(), 2);
     // Vehicle 251 is system id 1 again, on the second network.
     assert_eq!(
@@ -737,7 +737,7 @@ fn serial_vehicles_get_a_port_each_and_their_mistakes_are_named() {
     );
     let config = Config::from_toml(&text).unwrap();
     config.validate().unwrap();
-    let plan = config.transport_plan().unwrap();
+    let plan = config.transport_layout().unwrap();
     assert_eq!(
         plan.sockets[plan.routes[0].socket].endpoint,
         ringswarm::link::router::Endpoint::Serial {

@@ -114,7 +114,7 @@ fn random_values_in_any_key_never_panic() {
             };
             let _ = config.lockstep_faults();
             let _ = config.emulator();
-            let _ = config.transport_plan();
+            let _ = config.transport_layout();
             let Ok(setup) = config.validate() else {
                 continue;
             };

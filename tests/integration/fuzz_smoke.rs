@@ -162,7 +162,7 @@ fn config_parsers_survive_their_seeds_and_mutations() {
         assert!(config.emulator().is_ok(), "{}", path.display());
         assert!(config.lockstep_faults().is_ok(), "{}", path.display());
         assert!(config.link_faults().is_ok(), "{}", path.display());
-        assert!(config.transport_plan().is_ok(), "{}", path.display());
+        assert!(config.transport_layout().is_ok(), "{}", path.display());
         assert!(config.emulator_placements().is_ok(), "{}", path.display());
         assert!(config.bandwidth_check().is_ok(), "{}", path.display());
     }

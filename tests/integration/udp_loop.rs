@@ -8,11 +8,11 @@ use ringswarm::consensus::{CouplingGains, RingDigraph};
 use ringswarm::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel};
 use ringswarm::driver::udp::{DriverCommand, Port, run_swarm};
 use ringswarm::frame::{CommonFrame, Geodetic};
-use ringswarm::link::router::{Endpoint, RoutePlan, Router, SocketPlan, TransportPlan};
+use ringswarm::link::router::{Endpoint, Router, SocketLayout, TransportLayout, VehicleRoute};
 use ringswarm::swarm::{EndAction, LossPolicy, Swarm, SwarmSetup};
 use ringswarm::vehicle::{LinkConfig, Phase};
 use ringswarm_sitl::autopilot::{LinkId, Vehicle, VehicleConfig};
-use ringswarm_sitl::fleet::{FleetVehicle, spawn_shards};
+use ringswarm_sitl::fleet::{FleetVehicle, spawn_workers};
 use ringswarm_sitl::profile::Profile;
 use ringswarm_sitl::udp::{LinkFaults, LinkPort, LinkSocket, SimClock};
 use ringswarm_sitl::world::World;
@@ -34,11 +34,11 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         UdpSocket::bind("127.0.0.1:0").await.unwrap(),
     ];
     let nowhere = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    let mut plan = TransportPlan {
+    let mut plan = TransportLayout {
         sockets: ["a", "b"]
             .iter()
             .zip(&networks)
-            .map(|(name, s)| SocketPlan {
+            .map(|(name, s)| SocketLayout {
                 endpoint: Endpoint::Udp(s.local_addr().unwrap()),
                 network: Some((*name).to_owned()),
             })
@@ -51,7 +51,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         let (network, system_id) = (i / 2, (i % 2) as u8 + 1);
         let socket = UdpSocket::bind("127.0.0.1:0").await.unwrap();
         let quiet = i == 3;
-        plan.routes.push(RoutePlan {
+        plan.routes.push(VehicleRoute {
             socket: network,
             address: quiet.then(|| socket.local_addr().unwrap()),
             system_id,
@@ -79,7 +79,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
             status,
         });
     }
-    let shards = spawn_shards(fleet, 2, clock, &stop_rx);
+    let workers = spawn_workers(fleet, 2, clock, &stop_rx);
     let model = VehicleModel::from_hover_throttle(2.0, 0.5).unwrap();
     let setup = SwarmSetup {
         ring: RingDigraph::for_agents(N, 1.0).unwrap(),
@@ -169,7 +169,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
     stop_tx.send_replace(true);
     let (swarm, _) = swarm_task.await.unwrap().unwrap();
     assert!(swarm.links().all(|l| l.phase() == Phase::Flying));
-    shards.join().await.unwrap();
+    workers.join().await.unwrap();
     // Vehicle 4's first frames went to its default peer, not to the coordinator: it was
     // found only because the coordinator spoke first.
     nowhere.set_nonblocking(true).unwrap();

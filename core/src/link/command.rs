@@ -8,7 +8,7 @@ use num_traits::FromPrimitive;
 
 /// What a link asks of its vehicle.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Command {
+pub enum VehicleCommand {
     /// Arm (MAV_CMD_COMPONENT_ARM_DISARM, param1 1).
     Arm,
     /// Disarm (param1 0, not forced).
@@ -37,7 +37,7 @@ pub enum Command {
     },
 }
 
-impl Command {
+impl VehicleCommand {
     /// The MAV_CMD the vehicle acknowledges it with.
     pub fn id(&self) -> u16 {
         self.mav_cmd() as u16
@@ -84,7 +84,7 @@ impl Command {
 
 /// The COMMAND_LONG for `command` to `target_system`'s autopilot; `confirmation` counts
 /// the resends before it (0 for the first).
-pub fn command_long(command: &Command, target_system: u8, confirmation: u8) -> MavMessage {
+pub fn command_long(command: &VehicleCommand, target_system: u8, confirmation: u8) -> MavMessage {
     let p = command.params();
     MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
         target_system,
@@ -148,7 +148,7 @@ mod tests {
 
     #[test]
     fn each_command_is_the_command_long_px4_reads() {
-        let msg = command_long(&Command::SetMode { main: 6, sub: 3 }, 7, 2);
+        let msg = command_long(&VehicleCommand::SetMode { main: 6, sub: 3 }, 7, 2);
         let MavMessage::COMMAND_LONG(c) = msg else {
             panic!("{msg:?}")
         };
@@ -158,12 +158,12 @@ mod tests {
         );
         assert_eq!(c.command, MavCmd::MAV_CMD_DO_SET_MODE);
         assert_eq!([c.param1, c.param2, c.param3], [1.0, 6.0, 3.0]);
-        let MavMessage::COMMAND_LONG(c) = command_long(&Command::Land, 1, 0) else {
+        let MavMessage::COMMAND_LONG(c) = command_long(&VehicleCommand::Land, 1, 0) else {
             panic!()
         };
-        assert_eq!(c.command as u16, Command::Land.id());
+        assert_eq!(c.command as u16, VehicleCommand::Land.id());
         assert!(c.param4.is_nan() && c.param5.is_nan() && c.param7.is_nan());
-        let off = Command::StreamInterval {
+        let off = VehicleCommand::StreamInterval {
             message_id: 30,
             interval_us: None,
         };
@@ -171,7 +171,7 @@ mod tests {
             panic!()
         };
         assert_eq!((c.param1, c.param2), (30.0, -1.0));
-        let MavMessage::COMMAND_LONG(c) = command_long(&Command::Disarm, 1, 0) else {
+        let MavMessage::COMMAND_LONG(c) = command_long(&VehicleCommand::Disarm, 1, 0) else {
             panic!()
         };
         assert_eq!((c.command as u16, c.param1), (400, 0.0));

@@ -11,7 +11,7 @@ use mavlink::dialects::common::{
 };
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
-use super::command::{Command, command_long};
+use super::command::{VehicleCommand, command_long};
 use super::signer::Signer;
 use crate::control::AttitudeThrust;
 use crate::frame::Geodetic;
@@ -49,7 +49,7 @@ pub enum Outgoing<'a> {
     /// A command; `confirmation` counts its resends before this one.
     Command {
         /// The command.
-        command: Command,
+        command: VehicleCommand,
         /// The vehicle.
         target_system: u8,
         /// Resends before this one.

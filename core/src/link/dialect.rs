@@ -15,7 +15,7 @@
 
 use ringswarm_wire::{ardupilot, px4};
 
-use super::command::Command;
+use super::command::VehicleCommand;
 use crate::control::AttitudeThrust;
 
 /// The autopilot a vehicle runs, as its HEARTBEAT says.
@@ -150,13 +150,13 @@ impl Autopilot {
     }
 
     /// The mode the coordinator flies it in.
-    pub fn fly_mode(self) -> Command {
+    pub fn fly_mode(self) -> VehicleCommand {
         match self {
-            Self::Px4 => Command::SetMode {
+            Self::Px4 => VehicleCommand::SetMode {
                 main: px4::MAIN_OFFBOARD,
                 sub: 0,
             },
-            Self::ArduPilot => Command::SetMode {
+            Self::ArduPilot => VehicleCommand::SetMode {
                 main: ardupilot::GUIDED,
                 sub: 0,
             },
@@ -173,13 +173,13 @@ impl Autopilot {
 
     /// The mode it is handed to when it cannot be flown on: it brakes and holds on its
     /// own estimate.
-    pub fn hold_mode(self) -> Command {
+    pub fn hold_mode(self) -> VehicleCommand {
         match self {
-            Self::Px4 => Command::SetMode {
+            Self::Px4 => VehicleCommand::SetMode {
                 main: px4::MAIN_AUTO,
                 sub: px4::SUB_AUTO_LOITER,
             },
-            Self::ArduPilot => Command::SetMode {
+            Self::ArduPilot => VehicleCommand::SetMode {
                 main: ardupilot::BRAKE,
                 sub: 0,
             },
@@ -376,8 +376,8 @@ mod tests {
         assert!(px4.in_land(px4::custom_mode(4, 6)));
         assert_eq!(ap.mode_name(20), "GUIDED_NOGPS");
         assert_eq!(px4.mode_name(px4::custom_mode(4, 3)), "AUTO.LOITER");
-        assert_eq!(ap.fly_mode(), Command::SetMode { main: 4, sub: 0 });
-        assert_eq!(ap.hold_mode(), Command::SetMode { main: 17, sub: 0 });
+        assert_eq!(ap.fly_mode(), VehicleCommand::SetMode { main: 4, sub: 0 });
+        assert_eq!(ap.hold_mode(), VehicleCommand::SetMode { main: 17, sub: 0 });
         assert_eq!(Autopilot::from_heartbeat(3), Some(ap));
         assert_eq!(Autopilot::from_heartbeat(12), Some(px4));
         assert_eq!(Autopilot::from_heartbeat(0), None);

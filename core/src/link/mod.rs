@@ -10,7 +10,7 @@ pub mod provision;
 pub mod router;
 mod signer;
 
-pub use command::{Command, command_long, command_name, mission_result_name, result_name};
+pub use command::{VehicleCommand, command_long, command_name, mission_result_name, result_name};
 pub use convert::{
     AUTOPILOT_PX4, Inbound, Outgoing, autopilot_name, encode, fence_count, fence_item,
     gcs_heartbeat, inbound, param_request_read, param_set, set_attitude_target,

@@ -52,14 +52,14 @@ pub const SERIAL_PEER: SocketAddr =
 
 /// One coordinator socket.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct SocketPlan {
+pub struct SocketLayout {
     /// Where it is.
     pub endpoint: Endpoint,
     /// The network's name, for a network socket.
     pub network: Option<String>,
 }
 
-impl SocketPlan {
+impl SocketLayout {
     /// Where a UDP socket is bound; `None` for a serial port.
     pub fn udp_bind(&self) -> Option<SocketAddr> {
         match self.endpoint {
@@ -71,8 +71,8 @@ impl SocketPlan {
 
 /// How vehicle `i` is reached.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct RoutePlan {
-    /// Index of its socket in [`TransportPlan::sockets`].
+pub struct VehicleRoute {
+    /// Index of its socket in [`TransportLayout::sockets`].
     pub socket: usize,
     /// Its address: fixed on an own socket, the first to try on a network.
     pub address: Option<SocketAddr>,
@@ -82,11 +82,11 @@ pub struct RoutePlan {
 
 /// The coordinator's sockets and each vehicle's route, in ring order.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct TransportPlan {
+pub struct TransportLayout {
     /// The sockets to bind.
-    pub sockets: Vec<SocketPlan>,
+    pub sockets: Vec<SocketLayout>,
     /// One route per vehicle.
-    pub routes: Vec<RoutePlan>,
+    pub routes: Vec<VehicleRoute>,
 }
 
 /// A vehicle's address changed (first learned, or replaced after silence).
@@ -128,7 +128,7 @@ pub struct Router {
 
 impl Router {
     /// A router for `plan` (a route's socket index must be in range: the config checks).
-    pub fn new(plan: &TransportPlan) -> Self {
+    pub fn new(plan: &TransportLayout) -> Self {
         let mut demux: Vec<Demux> = plan
             .sockets
             .iter()
@@ -258,42 +258,42 @@ mod tests {
     }
 
     /// Two networks whose system ids overlap (1 and 2 on each) and one own socket.
-    fn plan() -> TransportPlan {
-        let network = |name: &str, port| SocketPlan {
+    fn plan() -> TransportLayout {
+        let network = |name: &str, port| SocketLayout {
             endpoint: Endpoint::Udp(addr(port)),
             network: Some(name.to_owned()),
         };
-        TransportPlan {
+        TransportLayout {
             sockets: vec![
                 network("a", 14550),
                 network("b", 14551),
-                SocketPlan {
+                SocketLayout {
                     endpoint: Endpoint::Udp(addr(14540)),
                     network: None,
                 },
             ],
             routes: vec![
-                RoutePlan {
+                VehicleRoute {
                     socket: 0,
                     address: None,
                     system_id: 1,
                 },
-                RoutePlan {
+                VehicleRoute {
                     socket: 0,
                     address: Some(addr(30002)),
                     system_id: 2,
                 },
-                RoutePlan {
+                VehicleRoute {
                     socket: 1,
                     address: None,
                     system_id: 1,
                 },
-                RoutePlan {
+                VehicleRoute {
                     socket: 1,
                     address: None,
                     system_id: 2,
                 },
-                RoutePlan {
+                VehicleRoute {
                     socket: 2,
                     address: Some(addr(14580)),
                     system_id: 1,

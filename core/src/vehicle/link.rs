@@ -14,7 +14,7 @@ use super::telemetry::{OriginVerdict, PositionVerdict, TelemetryGate};
 use super::{LinkConfig, LinkEvent, Phase, Setpoint, VehicleState};
 
 use crate::link::{
-    Autopilot, AutopilotChoice, Command, Encoder, Inbound, Outgoing, Signer, autopilot_name,
+    Autopilot, AutopilotChoice, Encoder, Inbound, Outgoing, Signer, VehicleCommand, autopilot_name,
     command_name, encode, frames, inbound, mission_result_name,
 };
 
@@ -27,7 +27,7 @@ mod commands;
 /// A command waiting for its acknowledgement.
 #[derive(Debug, Clone, Copy)]
 struct Pending {
-    command: Command,
+    command: VehicleCommand,
     attempt: u8,
     deadline: SimTime,
     /// An ACCEPTED that may still be followed by the real answer.

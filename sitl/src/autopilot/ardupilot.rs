@@ -40,7 +40,7 @@ use mavlink::dialects::common::{
 use nalgebra::{Quaternion, UnitQuaternion};
 use ringswarm_wire::ardupilot as ap;
 
-use super::commands::Command;
+use super::commands::ReceivedCommand;
 use super::mode::FlightMode;
 use super::offboard::{OffboardTarget, att_mask};
 use super::{LinkId, Vehicle};
@@ -183,7 +183,7 @@ impl Vehicle {
     /// DO_SET_MODE (or SET_MODE) as ArduCopter takes it: param1 bit 0, the mode number in
     /// param2; any mode it flies while disarmed, the position modes armed only with a
     /// position estimate.
-    pub(super) fn ap_set_mode(&mut self, now: SimTime, cmd: &Command) -> MavResult {
+    pub(super) fn ap_set_mode(&mut self, now: SimTime, cmd: &ReceivedCommand) -> MavResult {
         let base = cmd.params[0].map_or(0, |b| b as u32);
         let Some(number) = cmd.params[1].filter(|_| base & 1 == 1) else {
             return MavResult::MAV_RESULT_DENIED;
@@ -231,7 +231,7 @@ impl Vehicle {
     /// ARM_DISARM as ArduCopter answers it: FAILED with its STATUSTEXT before the EKF has
     /// a position or in a mode that does not arm (LAND, RTL, BRAKE); a disarm in the air
     /// only forced (21196).
-    pub(super) fn ap_arm_disarm(&mut self, now: SimTime, cmd: &Command) -> MavResult {
+    pub(super) fn ap_arm_disarm(&mut self, now: SimTime, cmd: &ReceivedCommand) -> MavResult {
         let force = cmd.params[1].is_some_and(|p| FORCE_ARM.contains(&p));
         match cmd.params[0] {
             Some(1.0) if self.armed => MavResult::MAV_RESULT_ACCEPTED,
@@ -271,7 +271,7 @@ impl Vehicle {
 
     /// NAV_TAKEOFF in GUIDED: param7 metres above home; FAILED disarmed, in the air, or
     /// below where it is.
-    pub(super) fn ap_takeoff(&mut self, cmd: &Command) -> MavResult {
+    pub(super) fn ap_takeoff(&mut self, cmd: &ReceivedCommand) -> MavResult {
         let guided = self.ap.is_some_and(|s| s.mode_number == ap::GUIDED);
         let height = self.env.ground_z_ned_m - self.state.pos_ned_m.z;
         let Some(alt) = cmd.params[6].filter(|a| *a > height) else {

@@ -26,13 +26,13 @@ const REPOSITION_CHANGE_MODE: u32 = 1;
 
 /// A command with its seven parameters (`None` = unused).
 #[derive(Debug, Clone, Copy)]
-pub(super) struct Command {
+pub(super) struct ReceivedCommand {
     /// The command.
     pub id: MavCmd,
     pub params: [Option<f64>; 7],
 }
 
-impl Command {
+impl ReceivedCommand {
     /// A COMMAND_LONG's parameters; NaN marks an unused parameter.
     pub fn from_wire(id: MavCmd, params: [f32; 7]) -> Self {
         Self {
@@ -68,7 +68,7 @@ impl Vehicle {
         now: SimTime,
         link: LinkId,
         sender: (u8, u8),
-        cmd: Command,
+        cmd: ReceivedCommand,
     ) {
         let ardupilot = self.is_ardupilot();
         let result = match cmd.id {
@@ -144,7 +144,7 @@ impl Vehicle {
         now: SimTime,
         link: LinkId,
         sender: (u8, u8),
-        cmd: Command,
+        cmd: ReceivedCommand,
     ) {
         // ArduPilot answers once.
         if cmd.id == MavCmd::MAV_CMD_DO_SET_MODE && !self.is_ardupilot() {
@@ -153,7 +153,7 @@ impl Vehicle {
         self.run_command(now, link, sender, cmd);
     }
 
-    fn cmd_arm_disarm(&mut self, now: SimTime, cmd: &Command) -> MavResult {
+    fn cmd_arm_disarm(&mut self, now: SimTime, cmd: &ReceivedCommand) -> MavResult {
         let force = cmd.params[1] == Some(FORCE_MAGIC);
         match cmd.params[0] {
             Some(1.0) => {
@@ -210,7 +210,7 @@ impl Vehicle {
         true
     }
 
-    fn cmd_set_mode(&mut self, now: SimTime, cmd: &Command) -> MavResult {
+    fn cmd_set_mode(&mut self, now: SimTime, cmd: &ReceivedCommand) -> MavResult {
         let (Some(main), sub) = (cmd.params[1], cmd.params[2].unwrap_or(0.0)) else {
             return MavResult::MAV_RESULT_DENIED;
         };
@@ -227,7 +227,7 @@ impl Vehicle {
 
     /// NAV_TAKEOFF: param7 is the target altitude AMSL (NaN: the current altitude plus
     /// MIS_TAKEOFF_ALT), never below the current altitude.
-    fn cmd_takeoff(&mut self, cmd: &Command) -> MavResult {
+    fn cmd_takeoff(&mut self, cmd: &ReceivedCommand) -> MavResult {
         self.failsafe = false;
         self.enter_mode(FlightMode::Takeoff);
         if let Some(alt_amsl) = cmd.params[6].filter(|a| a.is_finite()) {
@@ -246,7 +246,7 @@ impl Vehicle {
     /// flies to latitude/longitude (param5/6, NaN: here) at altitude param7 (AMSL, NaN:
     /// here) at param1 m/s (≤ 0 or NaN: MPC_XY_CRUISE), facing param4 (radians, as PX4
     /// reads it; NaN: the current heading).
-    fn cmd_reposition(&mut self, cmd: &Command) -> MavResult {
+    fn cmd_reposition(&mut self, cmd: &ReceivedCommand) -> MavResult {
         let flags = cmd.params[1].map_or(0, |f| f as u32);
         if flags & REPOSITION_CHANGE_MODE == 0 && self.mode != FlightMode::Hold {
             return MavResult::MAV_RESULT_DENIED;
@@ -285,7 +285,7 @@ impl Vehicle {
     /// The local NED point of a command's latitude/longitude (param5/6, degrees) and AMSL
     /// altitude (param7), each unused one taken from where the vehicle is; `None` for a
     /// latitude or longitude off the Earth.
-    fn target_of(&self, cmd: &Command) -> Option<Vector3<f64>> {
+    fn target_of(&self, cmd: &ReceivedCommand) -> Option<Vector3<f64>> {
         let (lat, lon, alt) = (cmd.params[4], cmd.params[5], cmd.params[6]);
         if lat.is_some_and(|v| v.abs() > 90.0) || lon.is_some_and(|v| v.abs() > 180.0) {
             return None;
@@ -304,7 +304,7 @@ impl Vehicle {
     /// (m/s; NaN: 1; at most what MPC_ACC_HOR allows on that radius), yaw behaviour param3
     /// (0 centre, 1 initial heading, 2 free, 3 tangent; NaN: 0), centre param5/6
     /// (lat/lon; NaN: here), altitude param7 (AMSL; NaN: here). Needs a flying vehicle.
-    fn cmd_orbit(&mut self, cmd: &Command) -> MavResult {
+    fn cmd_orbit(&mut self, cmd: &ReceivedCommand) -> MavResult {
         if !self.armed || self.landed {
             return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
         }
@@ -351,7 +351,7 @@ impl Vehicle {
 
     /// DO_CHANGE_SPEED: param2 m/s for the leg being flown (Hold/goto or a mission);
     /// −1 leaves it, 0 or less otherwise goes back to MPC_XY_CRUISE.
-    fn cmd_change_speed(&mut self, cmd: &Command) -> MavResult {
+    fn cmd_change_speed(&mut self, cmd: &ReceivedCommand) -> MavResult {
         let speed = match cmd.params[1] {
             Some(-1.0) => return MavResult::MAV_RESULT_ACCEPTED,
             Some(s) if s > 0.0 => s,
@@ -366,7 +366,7 @@ impl Vehicle {
     }
 
     /// MISSION_START: AUTO.MISSION from item param1 (−1: the current one), and arms.
-    fn cmd_mission_start(&mut self, now: SimTime, cmd: &Command) -> MavResult {
+    fn cmd_mission_start(&mut self, now: SimTime, cmd: &ReceivedCommand) -> MavResult {
         let n = self.navigator.mission.items().len() as f64;
         let first = cmd.params[0];
         if !self.navigator.mission.is_valid() || first.is_none_or(|f| !(-1.0..n).contains(&f)) {
@@ -387,7 +387,7 @@ impl Vehicle {
     }
 
     /// DO_SET_MISSION_CURRENT: param1 the item (−1: keep), param2 0 or 1.
-    fn cmd_set_mission_current(&mut self, cmd: &Command) -> MavResult {
+    fn cmd_set_mission_current(&mut self, cmd: &ReceivedCommand) -> MavResult {
         let (Some(seq), reset) = (cmd.params[0], cmd.params[1].unwrap_or(0.0)) else {
             return MavResult::MAV_RESULT_DENIED;
         };
@@ -404,7 +404,12 @@ impl Vehicle {
         MavResult::MAV_RESULT_ACCEPTED
     }
 
-    fn cmd_message_interval(&mut self, now: SimTime, link: LinkId, cmd: &Command) -> MavResult {
+    fn cmd_message_interval(
+        &mut self,
+        now: SimTime,
+        link: LinkId,
+        cmd: &ReceivedCommand,
+    ) -> MavResult {
         let (Some(id), Some(interval_us)) = (cmd.params[0], cmd.params[1]) else {
             return MavResult::MAV_RESULT_DENIED;
         };
@@ -421,7 +426,12 @@ impl Vehicle {
         }
     }
 
-    fn cmd_request_message(&mut self, now: SimTime, link: LinkId, cmd: &Command) -> MavResult {
+    fn cmd_request_message(
+        &mut self,
+        now: SimTime,
+        link: LinkId,
+        cmd: &ReceivedCommand,
+    ) -> MavResult {
         let Some(id) = cmd.params[0] else {
             return MavResult::MAV_RESULT_DENIED;
         };

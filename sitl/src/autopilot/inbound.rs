@@ -13,7 +13,7 @@ use mavlink::dialects::common::{
     SET_POSITION_TARGET_LOCAL_NED_DATA, TIMESYNC_DATA,
 };
 
-use super::commands::Command;
+use super::commands::ReceivedCommand;
 use super::offboard::{self, AttitudeTarget, OffboardTarget, PositionTarget, Refusal};
 use super::{LinkId, Vehicle};
 use crate::codec::frames;
@@ -262,7 +262,12 @@ impl Vehicle {
         let params = [
             m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7,
         ];
-        self.run_wire_command(now, link, sender, Command::from_wire(m.command, params));
+        self.run_wire_command(
+            now,
+            link,
+            sender,
+            ReceivedCommand::from_wire(m.command, params),
+        );
         true
     }
 
@@ -286,7 +291,7 @@ impl Vehicle {
                 | MavFrame::MAV_FRAME_GLOBAL_TERRAIN_ALT_INT
         );
         let params = [m.param1, m.param2, m.param3, m.param4];
-        let command = Command::from_int(m.command, params, m.x, m.y, m.z, global);
+        let command = ReceivedCommand::from_int(m.command, params, m.x, m.y, m.z, global);
         self.run_wire_command(now, link, sender, command);
         true
     }
@@ -316,7 +321,7 @@ impl Vehicle {
             f32::NAN,
             f32::NAN,
         ];
-        let command = Command::from_wire(
+        let command = ReceivedCommand::from_wire(
             mavlink::dialects::common::MavCmd::MAV_CMD_DO_SET_MODE,
             params,
         );

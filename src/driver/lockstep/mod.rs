@@ -3,7 +3,7 @@
 //! time, 1 ms at a time, with a seeded latency and loss on every link. Same seed, same
 //! inputs: the same trajectory, bit for bit.
 //!
-//! By default link `i` talks to vehicle `i`. With a transport plan
+//! By default link `i` talks to vehicle `i`. With a transport layout
 //! ([`Lockstep::with_transport`]) datagrams go through the same router as over UDP
 //! (`routing`). Shards ([`Lockstep::sharded`]) each fly their own vehicles and tell each
 //! other the rest over a simulated bus (`bus`).
@@ -27,7 +27,7 @@ use ringswarm_wire::time::SimTime;
 
 use super::{Intake, Observer};
 use crate::distributed::ShardPlan;
-use crate::link::router::TransportPlan;
+use crate::link::router::TransportLayout;
 use crate::swarm::Swarm;
 pub use bus::BusCounts;
 use bus::ShardBus;
@@ -158,7 +158,7 @@ impl Lockstep {
 
     /// Routes every datagram as `plan` says (vehicle `j` sits at its route's address, or
     /// at a unique virtual one, and sends to its route's socket).
-    pub fn with_transport(mut self, plan: &TransportPlan) -> Self {
+    pub fn with_transport(mut self, plan: &TransportLayout) -> Self {
         self.routing = Some(Routing::new(plan));
         self
     }
@@ -182,7 +182,7 @@ impl Lockstep {
             .into_iter()
             .map(|v| Vehicle::new(v, world))
             .collect::<Result<Vec<_>, _>>()?;
-        let plan = config.transport_plan()?;
+        let plan = config.transport_layout()?;
         let mut run =
             Self::new(Swarm::new(setup), vehicles, faults.conditions).with_transport(&plan);
         for (i, from, until) in faults.silences {

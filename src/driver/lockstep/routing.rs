@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use std::net::{IpAddr, SocketAddr};
 use std::ops::Range;
 
-use crate::link::router::{Router, TransportPlan};
+use crate::link::router::{Router, TransportLayout};
 
 /// The router and the vehicles' virtual addresses.
 #[derive(Debug)]
@@ -24,7 +24,7 @@ pub(super) struct Routing {
 
 impl Routing {
     /// Vehicle `j` at its route's address, or at a unique virtual one.
-    pub(super) fn new(plan: &TransportPlan) -> Self {
+    pub(super) fn new(plan: &TransportLayout) -> Self {
         let addresses: Vec<SocketAddr> = plan
             .routes
             .iter()

@@ -10,7 +10,7 @@ use ringswarm_wire::time::SimTime;
 use super::super::params::ParamSession;
 use super::super::{LinkEvent, Phase};
 use super::{Pending, VehicleLink};
-use crate::link::{Command, Outgoing, StreamRate};
+use crate::link::{Outgoing, StreamRate, VehicleCommand};
 
 /// MAV_RESULT_ACCEPTED.
 const ACCEPTED: u8 = 0;
@@ -36,13 +36,13 @@ impl VehicleLink {
 
     pub(super) fn request_land(&mut self, now: SimTime) {
         self.phase = Phase::Landing;
-        self.send_pending(now, Command::Land, 1);
+        self.send_pending(now, VehicleCommand::Land, 1);
     }
 
     pub(super) fn request_disarm(&mut self, now: SimTime) {
         self.phase = Phase::Disarming;
         self.events.push_back(LinkEvent::Landed);
-        self.send_pending(now, Command::Disarm, 1);
+        self.send_pending(now, VehicleCommand::Disarm, 1);
     }
 
     /// Disarmed on the ground: done, once what the handshake wrote on the vehicle is put
@@ -145,7 +145,7 @@ impl VehicleLink {
                 StreamRate::Fixed(us) => Some(us),
                 StreamRate::Off => None,
             };
-            let stream = Command::StreamInterval {
+            let stream = VehicleCommand::StreamInterval {
                 message_id,
                 interval_us,
             };
@@ -202,7 +202,7 @@ impl VehicleLink {
     /// while it has not come, so a lost request or answer costs a second, not the 5 s
     /// of PX4's slow origin stream).
     pub(super) fn request_origin(&mut self) {
-        let origin = Command::RequestMessage {
+        let origin = VehicleCommand::RequestMessage {
             message_id: GPS_GLOBAL_ORIGIN,
         };
         self.send_command(origin, 0);
@@ -220,7 +220,11 @@ impl VehicleLink {
             self.mode_taken(now);
         }
         if self.phase == Phase::Landing {
-            if self.pending.is_some_and(|p| p.command == Command::Land) && self.state.in_land() {
+            if self
+                .pending
+                .is_some_and(|p| p.command == VehicleCommand::Land)
+                && self.state.in_land()
+            {
                 self.pending = None;
                 self.events.push_back(LinkEvent::Landing);
             }
@@ -298,7 +302,7 @@ impl VehicleLink {
 
     pub(super) fn request_arm(&mut self, now: SimTime) {
         self.phase = Phase::Arming;
-        self.send_pending(now, Command::Arm, 1);
+        self.send_pending(now, VehicleCommand::Arm, 1);
     }
 
     pub(super) fn request_fly_mode(&mut self, now: SimTime) {
@@ -307,7 +311,7 @@ impl VehicleLink {
         self.send_pending(now, mode, 1);
     }
 
-    pub(super) fn send_pending(&mut self, now: SimTime, command: Command, attempt: u8) {
+    pub(super) fn send_pending(&mut self, now: SimTime, command: VehicleCommand, attempt: u8) {
         self.send_command(command, attempt - 1);
         self.pending = Some(Pending {
             command,
@@ -318,7 +322,7 @@ impl VehicleLink {
     }
 
     /// Sends `command`; `confirmation` counts its resends before this one.
-    pub(super) fn send_command(&mut self, command: Command, confirmation: u8) {
+    pub(super) fn send_command(&mut self, command: VehicleCommand, confirmation: u8) {
         let target_system = self.cfg.system_id;
         self.queue(Outgoing::Command {
             command,
