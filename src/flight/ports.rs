@@ -8,7 +8,7 @@ use crate::driver::serial::SerialLine;
 use crate::driver::udp::Port;
 use crate::link::router::{Endpoint, TransportLayout};
 
-/// Binds every socket of the plan, naming the one that cannot be bound.
+/// Binds every socket of the layout, naming the one that cannot be bound.
 ///
 /// # Errors
 /// The first bind error.

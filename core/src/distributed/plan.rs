@@ -36,7 +36,7 @@ impl Watch {
 
 /// Why a plan cannot be made.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum PlanError {
+pub enum ShardPlanError {
     /// The owner table does not have one entry per vehicle of the ring.
     #[error("{got} vehicle owners for a ring of {expected} vehicles")]
     WrongLength {
@@ -85,42 +85,42 @@ impl ShardPlan {
     /// Shard `this` of `shards`, vehicle `i` flown by shard `owner[i]`.
     ///
     /// # Errors
-    /// [`PlanError`] when the table does not fit the ring or the shards.
+    /// [`ShardPlanError`] when the table does not fit the ring or the shards.
     pub fn new(
         this: usize,
         shards: usize,
         owner: Vec<usize>,
         ring: &RingDigraph,
         watch: Watch,
-    ) -> Result<Self, PlanError> {
+    ) -> Result<Self, ShardPlanError> {
         let n = ring.agents();
         if owner.len() != n {
-            return Err(PlanError::WrongLength {
+            return Err(ShardPlanError::WrongLength {
                 expected: n,
                 got: owner.len(),
             });
         }
         for big in [n, shards] {
             if big > usize::from(u16::MAX) {
-                return Err(PlanError::TooMany(big));
+                return Err(ShardPlanError::TooMany(big));
             }
         }
         if this >= shards {
-            return Err(PlanError::NoSuchShard {
+            return Err(ShardPlanError::NoSuchShard {
                 vehicle: 0,
                 shard: this,
                 shards,
             });
         }
         if let Some((vehicle, &shard)) = owner.iter().enumerate().find(|(_, s)| **s >= shards) {
-            return Err(PlanError::NoSuchShard {
+            return Err(ShardPlanError::NoSuchShard {
                 vehicle,
                 shard,
                 shards,
             });
         }
         if let Some(empty) = (0..shards).find(|s| !owner.contains(s)) {
-            return Err(PlanError::Empty(empty));
+            return Err(ShardPlanError::Empty(empty));
         }
         // Vehicle j is read by the shards flying its out-neighbours (the law), or by
         // every other shard (watch all).
@@ -311,14 +311,14 @@ mod tests {
         let r = ring(4);
         assert_eq!(
             ShardPlan::new(0, 2, vec![0, 0, 1], &r, Watch::All),
-            Err(PlanError::WrongLength {
+            Err(ShardPlanError::WrongLength {
                 expected: 4,
                 got: 3
             })
         );
         assert_eq!(
             ShardPlan::new(0, 2, vec![0, 0, 2, 1], &r, Watch::All),
-            Err(PlanError::NoSuchShard {
+            Err(ShardPlanError::NoSuchShard {
                 vehicle: 2,
                 shard: 2,
                 shards: 2
@@ -326,7 +326,7 @@ mod tests {
         );
         assert_eq!(
             ShardPlan::new(0, 3, vec![0, 0, 1, 1], &r, Watch::All),
-            Err(PlanError::Empty(2))
+            Err(ShardPlanError::Empty(2))
         );
         assert_eq!(
             ShardPlan::new(0, 2, vec![0, 0, 1, 2], &r, Watch::All)
