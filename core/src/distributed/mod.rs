@@ -18,5 +18,5 @@ pub use payload::{
     MemberPhase, PAYLOAD_VERSION, PayloadError, PlanVelocities, ShardMessage, ShardReport,
     VehicleReport, WeightedSum, decode, encode,
 };
-pub use plan::{DEFAULT_START_LEAD, DEFAULT_TILE_M, ShardPlanError, ShardPlan, Watch};
+pub use plan::{DEFAULT_START_LEAD, DEFAULT_TILE_M, ShardPlan, ShardPlanError, Watch};
 pub use tiles::{Tile, TileInterest};

@@ -42,7 +42,7 @@ impl Swarm {
             if !self.start_due(now) {
                 return;
             }
-            let own: Vec<super::shard::OwnPlanInput> = (0..self.slots.len())
+            let own: Vec<super::peers::OwnPlanInput> = (0..self.slots.len())
                 .filter(|i| !self.is_remote(*i))
                 .map(|i| {
                     let v = self.law.states[i].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
