@@ -73,9 +73,10 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
         },
         other => other.name(),
     };
+    // One mark per vehicle (another shard's: as its shard reports it).
     let links: String = swarm
-        .links()
-        .map(|l| match l.phase() {
+        .indices()
+        .map(|i| match swarm.vehicle_phase(i) {
             Phase::Discovering => '?',
             Phase::Streaming(_) => 's',
             Phase::Arming => 'a',
@@ -107,10 +108,10 @@ fn status_line(swarm: &Swarm, recorder: &Recorder, now: SimTime) -> String {
     if matches!(swarm.phase(), SwarmPhase::Handshake) {
         // What the handshake waits for (ArduPilot's EKF, a fence upload, …): the first
         // vehicle waiting, and how many more.
-        let mut waiting = swarm
-            .links()
-            .zip(&swarm.setup().links)
-            .filter_map(|(l, cfg)| l.waiting_for().map(|what| (cfg.system_id, what)));
+        let mut waiting = swarm.indices().filter_map(|i| {
+            let what = swarm.link(i)?.waiting_for()?;
+            Some((swarm.setup().links[i].system_id, what))
+        });
         if let Some((id, what)) = waiting.next() {
             line += &format!(" | vehicle {id} {what}");
             let more = waiting.count();

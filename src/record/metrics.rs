@@ -5,6 +5,7 @@ use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 use serde::Serialize;
 
+use crate::swarm::VehicleIndex;
 use crate::swarm::timing::TimingReport;
 use crate::swarm::{Swarm, SwarmPhase};
 
@@ -103,7 +104,7 @@ impl RunTracker {
         let n = swarm.vehicle_count();
         self.pos.clear();
         let mut vel = Vector2::zeros();
-        for i in 0..n {
+        for i in swarm.indices() {
             let Some(s) = swarm.common_state(i) else {
                 return;
             };
@@ -340,6 +341,7 @@ impl ModelReport {
             .iter()
             .enumerate()
             .filter_map(|(i, link)| {
+                let i = VehicleIndex(i);
                 let (hover, hover_std) = swarm.hover_estimate(i)?;
                 let (drag, drag_std, fed) = swarm.drag_estimate(i)?;
                 let b = swarm.disturbance_estimate_mps2(i)?;

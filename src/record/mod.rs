@@ -30,6 +30,7 @@ use ringswarm_wire::time::SimTime;
 
 use crate::link::raw_frames;
 use crate::swarm::Swarm;
+use crate::swarm::VehicleIndex;
 use metrics::{RunTracker, Summary};
 use sink::Sinks;
 use trace::Trace;
@@ -328,7 +329,7 @@ impl Recorder {
         let Some(sinks) = self.sinks.as_mut() else {
             return Ok(());
         };
-        for i in 0..self.vehicles {
+        for (k, i) in VehicleIndex::all(self.vehicles).enumerate() {
             let link_state = swarm.link(i).map(|l| l.state());
             let attitude = link_state.and_then(|l| l.attitude);
             let Some(s) = swarm.common_state(i) else {
@@ -358,10 +359,10 @@ impl Recorder {
                     .map_or(f64::NAN, |t| now.saturating_since(t).as_secs_f64() * 1e3),
             };
             match self.text {
-                RowText::Writer => rows::push_row(sinks.buffer(FIRST_CSV + i), &row),
-                RowText::Inline => row.write_csv(sinks.buffer(FIRST_CSV + i)),
+                RowText::Writer => rows::push_row(sinks.buffer(FIRST_CSV + k), &row),
+                RowText::Inline => row.write_csv(sinks.buffer(FIRST_CSV + k)),
             }
-            sinks.appended(FIRST_CSV + i)?;
+            sinks.appended(FIRST_CSV + k)?;
         }
         Ok(())
     }

@@ -9,6 +9,7 @@
 use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 
+use crate::swarm::VehicleIndex;
 use crate::swarm::{Swarm, SwarmPhase};
 
 /// The fewest instants a trace keeps, however many vehicles share its budget.
@@ -66,9 +67,7 @@ impl Trace {
         if !self.due(now) {
             return;
         }
-        let states: Option<Vec<_>> = (0..swarm.vehicle_count())
-            .map(|i| swarm.common_state(i))
-            .collect();
+        let states: Option<Vec<_>> = swarm.indices().map(|i| swarm.common_state(i)).collect();
         let Some(states) = states else {
             return;
         };
@@ -85,13 +84,13 @@ impl Trace {
             .iter()
             .enumerate()
             .map(|(i, s)| {
-                let rpy = swarm.link(i).and_then(|l| l.state().attitude).map_or(
-                    Vector3::repeat(f64::NAN),
-                    |q| {
+                let rpy = swarm
+                    .link(VehicleIndex(i))
+                    .and_then(|l| l.state().attitude)
+                    .map_or(Vector3::repeat(f64::NAN), |q| {
                         let (r, p, y) = q.euler_angles();
                         Vector3::new(r, p, y)
-                    },
-                );
+                    });
                 Sample {
                     pos_m: s.pos_enu_m,
                     vel_mps: s.vel_enu_mps,

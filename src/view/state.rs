@@ -172,18 +172,18 @@ impl ViewState {
     pub fn of_swarm(swarm: &Swarm, now: SimTime, figures: Option<Snapshot>) -> Self {
         let setup = swarm.setup();
         let n = swarm.vehicle_count();
-        let states: Vec<_> = (0..n).map(|i| swarm.common_state(i)).collect();
+        let states: Vec<_> = swarm.indices().map(|i| swarm.common_state(i)).collect();
         let xy: Vec<_> = states.iter().map(|s| s.map(|s| s.pos_enu_m.xy())).collect();
         let w: Vec<f64> = (0..n).map(|i| setup.ring.w(i)).collect();
         let targets = formation_targets(&xy, &setup.offsets_m, &w);
         let predicted = swarm.predicted_final_velocity();
         let active = swarm.safety_active_rows();
         let vehicles = swarm
-            .links()
-            .enumerate()
-            .map(|(i, link)| {
-                let state = link.state();
-                let heard = state.last_heartbeat.is_some();
+            .indices()
+            .map(|i| {
+                // Another shard's vehicle has no link here: what its shard reports.
+                let state = swarm.link(i).map(|l| l.state());
+                let heard = state.is_some_and(|s| s.last_heartbeat.is_some());
                 VehicleView {
                     sysid: setup.links[i].system_id,
                     network: setup.links[i].network.clone(),
@@ -191,14 +191,14 @@ impl ViewState {
                     velocity_enu_mps: states[i].map(|s| s.vel_enu_mps.into()),
                     target_enu_m: targets.as_ref().map(|(_, t)| t[i].into()),
                     link_phase: swarm.vehicle_phase(i).name().to_owned(),
-                    mode: heard.then(|| state.mode_name()),
-                    armed: heard.then_some(state.armed),
+                    mode: state.filter(|_| heard).map(|s| s.mode_name()),
+                    armed: state.filter(|_| heard).map(|s| s.armed),
                     telemetry_age_ms: state
-                        .last_heard
+                        .and_then(|s| s.last_heard)
                         .map(|t| now.saturating_since(t).as_secs_f64() * 1e3),
                     speed_mps: states[i].map(|s| s.vel_enu_mps.xy().norm()),
                     saturated: Some(swarm.command_limited(i)),
-                    constrained: Some(active.iter().any(|&(a, b)| a == i || b == i)),
+                    constrained: Some(active.iter().any(|&(a, b)| a == i.get() || b == i.get())),
                 }
             })
             .collect();

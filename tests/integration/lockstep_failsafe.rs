@@ -6,6 +6,7 @@
 
 use ringswarm::config::Config;
 use ringswarm::driver::lockstep::Lockstep;
+use ringswarm::swarm::VehicleIndex;
 use ringswarm::swarm::{SwarmFailure, SwarmPhase};
 use ringswarm::vehicle::Phase;
 use ringswarm_sitl::autopilot::{FlightMode, Vehicle};
@@ -81,7 +82,7 @@ fn watch(run: &mut Lockstep, until_s: f64, i: usize) -> Watch {
         }
         if r.swarm().control_ticks() != last_tick {
             last_tick = r.swarm().control_ticks();
-            if r.swarm().link(i).unwrap().phase() == Phase::Flying {
+            if r.swarm().link(VehicleIndex(i)).unwrap().phase() == Phase::Flying {
                 w.min_thrust = w.min_thrust.min(r.swarm().setpoints()[i].thrust_norm);
             }
         }
@@ -109,7 +110,10 @@ fn nan_telemetry_from_one_vehicle_leaves_the_others_flying_and_that_vehicle_hold
     let v3 = run.vehicles()[2].status();
     assert_eq!(v3.mode, FlightMode::Hold, "{v3:?}");
     assert!(v3.armed && !v3.failsafe);
-    assert_eq!(run.swarm().link(2).unwrap().phase(), Phase::VehicleHold);
+    assert_eq!(
+        run.swarm().link(VehicleIndex(2)).unwrap().phase(),
+        Phase::VehicleHold
+    );
     // The others brake at up to g·tan 45° from ~15 m/s and hover 3.7 s later; vehicle 3
     // brakes in its own Hold, more gently (PX4's MPC_ACC_HOR-limited braking).
     for (i, v) in run.vehicles().iter().enumerate().filter(|(i, _)| *i != 2) {
@@ -152,7 +156,7 @@ fn a_vehicle_whose_position_stops_while_its_heartbeat_goes_on_is_lost_within_the
     let held = w.held_at.expect("never held").as_secs_f64();
     assert!((10.29..10.31).contains(&held), "held at {held} s");
     // Its heartbeat goes on: never lost, but in its own Hold, and the others hover.
-    let link = &run.swarm().link(2).unwrap();
+    let link = &run.swarm().link(VehicleIndex(2)).unwrap();
     assert_eq!(link.phase(), Phase::VehicleHold);
     assert!(
         link.state().last_heartbeat.is_some_and(
@@ -180,7 +184,10 @@ fn a_vehicle_whose_estimator_loses_its_position_is_not_flown_on_its_dead_reckoni
     let w = watch(&mut run, 13.0, 2);
     let held = w.held_at.expect("never held").as_secs_f64();
     assert!((11.0..=11.004).contains(&held), "held at {held} s");
-    assert_eq!(run.swarm().link(2).unwrap().phase(), Phase::VehicleHold);
+    assert_eq!(
+        run.swarm().link(VehicleIndex(2)).unwrap().phase(),
+        Phase::VehicleHold
+    );
     assert_eq!(run.vehicles()[2].status().mode, FlightMode::Hold);
     let told = warnings(&run, 3);
     assert_eq!(
@@ -210,7 +217,7 @@ fn a_vehicle_whose_estimator_loses_its_position_is_not_flown_on_its_dead_reckoni
 /// The common-frame position the coordinator flies vehicle `i` on, against the truth.
 fn common_error_m(run: &Lockstep, i: usize) -> f64 {
     let truth = ringswarm::control::ned_to_enu(run.vehicles()[i].status().pos_world_ned_m);
-    let seen = run.swarm().common_state(i).unwrap().pos_enu_m;
+    let seen = run.swarm().common_state(VehicleIndex(i)).unwrap().pos_enu_m;
     (seen - truth).norm()
 }
 
@@ -302,7 +309,10 @@ fn a_stall_of_the_coordinator_is_not_taken_for_its_vehicles_going_silent() {
         let told = warnings(&run, id);
         assert!(told.is_empty(), "vehicle {id}: {told:?}");
         assert_eq!(
-            run.swarm().link(usize::from(id) - 1).unwrap().phase(),
+            run.swarm()
+                .link(VehicleIndex(usize::from(id) - 1))
+                .unwrap()
+                .phase(),
             Phase::Flying
         );
     }

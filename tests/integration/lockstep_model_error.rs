@@ -11,6 +11,7 @@ use nalgebra::Vector2;
 use ringswarm::config::{AirframeSection, Config};
 use ringswarm::control::ned_to_enu;
 use ringswarm::driver::lockstep::Lockstep;
+use ringswarm::swarm::VehicleIndex;
 use ringswarm_wire::time::SimTime;
 
 fn load(name: &str) -> Config {
@@ -69,7 +70,7 @@ fn fly_run(config: &Config) -> (Reached, Lockstep) {
             .map(|v| (-v.status().pos_world_ned_m.z - 50.0).abs())
             .fold(0.0, f64::max),
         hover: (0..v.len())
-            .map(|i| run.swarm().hover_estimate(i).unwrap().0)
+            .map(|i| run.swarm().hover_estimate(VehicleIndex(i)).unwrap().0)
             .collect(),
         battery_pct: run
             .vehicles()

@@ -16,6 +16,7 @@ use nalgebra::Vector2;
 use ringswarm::config::Config;
 use ringswarm::control::ned_to_enu;
 use ringswarm::driver::lockstep::Lockstep;
+use ringswarm::swarm::VehicleIndex;
 use ringswarm::swarm::{PlanDecision, StopReason, SwarmPhase};
 use ringswarm_wire::time::SimTime;
 
@@ -93,7 +94,9 @@ fn fly(config: &Config) -> Outcome {
             .fold(0.0, f64::max),
         max_speed_mps,
         stop: swarm.stop_reason(),
-        drag: (0..6).map(|i| swarm.drag_estimate(i).unwrap().0).collect(),
+        drag: (0..6)
+            .map(|i| swarm.drag_estimate(VehicleIndex(i)).unwrap().0)
+            .collect(),
         planned: swarm.plan_decision().cloned(),
     }
 }

@@ -6,6 +6,7 @@ use std::time::Duration;
 use nalgebra::Vector2;
 use ringswarm::config::Config;
 use ringswarm::driver::lockstep::{LinkConditions, Lockstep};
+use ringswarm::swarm::VehicleIndex;
 use ringswarm::swarm::{Swarm, SwarmPhase};
 use ringswarm_sitl::autopilot::Vehicle;
 use ringswarm_wire::time::SimTime;
@@ -75,7 +76,7 @@ fn six_vehicles_are_handshaken_and_consensus_starts_with_the_papers_prediction()
     // Every vehicle is placed in the common frame where the emulator put it, up to the
     // age of its last LOCAL_POSITION_NED (at most one 20 ms telemetry period).
     for (i, v) in run.vehicles().iter().enumerate() {
-        let common = run.swarm().common_state(i).unwrap().pos_enu_m;
+        let common = run.swarm().common_state(VehicleIndex(i)).unwrap().pos_enu_m;
         let status = v.status();
         let truth = ringswarm::control::ned_to_enu(status.pos_world_ned_m);
         let allowance = status.vel_ned_mps.norm() * 0.021 + 0.01;

@@ -4,6 +4,7 @@
 use ringswarm::config::Config;
 use ringswarm::driver::lockstep::Lockstep;
 use ringswarm::swarm::SwarmPhase;
+use ringswarm::swarm::VehicleIndex;
 use ringswarm::vehicle::Phase;
 use ringswarm_sitl::autopilot::{FlightMode, Vehicle};
 use ringswarm_wire::time::SimTime;
@@ -97,7 +98,9 @@ fn by_default_a_vehicle_that_failsafed_is_left_to_its_own_decision() {
         if r.now() > secs(13.0) && v.mode == FlightMode::Offboard {
             retaken = true;
         }
-        if overridden_at.is_none() && r.swarm().link(2).unwrap().phase() == Phase::Overridden {
+        if overridden_at.is_none()
+            && r.swarm().link(VehicleIndex(2)).unwrap().phase() == Phase::Overridden
+        {
             overridden_at = Some(r.now());
         }
     });

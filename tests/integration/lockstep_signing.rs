@@ -5,6 +5,7 @@ use crate::common;
 
 use ringswarm::driver::Observer;
 use ringswarm::driver::lockstep::Lockstep;
+use ringswarm::swarm::VehicleIndex;
 use ringswarm::vehicle::Phase;
 use ringswarm_sitl::autopilot::FlightMode;
 use ringswarm_wire::codec::decode_datagram_with;
@@ -141,7 +142,7 @@ fn the_vehicles_authentic_frames_from_another_link_id_are_refused() {
     let key = SigningKey::from_bytes([0x77; 32]);
     let mut run = build(Some(&key), &vec![Some(key.clone()); 6]);
     run.run_until(SimTime::from_millis(2_000), |_| {});
-    let before = run.swarm().link(0).unwrap().refused_frames();
+    let before = run.swarm().link(VehicleIndex(0)).unwrap().refused_frames();
     assert_eq!(before, 0);
     let mut gcs_clock =
         ringswarm_wire::signing::Signing::new(key.clone(), common::START + 500_000_000);
@@ -158,11 +159,17 @@ fn the_vehicles_authentic_frames_from_another_link_id_are_refused() {
         run.inject(false, 0, bytes);
     }
     run.run_until(SimTime::from_millis(2_100), |_| {});
-    assert_eq!(run.swarm().link(0).unwrap().refused_frames(), 10);
+    assert_eq!(
+        run.swarm().link(VehicleIndex(0)).unwrap().refused_frames(),
+        10
+    );
     assert!(run.swarm().events().iter().any(|e| {
         e.system_id == Some(1)
             && e.text
                 .contains("signed on link id 0, but the vehicle talks to us on link id 1")
     }));
-    assert_eq!(run.swarm().link(0).unwrap().phase(), Phase::Flying);
+    assert_eq!(
+        run.swarm().link(VehicleIndex(0)).unwrap().phase(),
+        Phase::Flying
+    );
 }

@@ -15,6 +15,7 @@ use ringswarm::driver::Observer;
 use ringswarm::driver::lockstep::Lockstep;
 use ringswarm::record::{Recorder, RowText, RunSetup};
 use ringswarm::swarm::Swarm;
+use ringswarm::swarm::VehicleIndex;
 use ringswarm::view::replay::Replay;
 use ringswarm::view::state::VehicleView;
 use ringswarm::view::{Content, LiveFeed, ViewState, WebServer};
@@ -113,7 +114,7 @@ fn the_state_api_shows_every_vehicle_where_the_swarm_has_it() {
         assert_eq!(v.link_phase, "flying");
         assert_eq!(v.mode.as_deref(), Some("OFFBOARD"));
         assert_eq!(v.armed, Some(true));
-        let s = swarm.common_state(i).expect("known");
+        let s = swarm.common_state(VehicleIndex(i)).expect("known");
         let p = v.position_enu_m.expect("position");
         let vel = v.velocity_enu_mps.expect("velocity");
         for axis in 0..3 {
@@ -130,8 +131,14 @@ fn the_state_api_shows_every_vehicle_where_the_swarm_has_it() {
     let mut closest = (0, 0, f64::INFINITY);
     for i in 0..6 {
         for j in i + 1..6 {
-            let d = swarm.common_state(i).expect("known").pos_enu_m
-                - swarm.common_state(j).expect("known").pos_enu_m;
+            let d = swarm
+                .common_state(VehicleIndex(i))
+                .expect("known")
+                .pos_enu_m
+                - swarm
+                    .common_state(VehicleIndex(j))
+                    .expect("known")
+                    .pos_enu_m;
             let d = nalgebra::Vector3::new(d.x, d.y, d.z / 3.0).norm();
             if d < closest.2 {
                 closest = (i, j, d);
@@ -353,7 +360,11 @@ impl Observer for Recording<'_> {
     fn swarm(&mut self, swarm: &Swarm, now: SimTime) {
         self.recorder.sample(swarm, now);
         let positions: Option<Vec<[f64; 3]>> = (0..swarm.vehicle_count())
-            .map(|i| swarm.common_state(i).map(|s| s.pos_enu_m.into()))
+            .map(|i| {
+                swarm
+                    .common_state(VehicleIndex(i))
+                    .map(|s| s.pos_enu_m.into())
+            })
             .collect();
         if let Some(p) = positions {
             self.ticks.insert(now.as_micros(), p);

@@ -6,6 +6,7 @@
 
 use ringswarm_wire::time::SimTime;
 
+use super::VehicleIndex;
 use super::{StopReason, Swarm, SwarmPhase};
 use crate::safety::stop_point_m;
 use crate::swarm::LossPolicy;
@@ -32,8 +33,8 @@ impl Swarm {
             .safety
             .map_or(BRAKING_SHARE_WITHOUT_FILTER, |s| s.braking_share);
         let envelope = &self.setup.envelope;
-        let mut worst: Option<(usize, f64, nalgebra::Vector3<f64>)> = None;
-        for i in 0..self.slots.len() {
+        let mut worst: Option<(VehicleIndex, f64, nalgebra::Vector3<f64>)> = None;
+        for i in self.indices() {
             let Some(s) = self.law.states[i] else {
                 continue;
             };

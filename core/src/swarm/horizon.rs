@@ -13,6 +13,7 @@
 use ringswarm_wire::time::SimTime;
 
 use super::Swarm;
+use super::VehicleIndex;
 use crate::distributed::tiles::SUBSCRIPTION_LAG_S;
 use crate::distributed::{TileInterest, VehicleReport};
 use crate::safety::{LOOKAHEAD_S, look_radius_m};
@@ -26,8 +27,8 @@ impl Swarm {
 
     /// The fastest of the vehicles `which` picks that have a fresh state here, scaled as
     /// [`Self::own_top_speed_mps`].
-    fn top_speed_mps(&self, which: impl Fn(usize) -> bool) -> f64 {
-        (0..self.slots.len())
+    fn top_speed_mps(&self, which: impl Fn(VehicleIndex) -> bool) -> f64 {
+        self.indices()
             .filter(|i| which(*i))
             .filter_map(|i| self.law.states[i])
             .map(|s| {
@@ -60,7 +61,8 @@ impl Swarm {
                     .filter(|v| v.is_finite())
                     .fold(0.0, f64::max);
                 let fastest = self.top_speed_mps(|_| true).max(reported);
-                let own: Vec<nalgebra::Vector2<f64>> = (0..self.slots.len())
+                let own: Vec<nalgebra::Vector2<f64>> = self
+                    .indices()
                     .filter(|i| !self.is_remote(*i))
                     .filter_map(|i| self.law.states[i])
                     .map(|s| s.pos_enu_m.xy())

@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use ringswarm_wire::time::SimTime;
 
+use super::VehicleIndex;
 use super::slot::VehicleSlot;
 use super::{Swarm, model};
 use crate::vehicle::{LinkEvent, VehicleLink};
@@ -28,12 +29,14 @@ impl Swarm {
     /// of it as the vehicle's (see [`VehicleLink::handle_datagram`]).
     ///
     /// Costs the link's work only: nothing here visits the other links.
+    /// (The datagram interface numbers vehicles as the drivers' routers do: `i` is
+    /// [`VehicleIndex::get`].)
     pub fn handle_datagram(&mut self, now: SimTime, i: usize, bytes: &[u8]) -> bool {
         let Some(link) = self.slots.get_mut(i).and_then(VehicleSlot::link_mut) else {
             return false;
         };
         let taken = link.handle_datagram(now, bytes);
-        self.after_link(now, i);
+        self.after_link(now, VehicleIndex(i));
         taken
     }
 
@@ -72,7 +75,7 @@ impl Swarm {
             if link.has_output() {
                 self.scheduler.has_output(i);
             }
-            return Some((i, bytes));
+            return Some((i.get(), bytes));
         }
     }
 
@@ -146,14 +149,14 @@ impl Swarm {
 
     /// After something that may have touched every link (landing): O(N), rare.
     pub(super) fn after_all_links(&mut self, now: SimTime) {
-        for i in 0..self.slots.len() {
+        for i in self.indices() {
             self.after_link(now, i);
         }
     }
 
     /// After link `i` ran: its output, its next deadline, its events.
-    pub(super) fn after_link(&mut self, now: SimTime, i: usize) {
-        let Some(slot) = self.slots.get_mut(i) else {
+    pub(super) fn after_link(&mut self, now: SimTime, i: VehicleIndex) {
+        let Some(slot) = self.slots.get_mut(i.0) else {
             return;
         };
         let Some(link) = slot.link() else {
@@ -177,7 +180,7 @@ impl Swarm {
     /// MOT_THST_HOVER): with the hover estimator on, the estimate starts from it (the
     /// estimator corrects it in the air); with it off, the configured one is flown and a
     /// disagreement of more than the estimator's significance is warned of.
-    fn take_reported_hover(&mut self, now: SimTime, i: usize, hover_throttle: f64) {
+    fn take_reported_hover(&mut self, now: SimTime, i: VehicleIndex, hover_throttle: f64) {
         let configured = self.setup.models[i].hover_throttle();
         let differs =
             (hover_throttle - configured).abs() > model::SIGNIFICANT_FRACTION * configured;
@@ -189,7 +192,7 @@ impl Swarm {
             })
         } else if self
             .slots
-            .get_mut(i)
+            .get_mut(i.0)
             .is_some_and(|s| s.flown.seed_hover(hover_throttle))
         {
             differs.then(|| {
@@ -207,10 +210,10 @@ impl Swarm {
         }
     }
 
-    fn drain_events_of(&mut self, now: SimTime, i: usize) {
+    fn drain_events_of(&mut self, now: SimTime, i: VehicleIndex) {
         while let Some(event) = self
             .slots
-            .get_mut(i)
+            .get_mut(i.0)
             .and_then(VehicleSlot::link_mut)
             .and_then(VehicleLink::poll_event)
         {

@@ -77,7 +77,7 @@ impl Swarm {
                 SaturationMode::Clip
             }
             SwarmPhase::Handshake => {
-                for i in 0..self.law.accel.len() {
+                for i in self.indices() {
                     let in_air = self.ours_in_air(i);
                     let slot = &mut self.slots[i];
                     let on_ground = slot.link().is_some_and(|l| l.state().landed);

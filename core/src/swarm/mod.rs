@@ -40,6 +40,7 @@ mod events;
 mod fence;
 mod guard;
 mod horizon;
+mod index;
 mod io;
 mod laws;
 mod model;
@@ -67,6 +68,7 @@ use crate::vehicle::{Phase, Setpoint, VehicleLink};
 use events::EventLog;
 pub use events::{MAX_KEPT_EVENTS, REPEAT_WINDOW, SwarmEvent};
 pub use guard::{DivergenceGuard, GuardLimits, GuardTrip};
+pub use index::VehicleIndex;
 pub use io::{LISTEN_LAG_FLOOR, MAX_TICK_DEFER};
 use model::FlownModel;
 pub use safety::SafetyStats;
@@ -264,7 +266,7 @@ impl Swarm {
             ));
         }
         let mut swarm = Self::new(setup);
-        for i in (0..n).filter(|i| !plan.is_local(*i)) {
+        for i in VehicleIndex::all(n).filter(|i| !plan.is_local(i.get())) {
             // Flown by its own shard: no link here, never due.
             swarm.slots[i].member = Member::Remote(None);
             swarm.scheduler.schedule(i, SimTime::MAX);

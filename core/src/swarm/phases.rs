@@ -6,6 +6,7 @@ use std::time::Duration;
 use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
+use super::VehicleIndex;
 use super::{EndAction, LossPolicy, PlanDecision, StopReason, Swarm, SwarmFailure, SwarmPhase};
 use crate::consensus::{formation_error_m, predicted_final_velocity};
 use crate::vehicle::Phase;
@@ -29,7 +30,7 @@ impl Swarm {
     /// [`PLAN_CLIMB_MPS`] vertically.
     fn level_at_altitude(&self) -> bool {
         // Over the vehicles known here (every one in one process).
-        let known = (0..self.law.states.len()).filter(|i| self.is_known(*i));
+        let known = self.indices().filter(|i| self.is_known(*i));
         known.map(|i| self.law.states[i]).all(|s| {
             s.is_some_and(|s| {
                 (s.pos_enu_m.z - self.setup.altitude_m).abs() < PLAN_ALTITUDE_M
@@ -42,9 +43,9 @@ impl Swarm {
     pub(super) fn transition(&mut self, now: SimTime) {
         // Over the vehicles known here (all of them in one process); with shards, the
         // others through their shard's report (shard.rs).
-        let known = |i: &usize| self.is_known(*i);
-        let n = self.slots.len();
-        let all_flying = (0..n)
+        let known = |i: &VehicleIndex| self.is_known(*i);
+        let all_flying = self
+            .indices()
             .filter(known)
             .all(|i| self.member_phase(i) == Phase::Flying && self.law.states[i].is_some())
             && self.others_flying(now);
@@ -52,7 +53,7 @@ impl Swarm {
         // comes back on its own, so the swarm holds (or lands) until told otherwise. So
         // does one that flies on a position too old to use, or that was handed to its own
         // Hold.
-        let any_lost = (0..n).filter(known).any(|i| {
+        let any_lost = self.indices().filter(known).any(|i| {
             let phase = self.member_phase(i);
             matches!(phase, Phase::Lost | Phase::Overridden | Phase::VehicleHold)
                 || (phase == Phase::Flying && self.law.states[i].is_none())
@@ -106,7 +107,7 @@ impl Swarm {
                 // starts once every shard is ready (start_when_agreed).
                 let worst = retarget
                     .iter()
-                    .filter(|(agent, _)| !self.is_remote(*agent))
+                    .filter(|(agent, _)| !self.is_remote(VehicleIndex(*agent)))
                     .map(|r| (off(r), *r))
                     .max_by(|a, b| a.0.total_cmp(&b.0));
                 // The prediction is the w-weighted mean at the start of consensus: that
@@ -212,14 +213,16 @@ impl Swarm {
     }
 
     fn handshake_over(&mut self, now: SimTime) -> bool {
-        let failed = (0..self.slots.len())
+        let failed = self
+            .indices()
             .filter(|i| self.is_known(*i))
             .any(|i| self.member_phase(i) == Phase::Failed);
         let timed_out = now >= SimTime::ZERO + self.setup.handshake_timeout;
         if !(failed || timed_out) {
             return false;
         }
-        let not_flying: Vec<(u8, String)> = (0..self.slots.len())
+        let not_flying: Vec<(u8, String)> = self
+            .indices()
             .filter_map(|i| {
                 let cfg = &self.setup.links[i];
                 if !self.is_known(i) {

@@ -4,6 +4,7 @@
 use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
+use super::VehicleIndex;
 use super::{MAX_SPEED_MPS, PlanDecision, Retargeted, Swarm, SwarmPhase, TargetVelocity};
 use crate::consensus::{
     LeastChange, PlanOutcome, PlanRequest, RingDigraph, RingModes, analyze, fastest_mode_per_s,
@@ -26,7 +27,8 @@ impl Swarm {
             .flatten()
             .map(|s| s.vel_enu_mps.xy())
             .collect();
-        let limits = (0..self.slots.len())
+        let limits = self
+            .indices()
             .map(|i| self.vehicle_speed_limit_mps(i))
             .collect();
         self.plan_from(now, velocities, limits);
@@ -42,7 +44,8 @@ impl Swarm {
             if !self.start_due(now) {
                 return;
             }
-            let own: Vec<super::peers::OwnPlanInput> = (0..self.slots.len())
+            let own: Vec<super::peers::OwnPlanInput> = self
+                .indices()
                 .filter(|i| !self.is_remote(*i))
                 .map(|i| {
                     let v = self.law.states[i].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
@@ -81,7 +84,7 @@ impl Swarm {
         let decision = match self.planned_ring(&target, velocities, &limits) {
             Ok((ring, retarget)) => {
                 let k = ring.k();
-                self.law.w = (0..self.slots.len()).map(|i| ring.w(i)).collect();
+                self.law.w = self.indices().map(|i| ring.w(i.0)).collect();
                 self.setup.ring = ring;
                 PlanDecision::Planned { k, retarget }
             }
@@ -243,9 +246,9 @@ impl Swarm {
     /// configuration before), with a margin: [`SPEED_MARGIN`]` · a_h / drag`, where `a_h`
     /// is the horizontal acceleration the envelope allows at hover (`g·tan θ_max` when
     /// thrust allows). `None` without drag.
-    fn vehicle_speed_limit_mps(&self, i: usize) -> Option<f64> {
-        let d = self.slots.get(i).map(|s| s.flown.drag_best_per_s())?;
-        let model = self.law.flown_models.get(i)?;
+    fn vehicle_speed_limit_mps(&self, i: VehicleIndex) -> Option<f64> {
+        let d = self.slots.get(i.0).map(|s| s.flown.drag_best_per_s())?;
+        let model = self.law.flown_models.get(i.0)?;
         (d > 0.0).then(|| SPEED_MARGIN * self.setup.envelope.horizontal_limit_mps2(0.0, model) / d)
     }
 }

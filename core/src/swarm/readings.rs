@@ -4,6 +4,7 @@
 use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 
+use super::VehicleIndex;
 use super::slot::VehicleSlot;
 use super::{
     CommonState, GuardTrip, PlanDecision, StopReason, Swarm, SwarmEvent, SwarmFailure, SwarmPhase,
@@ -24,14 +25,19 @@ impl Swarm {
         self.phase
     }
 
+    /// Every vehicle's index, in ring order.
+    pub fn indices(&self) -> impl DoubleEndedIterator<Item = VehicleIndex> + Clone + 'static {
+        VehicleIndex::all(self.slots.len())
+    }
+
     /// How many vehicles the swarm has (flown here or, in a shard, elsewhere).
     pub fn vehicle_count(&self) -> usize {
         self.slots.len()
     }
 
     /// Vehicle `i`'s link, when this process flies it.
-    pub fn link(&self, i: usize) -> Option<&VehicleLink> {
-        self.slots.get(i)?.link()
+    pub fn link(&self, i: VehicleIndex) -> Option<&VehicleLink> {
+        self.slots.get(i.0)?.link()
     }
 
     /// The links of the vehicles this process flies (every vehicle without shards), in
@@ -84,14 +90,14 @@ impl Swarm {
 
     /// Vehicle `i`'s hover thrust estimate and its standard deviation (the configured
     /// hover throttle while the estimator is off).
-    pub fn hover_estimate(&self, i: usize) -> Option<(f64, f64)> {
-        self.slots.get(i).map(|s| s.flown.hover_estimate())
+    pub fn hover_estimate(&self, i: VehicleIndex) -> Option<(f64, f64)> {
+        self.slots.get(i.0).map(|s| s.flown.hover_estimate())
     }
 
     /// Vehicle `i`'s drag estimate and its standard deviation (1/s), and the drag fed
     /// forward now (1/s).
-    pub fn drag_estimate(&self, i: usize) -> Option<(f64, f64, f64)> {
-        self.slots.get(i).map(|s| &s.flown).map(|f| {
+    pub fn drag_estimate(&self, i: VehicleIndex) -> Option<(f64, f64, f64)> {
+        self.slots.get(i.0).map(|s| &s.flown).map(|f| {
             let (d, std) = f.drag_estimate();
             (d, std, f.drag_fed_forward_per_s())
         })
@@ -100,19 +106,19 @@ impl Swarm {
     /// The acceleration vehicle `i`'s commands do not explain, as its disturbance observer
     /// estimated it last while the vehicle flew on our commands in the air (m/s², ENU;
     /// zero while the observer is off).
-    pub fn disturbance_estimate_mps2(&self, i: usize) -> Option<Vector2<f64>> {
-        self.slots.get(i).map(|s| s.flown.disturbance_seen_mps2())
+    pub fn disturbance_estimate_mps2(&self, i: VehicleIndex) -> Option<Vector2<f64>> {
+        self.slots.get(i.0).map(|s| s.flown.disturbance_seen_mps2())
     }
 
     /// The model vehicle `i` is flown with now.
-    pub fn flown_model(&self, i: usize) -> Option<VehicleModel> {
-        self.law.flown_models.get(i).copied()
+    pub fn flown_model(&self, i: VehicleIndex) -> Option<VehicleModel> {
+        self.law.flown_models.get(i.0).copied()
     }
 
     /// Whether vehicle `i` was handed to its own Hold because its command could not be
     /// computed.
-    pub fn is_isolated(&self, i: usize) -> bool {
-        self.slots.get(i).is_some_and(|s| s.isolated)
+    pub fn is_isolated(&self, i: VehicleIndex) -> bool {
+        self.slots.get(i.0).is_some_and(|s| s.isolated)
     }
 
     /// Why the flight stopped, once it has (or is stopping).
@@ -122,8 +128,10 @@ impl Swarm {
 
     /// Vehicle `i`'s attitude response as measured so far (`None` before enough
     /// commanded motion has been seen, or with acceleration setpoints).
-    pub fn attitude_response(&self, i: usize) -> Option<crate::control::AttitudeResponse> {
-        self.slots.get(i).and_then(|s| s.flown.attitude_response())
+    pub fn attitude_response(&self, i: VehicleIndex) -> Option<crate::control::AttitudeResponse> {
+        self.slots
+            .get(i.0)
+            .and_then(|s| s.flown.attitude_response())
     }
 
     /// Whether the divergence guard ended the consensus (`fly` and `demo` exit non-zero).
@@ -155,8 +163,8 @@ impl Swarm {
 
     /// Whether the saturation changed vehicle `i`'s command on the last control tick (the
     /// envelope limited it).
-    pub fn command_limited(&self, i: usize) -> bool {
-        self.law.law_commands.get(i) != self.law.commands.get(i)
+    pub fn command_limited(&self, i: VehicleIndex) -> bool {
+        self.law.law_commands.get(i.0) != self.law.commands.get(i.0)
     }
 
     /// The last attitude and thrust setpoint of each vehicle.
@@ -166,8 +174,8 @@ impl Swarm {
 
     /// Vehicle `i` in the common frame, once its origin and a position are known (whatever
     /// the age of its position; the control tick uses only fresh ones).
-    pub fn common_state(&self, i: usize) -> Option<CommonState> {
-        let slot = self.slots.get(i)?;
+    pub fn common_state(&self, i: VehicleIndex) -> Option<CommonState> {
+        let slot = self.slots.get(i.0)?;
         let Some(link) = slot.link() else {
             return slot.remote().map(|r| r.state);
         };

@@ -5,6 +5,7 @@
 use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
+use super::VehicleIndex;
 use super::{BREACH_SHARE, BreachAction, SafetySetup, StopReason, Swarm, SwarmPhase};
 use crate::safety::{Agent, Outcome, Settings, Side};
 use crate::vehicle::VehicleLink;
@@ -88,7 +89,7 @@ impl Swarm {
         let consensus = matches!(self.phase, SwarmPhase::Consensus(_));
         let period_s = self.setup.control_interval.as_secs_f64();
         let mut age_s: f64 = 0.0;
-        for i in 0..self.slots.len() {
+        for i in self.indices() {
             if self.law.states[i].is_some() && self.ours_in_air(i) {
                 age_s = age_s.max(self.command_age_s(i, now) - period_s);
             } else if self.law.states[i].is_some()
@@ -103,7 +104,7 @@ impl Swarm {
         }
         self.safety.agents.clear();
         self.safety.xy.clear();
-        for i in 0..self.slots.len() {
+        for i in self.indices() {
             // A remote vehicle flown through its own shard's copy of this filter is a
             // variable too: a pair split between shards is solved here as one process
             // solves it, and each shard flies only its own vehicle's part.
@@ -186,7 +187,7 @@ impl Swarm {
             }
         }
         for (i, xy) in self.safety.xy.iter().enumerate() {
-            if self.safety.agents[i].controlled && !self.is_remote(i) {
+            if self.safety.agents[i].controlled && !self.is_remote(VehicleIndex(i)) {
                 self.law.commands[i].x = xy.x;
                 self.law.commands[i].y = xy.y;
             }
@@ -253,7 +254,7 @@ impl Swarm {
     /// uplink and the downlink), but never less than the link's round trip (TIMESYNC);
     /// a fit beyond [`MAX_RESPONSE_S`] is not trusted, and then the round trip plus
     /// [`UNMEASURED_RESPONSE_S`] is counted.
-    pub(super) fn command_age_s(&self, i: usize, now: SimTime) -> f64 {
+    pub(super) fn command_age_s(&self, i: VehicleIndex, now: SimTime) -> f64 {
         let link = self.link(i);
         let state = link
             .and_then(|l| l.state().last_position)

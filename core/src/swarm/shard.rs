@@ -34,6 +34,7 @@ use std::time::Duration;
 use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 
+use super::VehicleIndex;
 use super::agreement::Heard;
 use super::slot::{Member, RemoteVehicle};
 use super::{CommonState, Swarm, SwarmPhase};
@@ -76,33 +77,33 @@ fn from_f32(v: [f32; 3]) -> Vector3<f64> {
 
 impl Swarm {
     /// Whether vehicle `i` is flown by another shard.
-    pub(super) fn is_remote(&self, i: usize) -> bool {
+    pub(super) fn is_remote(&self, i: VehicleIndex) -> bool {
         self.slots
-            .get(i)
+            .get(i.0)
             .is_some_and(super::slot::VehicleSlot::is_remote)
     }
 
     /// Whether vehicle `i`'s state is known here: flown here, or a watched remote one.
-    pub(super) fn is_known(&self, i: usize) -> bool {
+    pub(super) fn is_known(&self, i: VehicleIndex) -> bool {
         self.peers
             .as_ref()
-            .is_none_or(|p| p.plan.is_local(i) || p.plan.is_watched(i))
+            .is_none_or(|p| p.plan.is_local(i.0) || p.plan.is_watched(i.0))
     }
 
     /// Vehicle `i`'s link phase as this shard knows it: its own link's, or, for a
     /// vehicle another shard flies, that shard's report of it (`discovering` until one
     /// comes). What a run directory and the live view show.
-    pub fn vehicle_phase(&self, i: usize) -> Phase {
+    pub fn vehicle_phase(&self, i: VehicleIndex) -> Phase {
         self.member_phase(i)
     }
 
     /// Whether vehicle `i` is flown by this process (always, without shards).
-    pub fn is_flown_here(&self, i: usize) -> bool {
+    pub fn is_flown_here(&self, i: VehicleIndex) -> bool {
         !self.is_remote(i)
     }
 
     /// Vehicle `i`'s link phase: its link's, or its shard's report of it.
-    pub(super) fn member_phase(&self, i: usize) -> Phase {
+    pub(super) fn member_phase(&self, i: VehicleIndex) -> Phase {
         self.slots[i].phase()
     }
 
@@ -112,8 +113,8 @@ impl Swarm {
     /// `τ` would otherwise put it `v·τ` behind them for the law (a steady formation
     /// error: 0.3 m at 15 m/s and 20 ms). Its age at that tick is kept, as this shard's
     /// own vehicles' ages are.
-    pub(super) fn remote_fresh_state(&self, i: usize, now: SimTime) -> Option<CommonState> {
-        let r = self.slots.get(i)?.remote()?;
+    pub(super) fn remote_fresh_state(&self, i: VehicleIndex, now: SimTime) -> Option<CommonState> {
+        let r = self.slots.get(i.0)?.remote()?;
         let age = now.saturating_since(r.measured);
         let hop = now.saturating_since(r.sent).as_secs_f64();
         (age <= self.setup.links[i].state_timeout).then(|| CommonState {
@@ -129,11 +130,11 @@ impl Swarm {
     /// alone against a partner taken to fly its law command unfiltered, the two
     /// shards' answers chatter and the pair closes inside the separation (measured:
     /// 2.76 m of 3 m on a head-on swap, 3.14 m in one process).
-    pub(super) fn cooperating_remote(&self, i: usize) -> bool {
+    pub(super) fn cooperating_remote(&self, i: VehicleIndex) -> bool {
         let Some(p) = self.peers.as_ref() else {
             return false;
         };
-        !p.plan.is_local(i)
+        !p.plan.is_local(i.0)
             && self.computable_now(i)
             && self.slots[i]
                 .remote()
@@ -144,24 +145,24 @@ impl Swarm {
     /// process; in a shard, when the plan reads its state and its ring in-neighbours',
     /// or (under the horizon, which reads more as vehicles come near) when all of these
     /// states are in on this tick.
-    pub(super) fn computable_now(&self, i: usize) -> bool {
+    pub(super) fn computable_now(&self, i: VehicleIndex) -> bool {
         let Some(p) = self.peers.as_ref() else {
             return true;
         };
-        p.plan.is_computable(i)
+        p.plan.is_computable(i.0)
             || (p.tiles.is_some()
                 && self.law.states[i].is_some()
                 && self
                     .setup
                     .ring
-                    .neighbours(i)
+                    .neighbours(i.0)
                     .iter()
                     .all(|e| self.law.states[e.from].is_some()))
     }
 
     /// When a remote vehicle's position was measured.
-    pub(super) fn remote_measured(&self, i: usize) -> Option<SimTime> {
-        self.slots.get(i)?.remote().map(|r| r.measured)
+    pub(super) fn remote_measured(&self, i: VehicleIndex) -> Option<SimTime> {
+        self.slots.get(i.0)?.remote().map(|r| r.measured)
     }
 
     /// Takes a message from another shard.
@@ -342,7 +343,7 @@ impl Swarm {
     /// This shard's `Σ wᵢ vᵢ` over its own vehicles' states flown on this tick.
     fn local_sum(&self) -> WeightedSum {
         let mut sum = WeightedSum::default();
-        for i in 0..self.slots.len() {
+        for i in self.indices() {
             if self.is_remote(i) {
                 continue;
             }
@@ -442,7 +443,7 @@ impl Swarm {
         let mut flying = 0u16;
         let mut lost = 0u16;
         let mut messages = Vec::new();
-        for i in 0..self.slots.len() {
+        for i in self.indices() {
             if self.is_remote(i) {
                 continue;
             }
@@ -466,7 +467,7 @@ impl Swarm {
             let read = self
                 .peers
                 .as_ref()
-                .is_some_and(|p| p.plan.is_read_elsewhere(i));
+                .is_some_and(|p| p.plan.is_read_elsewhere(i.0));
             if let (true, Some(s), Some(at)) =
                 (read, self.common_state(i), link.state().last_position)
             {
@@ -485,7 +486,7 @@ impl Swarm {
             let age_us = now.saturating_since(at).as_micros();
             let landed = self.slots[i].link().is_some_and(|l| l.state().landed);
             let report = VehicleReport {
-                vehicle: u16::try_from(i).unwrap_or(u16::MAX),
+                vehicle: u16::try_from(i.get()).unwrap_or(u16::MAX),
                 sent_us: p.to_swarm_us(now),
                 age_us: u32::try_from(age_us).unwrap_or(u32::MAX),
                 phase: member,

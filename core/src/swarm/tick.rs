@@ -14,6 +14,7 @@
 use nalgebra::Vector3;
 use ringswarm_wire::time::SimTime;
 
+use super::VehicleIndex;
 use super::model::HorizontalDrive;
 use super::slot::{Member, VehicleSlot};
 use super::{Swarm, SwarmPhase};
@@ -60,7 +61,7 @@ impl Swarm {
     /// Each vehicle's state in the common frame, `None` unless fresh: its link's, or
     /// its shard's report carried to `now`. The ages flown on are timed.
     fn gather_states(&mut self, now: SimTime) {
-        for i in 0..self.slots.len() {
+        for i in self.indices() {
             let Some(link) = self.slots[i].link() else {
                 self.law.states[i] = self.remote_fresh_state(i, now);
                 if self.law.states[i].is_some()
@@ -124,7 +125,7 @@ impl Swarm {
         if self.peers.is_some() {
             // A vehicle whose command cannot be computed here (its state or a neighbour's
             // is not read) has none to saturate with.
-            for i in 0..self.law.commands.len() {
+            for i in self.indices() {
                 if !self.computable_now(i) {
                     self.law.commands[i] = Vector3::zeros();
                 }
@@ -152,7 +153,7 @@ impl Swarm {
     /// Each link flown here gets its setpoint (level at hover thrust without a usable
     /// state, never a motor cut), and its flown model what was commanded.
     fn stream_setpoints(&mut self, now: SimTime) {
-        for i in 0..self.slots.len() {
+        for i in self.indices() {
             let VehicleSlot {
                 member: Member::Local(link),
                 flown,
@@ -209,7 +210,7 @@ impl Swarm {
     }
 
     /// Whether vehicle `i` flies on our commands in the air now.
-    pub(super) fn ours_in_air(&self, i: usize) -> bool {
+    pub(super) fn ours_in_air(&self, i: VehicleIndex) -> bool {
         let Some(link) = self.slots[i].link() else {
             return false;
         };
@@ -219,7 +220,7 @@ impl Swarm {
     /// Feeds each vehicle's hover thrust estimator with its latest report and takes the
     /// model to fly this tick.
     fn observe_models(&mut self, now: SimTime) {
-        for i in 0..self.slots.len() {
+        for i in self.indices() {
             if self.is_remote(i) {
                 continue;
             }
@@ -265,7 +266,7 @@ impl Swarm {
             return;
         }
         let dt = self.setup.control_interval.as_secs_f64();
-        for i in 0..self.slots.len() {
+        for i in self.indices() {
             let Some(s) = self.law.states[i] else {
                 continue;
             };
@@ -288,7 +289,7 @@ impl Swarm {
     /// Isolates every vehicle whose command is not finite: zero acceleration (level at
     /// hover thrust) and its own Hold, for good.
     fn isolate_non_finite(&mut self, now: SimTime, what: &str) {
-        for i in 0..self.law.commands.len() {
+        for i in self.indices() {
             if self.law.commands[i].iter().all(|x| x.is_finite()) {
                 continue;
             }
