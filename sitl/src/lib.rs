@@ -11,14 +11,21 @@
 //! - [`position_control`]: PX4's multicopter position controller (position P → velocity
 //!   PID → thrust vector → attitude), which flies every mode but raw offboard attitude.
 //! - [`trajectory`]: the limited-speed, limited-acceleration reference of auto modes.
-//! - [`profile`]: vehicle profiles (`ideal`, `x500`) with documented numbers.
+//! - [`profile`]: vehicle profiles (`ideal`, `x500`, `arducopter`) with documented numbers.
 //! - [`codec`], [`time`]: MAVLink framing and simulated time, from `ringswarm-wire`.
-//! - [`autopilot`]: the sans-IO vehicle machine with PX4's wire behaviour.
-//! - [`config_file`]: the TOML configuration of `ringswarm sitl --config`.
-//! - [`pty`]: a vehicle served on a pseudo-terminal, as an autopilot on a serial port.
-//! - [`udp`]: the tokio driver, one socket per link on PX4's ports, with fault injection
-//!   ([`link_faults`] and [`delay_line`], also used by the coordinator's lockstep driver).
+//! - [`autopilot`]: the sans-IO vehicle machine with PX4's wire behaviour, or per vehicle
+//!   ArduCopter's (`autopilot/ardupilot.rs`).
 //! - [`params`], [`world`]: parameter table, geodetic world.
+//! - [`config_file`]: the TOML configuration of `ringswarm sitl --config`.
+//! - [`udp`]: where vehicles sit on UDP (PX4 SITL's ports, MAVLink networks, whom a link
+//!   answers) and the simulated clock; [`fleet`]: the tokio driver that runs them, one
+//!   worker task per core stepping a group of vehicles on a 1 ms tick.
+//! - [`pty`]: a vehicle served on a pseudo-terminal, as an autopilot on a serial port.
+//! - [`link_faults`], [`delay_line`], [`faulty_line`]: loss, latency, jitter and
+//!   duplication of a simulated link: the one fault-send path of the fleet and of the
+//!   coordinator's lockstep driver.
+//! - [`keystore`], [`key_writer`]: each vehicle's signing key kept across restarts, in
+//!   PX4's file format, written off the workers' threads.
 //!
 //! It never depends on `ringswarm`.
 #![forbid(unsafe_code)]
