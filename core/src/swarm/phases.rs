@@ -41,23 +41,7 @@ impl Swarm {
 
     /// Moves between phases; runs at the start of every control tick.
     pub(super) fn transition(&mut self, now: SimTime) {
-        // Over the vehicles known here (all of them in one process); with shards, the
-        // others through their shard's report (shard.rs).
-        let known = |i: &VehicleIndex| self.is_known(*i);
-        let all_flying = self
-            .indices()
-            .filter(known)
-            .all(|i| self.member_phase(i) == Phase::Flying && self.law.states[i].is_some())
-            && self.others_flying(now);
-        // A vehicle taken out of OFFBOARD (pilot, its failsafe) counts as lost: it never
-        // comes back on its own, so the swarm holds (or lands) until told otherwise. So
-        // does one that flies on a position too old to use, or that was handed to its own
-        // Hold.
-        let any_lost = self.indices().filter(known).any(|i| {
-            let phase = self.member_phase(i);
-            matches!(phase, Phase::Lost | Phase::Overridden | Phase::VehicleHold)
-                || (phase == Phase::Flying && self.law.states[i].is_none())
-        }) || self.others_lost(now).is_some();
+        let (all_flying, any_lost) = self.fleet_status(now);
         if !all_flying {
             // This shard no longer vouches for a start: the others wait for it.
             self.withdraw_start();
@@ -74,93 +58,9 @@ impl Swarm {
             SwarmPhase::Handshake
                 if all_flying && self.setup.target.is_some() && self.plan.is_none() =>
             {
-                // Plan from the velocities of a swarm that flies level at its altitude: a
-                // plan made on the ground is spoilt by the climb that follows.
-                let since = *self.all_flying_since.get_or_insert(now);
-                let wait = self.setup.target.is_some_and(|t| t.wait_for_altitude);
-                if !wait || self.level_at_altitude() {
-                    self.plan_target(now);
-                } else if now.saturating_since(since) >= PLAN_ALTITUDE_WAIT {
-                    self.log.push(
-                        now,
-                        true,
-                        format!(
-                            "not level at {} m after {} s: planning anyway",
-                            self.setup.altitude_m,
-                            PLAN_ALTITUDE_WAIT.as_secs()
-                        ),
-                    );
-                    self.plan_target(now);
-                }
+                self.plan_when_level(now);
             }
-            SwarmPhase::Retargeting(since) if !any_lost => {
-                let Some(PlanDecision::Planned { retarget, .. }) = &self.plan else {
-                    return;
-                };
-                let tolerance = self.setup.target.map_or(0.05, |t| t.tolerance_mps);
-                let target = self.setup.target.map(|t| t.velocity_mps);
-                let off = |&(agent, v): &(usize, Vector2<f64>)| {
-                    self.law.states[agent]
-                        .map_or(f64::INFINITY, |s| (s.vel_enu_mps.xy() - v).norm())
-                };
-                // With shards, each judges its own re-targeted vehicles, and consensus
-                // starts once every shard is ready (start_when_agreed).
-                let worst = retarget
-                    .iter()
-                    .filter(|(agent, _)| !self.is_remote(VehicleIndex(*agent)))
-                    .map(|r| (off(r), *r))
-                    .max_by(|a, b| a.0.total_cmp(&b.0));
-                // The prediction is the w-weighted mean at the start of consensus: that
-                // mean is what has to reach the target. An agent still off its planned
-                // velocity only starts the formation from a little further away.
-                // Held to the re-targeted agents' share of the weights, the bound on the
-                // prediction is what one agent within `tolerance` would give.
-                let total: f64 = self.law.w.iter().sum();
-                let share: f64 = retarget.iter().map(|(a, _)| self.law.w[*a]).sum::<f64>() / total;
-                let mean = self.weighted_mean_velocity();
-                let mean_off = match (mean, target) {
-                    (Some(m), Some(t)) => (m - t).norm(),
-                    _ => 0.0,
-                };
-                let timeout = self
-                    .setup
-                    .target
-                    .map_or(Duration::from_secs(30), |t| t.timeout);
-                match worst {
-                    None => self.start_when_agreed(now),
-                    Some((error, _))
-                        if mean_off < tolerance * share && error < RETARGET_AGENT_TOLERANCE_MPS =>
-                    {
-                        self.start_when_agreed(now)
-                    }
-                    Some(_) if now.saturating_since(since) >= timeout && self.start_proposed() => {
-                        // Timed out before, and said so: waiting for the other shards.
-                        self.start_when_agreed(now)
-                    }
-                    Some((_, (agent, v))) if now.saturating_since(since) >= timeout => {
-                        let at =
-                            self.law.states[agent].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
-                        let m = mean.unwrap_or_default();
-                        self.log.push_vehicle(
-                            now,
-                            &self.setup.links[agent],
-                            true,
-                            format!(
-                                "re-target stage timed out after {:.1} s with the weighted mean velocity at ({:.2}, {:.2}) m/s and this vehicle at ({:.2}, {:.2}) m/s, planned ({:.2}, {:.2}) m/s: consensus from the velocities now",
-                                timeout.as_secs_f64(),
-                                m.x,
-                                m.y,
-                                at.x,
-                                at.y,
-                                v.x,
-                                v.y
-                            ),
-                        );
-                        self.start_when_agreed(now);
-                    }
-                    Some(_) => {}
-                }
-            }
+            SwarmPhase::Retargeting(since) if !any_lost => self.retarget_stage(now, since),
             SwarmPhase::Handshake | SwarmPhase::Holding(_) if all_flying => {
                 if over(self.first_consensus.or(self.first_law)) {
                     self.end(now);
@@ -171,28 +71,7 @@ impl Swarm {
                 }
             }
             SwarmPhase::Consensus(_) | SwarmPhase::Retargeting(_) if any_lost => {
-                match self.setup.loss_policy {
-                    LossPolicy::Hold => {
-                        let why = self.loss_cause(now);
-                        self.log.push(
-                            now,
-                            true,
-                            format!("a vehicle is lost{why}: the others brake and hold"),
-                        );
-                        self.forget_hold_points();
-                        self.phase = SwarmPhase::Holding(now);
-                        self.new_round(now);
-                    }
-                    LossPolicy::Land => {
-                        let why = self.loss_cause(now);
-                        self.log.push(
-                            now,
-                            true,
-                            format!("a vehicle is lost{why}: landing (on_link_loss = land)"),
-                        );
-                        self.land_because(now, StopReason::LinkLoss);
-                    }
-                }
+                self.on_vehicle_lost(now);
             }
             SwarmPhase::Consensus(_) if over(self.first_consensus) => self.end(now),
             SwarmPhase::Holding(_) | SwarmPhase::Stopped(_)
@@ -204,14 +83,156 @@ impl Swarm {
         }
     }
 
-    /// Gives up on the handshake when the timeout is over or a vehicle's handshake failed:
-    /// names the vehicles not flying and lands the others. Whether it gave up.
+    /// Whether every vehicle flies on a fresh state, and whether one is lost, over the
+    /// vehicles known here (all of them in one process); with shards, the others through
+    /// their shard's report (shard.rs).
+    fn fleet_status(&self, now: SimTime) -> (bool, bool) {
+        let known = |i: &VehicleIndex| self.is_known(*i);
+        let all_flying = self
+            .indices()
+            .filter(known)
+            .all(|i| self.member_phase(i) == Phase::Flying && self.law.states[i].is_some())
+            && self.others_flying(now);
+        // A vehicle taken out of OFFBOARD (pilot, its failsafe) counts as lost: it never
+        // comes back on its own, so the swarm holds (or lands) until told otherwise. So
+        // does one that flies on a position too old to use, or that was handed to its own
+        // Hold.
+        let any_lost = self.indices().filter(known).any(|i| {
+            let phase = self.member_phase(i);
+            matches!(phase, Phase::Lost | Phase::Overridden | Phase::VehicleHold)
+                || (phase == Phase::Flying && self.law.states[i].is_none())
+        }) || self.others_lost(now).is_some();
+        (all_flying, any_lost)
+    }
+
+    /// With a target velocity and every vehicle flying: plans once the swarm flies level
+    /// at its altitude, or after [`PLAN_ALTITUDE_WAIT`] anyway.
+    fn plan_when_level(&mut self, now: SimTime) {
+        // Plan from the velocities of a swarm that flies level at its altitude: a
+        // plan made on the ground is spoilt by the climb that follows.
+        let since = *self.all_flying_since.get_or_insert(now);
+        let wait = self.setup.target.is_some_and(|t| t.wait_for_altitude);
+        if !wait || self.level_at_altitude() {
+            self.plan_target(now);
+        } else if now.saturating_since(since) >= PLAN_ALTITUDE_WAIT {
+            self.log.push(
+                now,
+                true,
+                format!(
+                    "not level at {} m after {} s: planning anyway",
+                    self.setup.altitude_m,
+                    PLAN_ALTITUDE_WAIT.as_secs()
+                ),
+            );
+            self.plan_target(now);
+        }
+    }
+
+    /// Planner stage 1: consensus starts once the re-targeted agents (this shard's) have
+    /// their planned velocities and the weighted mean is near the target, or at the
+    /// stage's timeout (said once).
+    fn retarget_stage(&mut self, now: SimTime, since: SimTime) {
+        let Some(PlanDecision::Planned { retarget, .. }) = &self.plan else {
+            return;
+        };
+        let tolerance = self.setup.target.map_or(0.05, |t| t.tolerance_mps);
+        let target = self.setup.target.map(|t| t.velocity_mps);
+        let off = |&(agent, v): &(usize, Vector2<f64>)| {
+            self.law.states[agent].map_or(f64::INFINITY, |s| (s.vel_enu_mps.xy() - v).norm())
+        };
+        // With shards, each judges its own re-targeted vehicles, and consensus
+        // starts once every shard is ready (start_when_agreed).
+        let worst = retarget
+            .iter()
+            .filter(|(agent, _)| !self.is_remote(VehicleIndex(*agent)))
+            .map(|r| (off(r), *r))
+            .max_by(|a, b| a.0.total_cmp(&b.0));
+        // The prediction is the w-weighted mean at the start of consensus: that
+        // mean is what has to reach the target. An agent still off its planned
+        // velocity only starts the formation from a little further away.
+        // Held to the re-targeted agents' share of the weights, the bound on the
+        // prediction is what one agent within `tolerance` would give.
+        let total: f64 = self.law.w.iter().sum();
+        let share: f64 = retarget.iter().map(|(a, _)| self.law.w[*a]).sum::<f64>() / total;
+        let mean = self.weighted_mean_velocity();
+        let mean_off = match (mean, target) {
+            (Some(m), Some(t)) => (m - t).norm(),
+            _ => 0.0,
+        };
+        let timeout = self
+            .setup
+            .target
+            .map_or(Duration::from_secs(30), |t| t.timeout);
+        match worst {
+            None => self.start_when_agreed(now),
+            Some((error, _))
+                if mean_off < tolerance * share && error < RETARGET_AGENT_TOLERANCE_MPS =>
+            {
+                self.start_when_agreed(now)
+            }
+            Some(_) if now.saturating_since(since) >= timeout && self.start_proposed() => {
+                // Timed out before, and said so: waiting for the other shards.
+                self.start_when_agreed(now)
+            }
+            Some((_, (agent, v))) if now.saturating_since(since) >= timeout => {
+                let at = self.law.states[agent].map_or(Vector2::zeros(), |s| s.vel_enu_mps.xy());
+                let m = mean.unwrap_or_default();
+                self.log.push_vehicle(
+                    now,
+                    &self.setup.links[agent],
+                    true,
+                    format!(
+                        "re-target stage timed out after {:.1} s with the weighted mean velocity at ({:.2}, {:.2}) m/s and this vehicle at ({:.2}, {:.2}) m/s, planned ({:.2}, {:.2}) m/s: consensus from the velocities now",
+                        timeout.as_secs_f64(),
+                        m.x,
+                        m.y,
+                        at.x,
+                        at.y,
+                        v.x,
+                        v.y
+                    ),
+                );
+                self.start_when_agreed(now);
+            }
+            Some(_) => {}
+        }
+    }
+
+    /// A vehicle lost in consensus or the re-target stage: the loss policy (the others
+    /// brake and hold, or every vehicle lands).
+    fn on_vehicle_lost(&mut self, now: SimTime) {
+        match self.setup.loss_policy {
+            LossPolicy::Hold => {
+                let why = self.loss_cause(now);
+                self.log.push(
+                    now,
+                    true,
+                    format!("a vehicle is lost{why}: the others brake and hold"),
+                );
+                self.forget_hold_points();
+                self.phase = SwarmPhase::Holding(now);
+                self.new_round(now);
+            }
+            LossPolicy::Land => {
+                let why = self.loss_cause(now);
+                self.log.push(
+                    now,
+                    true,
+                    format!("a vehicle is lost{why}: landing (on_link_loss = land)"),
+                );
+                self.land_because(now, StopReason::LinkLoss);
+            }
+        }
+    }
+
     /// With shards, which shard the loss was seen in (`""` in one process).
     fn loss_cause(&self, now: SimTime) -> String {
         self.others_lost(now)
             .map_or(String::new(), |why| format!(" ({why})"))
     }
 
+    /// Gives up on the handshake when the timeout is over or a vehicle's handshake failed:
+    /// names the vehicles not flying and lands the others. Whether it gave up.
     fn handshake_over(&mut self, now: SimTime) -> bool {
         let failed = self
             .indices()
