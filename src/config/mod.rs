@@ -10,6 +10,7 @@
 #[cfg(feature = "emulator")]
 mod emulator;
 mod gate;
+mod safety_checks;
 mod shards;
 mod transport;
 mod validate;

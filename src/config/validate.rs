@@ -13,7 +13,7 @@ use crate::consensus::{CouplingGains, RingDigraph, analyze};
 use crate::control::{AltitudeGains, Envelope, VehicleModel};
 use crate::frame::{CommonFrame, Geodetic};
 use crate::swarm::SetpointKind;
-use crate::swarm::{GuardLimits, SwarmSetup, TargetVelocity};
+use crate::swarm::{SwarmSetup, TargetVelocity};
 use crate::vehicle::{Autopilot, AutopilotChoice, LinkConfig};
 
 /// Longest flight (s): about eleven days. `Duration` cannot hold 1e20 s, and no battery
@@ -98,6 +98,89 @@ impl Config {
         }
         let n = self.vehicle.len();
         let autopilots = self.autopilots(&mut p);
+        let law = self.law_gains(n, &mut p);
+        let offsets = self.offsets(n, &mut p);
+        p.within(
+            "formation.altitude_m",
+            self.formation.altitude_m,
+            -MAX_DISTANCE_M,
+            MAX_DISTANCE_M,
+            " m",
+        );
+        let envelope = self.envelope_checked(&mut p);
+        self.check_frame(&mut p);
+        let timing = self.check_swarm(&mut p);
+        let target = self.target(&mut p);
+        let models = self.models(envelope.as_ref(), &mut p);
+        let guard = self.guard(&mut p);
+        let safety = self.safety(offsets.as_deref(), &mut p);
+        let fence = self.fence(&mut p);
+        self.transport(&mut p);
+        if !p.0.is_empty() {
+            return Err(p.0.join("\n"));
+        }
+        let LawGains {
+            ring,
+            gains,
+            altitude_gains,
+            bandwidth,
+        } = law;
+        let (
+            Some(ring),
+            Some(gains),
+            Some(altitude_gains),
+            Some(offsets),
+            Some(envelope),
+            Some(timing),
+        ) = (ring, gains, altitude_gains, offsets, envelope, timing)
+        else {
+            return Err("invalid configuration".to_owned());
+        };
+        let f = &self.frame;
+        let frame = CommonFrame::new(Geodetic {
+            lat_deg: f.latitude_deg,
+            lon_deg: f.longitude_deg,
+            alt_amsl_m: f.altitude_amsl_m,
+        });
+        let fence_plan = match (&fence, &self.fence) {
+            (Some(setup), Some(section)) if section.upload => Some(std::sync::Arc::new(
+                crate::vehicle::FencePlan::new(&setup.fence, &frame)?,
+            )),
+            _ => None,
+        };
+        Ok(SwarmSetup {
+            ring,
+            gains,
+            altitude_gains,
+            altitude_m: self.formation.altitude_m,
+            offsets_m: offsets,
+            models,
+            drag_per_s: self.vehicle.iter().map(|v| v.drag_per_s).collect(),
+            envelope,
+            saturation: self.envelope.saturation,
+            control_interval: timing.control_interval,
+            frame,
+            links: self.link_configs(&autopilots, &timing, fence_plan),
+            duration: Some(timing.duration),
+            handshake_timeout: timing.handshake_timeout,
+            estimate_hover: self.swarm.estimate_hover,
+            estimate_drag: self.swarm.estimate_drag,
+            disturbance_time_constant_s: self.swarm.disturbance_time_constant_s,
+            mean_velocity_gain: self.gains.k_vmean,
+            setpoint: self.swarm.setpoint,
+            bandwidth,
+            end_action: self.swarm.end,
+            loss_policy: self.swarm.on_link_loss,
+            target,
+            guard,
+            safety,
+            fence,
+        })
+    }
+
+    /// `[gains]`: the ring, the coupling gains (stable, within Theorem 1 and Yu's bound),
+    /// the bandwidth gate's check and the altitude loop's gains.
+    fn law_gains(&self, n: usize, p: &mut Problems) -> LawGains {
         let g = &self.gains;
         p.within("gains.k_vmean", g.k_vmean, 0.0, 10.0, " 1/s");
         let gains_ok = p.within("gains.k", g.k, -2.0, MAX_GAIN, "")
@@ -145,27 +228,33 @@ impl Config {
                     .ok()
             })
             .flatten();
-        let offsets = self.offsets(n, &mut p);
-        p.within(
-            "formation.altitude_m",
-            self.formation.altitude_m,
-            -MAX_DISTANCE_M,
-            MAX_DISTANCE_M,
-            " m",
-        );
+        LawGains {
+            ring,
+            gains,
+            altitude_gains,
+            bandwidth,
+        }
+    }
+
+    /// `[envelope]`: tilt, thrust limits and the horizontal margin.
+    fn envelope_checked(&self, p: &mut Problems) -> Option<Envelope> {
         let e = &self.envelope;
         let envelope_ok = p.positive("envelope.max_tilt_deg", e.max_tilt_deg, 80.0, " deg")
             & p.within("envelope.min_thrust", e.min_thrust, 0.0, 1.0, "")
             & p.within("envelope.max_thrust", e.max_thrust, 0.0, 1.0, "")
             & p.within("envelope.xy_margin", e.xy_margin, 0.0, 1.0, "");
-        let envelope = envelope_ok
+        envelope_ok
             .then(|| {
                 Envelope::new(e.max_tilt_deg.to_radians(), e.min_thrust, e.max_thrust)
                     .and_then(|env| env.with_xy_margin(e.xy_margin))
                     .map_err(|err| p.push(format!("envelope: {err}")))
                     .ok()
             })
-            .flatten();
+            .flatten()
+    }
+
+    /// `[frame]`'s reference and the emulator's ground.
+    fn check_frame(&self, p: &mut Problems) {
         let f = &self.frame;
         p.within("frame.latitude_deg", f.latitude_deg, -85.0, 85.0, " deg");
         p.within(
@@ -189,84 +278,33 @@ impl Config {
             MAX_DISTANCE_M,
             " m",
         );
-        let timing = self.check_swarm(&mut p);
-        let target = self.target(&mut p);
-        let models = self.models(envelope.as_ref(), &mut p);
-        let guard = self.guard(&mut p);
-        let safety = self.safety(offsets.as_deref(), &mut p);
-        let fence = self.fence(&mut p);
-        self.transport(&mut p);
-        if !p.0.is_empty() {
-            return Err(p.0.join("\n"));
-        }
-        let (
-            Some(ring),
-            Some(gains),
-            Some(altitude_gains),
-            Some(offsets),
-            Some(envelope),
-            Some(timing),
-        ) = (ring, gains, altitude_gains, offsets, envelope, timing)
-        else {
-            return Err("invalid configuration".to_owned());
-        };
+    }
+
+    /// Each vehicle's link configuration.
+    fn link_configs(
+        &self,
+        autopilots: &[AutopilotChoice],
+        timing: &Timing,
+        fence_plan: Option<std::sync::Arc<crate::vehicle::FencePlan>>,
+    ) -> Vec<LinkConfig> {
         let s = &self.swarm;
-        let frame = CommonFrame::new(Geodetic {
-            lat_deg: f.latitude_deg,
-            lon_deg: f.longitude_deg,
-            alt_amsl_m: f.altitude_amsl_m,
-        });
-        let fence_plan = match (&fence, &self.fence) {
-            (Some(setup), Some(section)) if section.upload => Some(std::sync::Arc::new(
-                crate::vehicle::FencePlan::new(&setup.fence, &frame)?,
-            )),
-            _ => None,
-        };
-        Ok(SwarmSetup {
-            ring,
-            gains,
-            altitude_gains,
-            altitude_m: self.formation.altitude_m,
-            offsets_m: offsets,
-            models,
-            drag_per_s: self.vehicle.iter().map(|v| v.drag_per_s).collect(),
-            envelope,
-            saturation: e.saturation,
-            control_interval: timing.control_interval,
-            frame,
-            links: self
-                .vehicle
-                .iter()
-                .zip(&autopilots)
-                .map(|(v, autopilot)| LinkConfig {
-                    autopilot: *autopilot,
-                    setpoint_interval: timing.control_interval,
-                    telemetry_interval: timing.control_interval,
-                    attitude_interval: timing.attitude_interval,
-                    link_timeout: timing.link_timeout,
-                    own_ids: (s.gcs_system_id, s.gcs_component_id),
-                    retake_offboard: s.retake_offboard,
-                    state_timeout: timing.state_timeout,
-                    network: v.network.clone(),
-                    fence: fence_plan.clone(),
-                    ..LinkConfig::new(v.system_id)
-                })
-                .collect(),
-            duration: Some(timing.duration),
-            handshake_timeout: timing.handshake_timeout,
-            estimate_hover: s.estimate_hover,
-            estimate_drag: s.estimate_drag,
-            disturbance_time_constant_s: s.disturbance_time_constant_s,
-            mean_velocity_gain: g.k_vmean,
-            setpoint: s.setpoint,
-            bandwidth,
-            end_action: s.end,
-            loss_policy: s.on_link_loss,
-            target,
-            guard,
-            safety,
-            fence,
-        })
+        self.vehicle
+            .iter()
+            .zip(autopilots)
+            .map(|(v, autopilot)| LinkConfig {
+                autopilot: *autopilot,
+                setpoint_interval: timing.control_interval,
+                telemetry_interval: timing.control_interval,
+                attitude_interval: timing.attitude_interval,
+                link_timeout: timing.link_timeout,
+                own_ids: (s.gcs_system_id, s.gcs_component_id),
+                retake_offboard: s.retake_offboard,
+                state_timeout: timing.state_timeout,
+                network: v.network.clone(),
+                fence: fence_plan.clone(),
+                ..LinkConfig::new(v.system_id)
+            })
+            .collect()
     }
 
     /// Each `[[vehicle]] autopilot`, by name; ArduPilot is flown with attitude setpoints
@@ -291,200 +329,6 @@ impl Config {
                 }
             })
             .collect()
-    }
-
-    /// `[safety]`: every key checked by name, and no two formation places closer than the
-    /// horizontal separation; `None` when the filter is off.
-    fn safety(
-        &self,
-        offsets: Option<&[nalgebra::Vector2<f64>]>,
-        p: &mut Problems,
-    ) -> Option<crate::swarm::SafetySetup> {
-        let s = &self.safety;
-        let mut ok = p.within("safety.horizontal_m", s.horizontal_m, 0.5, 100.0, " m");
-        ok &= p.within(
-            "safety.vertical_m",
-            s.vertical_m,
-            s.horizontal_m.max(0.5),
-            300.0,
-            " m (at least safety.horizontal_m)",
-        );
-        ok &= p.positive("safety.braking_share", s.braking_share, 1.0, "");
-        if !(ok && s.enabled) {
-            return None;
-        }
-        if let Some(offsets) = offsets {
-            for i in 0..offsets.len() {
-                for j in i + 1..offsets.len() {
-                    let d = (offsets[i] - offsets[j]).norm();
-                    if d < s.horizontal_m {
-                        p.push(format!(
-                            "formation.offsets_m[{i}] and formation.offsets_m[{j}] are {d:.3} m apart, closer than safety.horizontal_m = {} m: no formation can hold them",
-                            s.horizontal_m
-                        ));
-                    }
-                }
-            }
-        }
-        Some(crate::swarm::SafetySetup {
-            separation: crate::safety::Separation {
-                horizontal_m: s.horizontal_m,
-                vertical_m: s.vertical_m,
-                gamma: crate::swarm::SAFETY_GAMMA,
-            },
-            braking_share: s.braking_share,
-            action: s.action,
-        })
-    }
-
-    /// `[fence]`: the shape, the band and the margin checked by name; the formation's
-    /// altitude inside the band and every vehicle's start inside the shape.
-    fn fence(&self, p: &mut Problems) -> Option<crate::swarm::FenceSetup> {
-        use crate::config::FenceKind;
-        use crate::safety::{Fence, FenceShape, fence::polygon_self_intersects};
-        use nalgebra::{Vector2, Vector3};
-        let f = self.fence.as_ref()?;
-        let mut ok = p.within(
-            "fence.min_altitude_m",
-            f.min_altitude_m,
-            -MAX_DISTANCE_M,
-            MAX_DISTANCE_M,
-            " m",
-        );
-        ok &= p.within(
-            "fence.max_altitude_m",
-            f.max_altitude_m,
-            f.min_altitude_m.max(-MAX_DISTANCE_M),
-            MAX_DISTANCE_M,
-            " m (above fence.min_altitude_m)",
-        );
-        ok &= p.within("fence.margin_m", f.margin_m, 0.0, 1000.0, " m");
-        let shape = match f.kind {
-            FenceKind::Circle => {
-                let (Some(c), Some(r)) = (f.centre_enu_m, f.radius_m) else {
-                    p.push(
-                        "fence.centre_enu_m and fence.radius_m are required for kind = \"circle\""
-                            .to_owned(),
-                    );
-                    return None;
-                };
-                ok &= p.vector("fence.centre_enu_m", &c, MAX_DISTANCE_M, " m");
-                ok &= p.positive("fence.radius_m", r, MAX_DISTANCE_M, " m");
-                FenceShape::Circle {
-                    centre_m: Vector2::from(c),
-                    radius_m: r,
-                }
-            }
-            FenceKind::Polygon => {
-                let Some(list) = f.vertices_enu_m.as_ref() else {
-                    p.push("fence.vertices_enu_m is required for kind = \"polygon\"".to_owned());
-                    return None;
-                };
-                if list.len() < 3 {
-                    p.push(format!(
-                        "fence.vertices_enu_m needs at least 3 vertices, got {}",
-                        list.len()
-                    ));
-                    return None;
-                }
-                for (k, v) in list.iter().enumerate() {
-                    ok &= p.vector(
-                        &format!("fence.vertices_enu_m[{k}]"),
-                        v,
-                        MAX_DISTANCE_M,
-                        " m",
-                    );
-                }
-                let vertices_m: Vec<Vector2<f64>> =
-                    list.iter().map(|v| Vector2::from(*v)).collect();
-                if ok && polygon_self_intersects(&vertices_m) {
-                    p.push("fence.vertices_enu_m: the polygon's edges cross each other (a fence must be a simple polygon)".to_owned());
-                    ok = false;
-                }
-                FenceShape::Polygon { vertices_m }
-            }
-        };
-        if !ok {
-            return None;
-        }
-        let fence = Fence {
-            shape,
-            min_altitude_m: f.min_altitude_m,
-            max_altitude_m: f.max_altitude_m,
-        };
-        let altitude = self.formation.altitude_m;
-        if fence.vertical_margin_m(altitude) < f.margin_m {
-            p.push(format!(
-                "formation.altitude_m = {altitude} m is not inside the fence's altitudes [{}, {}] m by its margin of {} m",
-                f.min_altitude_m, f.max_altitude_m, f.margin_m
-            ));
-        }
-        for (k, v) in self.vehicle.iter().enumerate() {
-            let start = Vector3::from(v.start_enu_m);
-            if fence.horizontal_margin_m(start.xy()) < 0.0 {
-                p.push(format!(
-                    "vehicle[{k}] (system id {}) starts at ({}, {}) m, outside the fence",
-                    v.system_id, start.x, start.y
-                ));
-            }
-        }
-        Some(crate::swarm::FenceSetup {
-            fence,
-            margin_m: f.margin_m,
-            action: f.action,
-        })
-    }
-
-    /// `[guard]`: every bound checked by name; `None` when the guard is off.
-    fn guard(&self, p: &mut Problems) -> Option<GuardLimits> {
-        let g = &self.guard;
-        let ok = p.positive(
-            "guard.velocity_error_mps",
-            g.velocity_error_mps,
-            MAX_SPEED_MPS,
-            " m/s",
-        ) & p.positive("guard.velocity_error_s", g.velocity_error_s, 3600.0, " s")
-            & p.positive(
-                "guard.velocity_error_fraction",
-                g.velocity_error_fraction,
-                10.0,
-                "",
-            )
-            & p.positive(
-                "guard.formation_growth_fraction",
-                g.formation_growth_fraction,
-                100.0,
-                "",
-            )
-            & p.positive(
-                "guard.formation_growth_m",
-                g.formation_growth_m,
-                MAX_DISTANCE_M,
-                " m",
-            )
-            & p.positive(
-                "guard.formation_growth_s",
-                g.formation_growth_s,
-                3600.0,
-                " s",
-            );
-        if !(ok && g.enabled) {
-            return None;
-        }
-        GuardLimits::new(
-            (
-                g.velocity_error_mps,
-                g.velocity_error_fraction,
-                g.velocity_error_s,
-            ),
-            (
-                g.formation_growth_m,
-                g.formation_growth_fraction,
-                g.formation_growth_s,
-            ),
-        )
-        .map_err(|e| p.push(format!("guard: {e}")))
-        .ok()
     }
 
     /// `[swarm]`: rates, durations and timeouts, and the coordinator's own ids.
@@ -696,4 +540,12 @@ struct Timing {
     link_timeout: Duration,
     handshake_timeout: Duration,
     state_timeout: Duration,
+}
+
+/// What `[gains]` gives when it is valid.
+struct LawGains {
+    ring: Option<RingDigraph>,
+    gains: Option<CouplingGains>,
+    altitude_gains: Option<AltitudeGains>,
+    bandwidth: Option<crate::consensus::BandwidthCheck>,
 }
