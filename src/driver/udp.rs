@@ -196,33 +196,7 @@ pub async fn run_swarm<O: Observer>(
     let now = || SimTime::from_micros(start.elapsed().as_micros() as u64);
     let (tx, mut rx) = mpsc::channel::<Batch>(RECEIVE_QUEUE);
     let mut receivers = JoinSet::new();
-    let mut running = Vec::with_capacity(sockets.len());
-    for (s, port) in sockets.into_iter().enumerate() {
-        let socket = match port {
-            Port::Udp(socket) => Arc::new(socket),
-            Port::Serial(line) => {
-                running.push(Running::Serial(serial_reader(s, line, tx.clone())?));
-                continue;
-            }
-        };
-        running.push(Running::Udp(Arc::clone(&socket)));
-        let tx = tx.clone();
-        receivers.spawn(async move {
-            loop {
-                let batch = receive_batch(s, &socket).await?;
-                let full = batch.full;
-                if tx.send(batch).await.is_err() {
-                    return Ok::<(), io::Error>(());
-                }
-                if full {
-                    // More is likely waiting. Without a yield, this task would go on
-                    // reading until tokio's budget (128 awaits: some four thousand
-                    // datagrams, milliseconds) runs out while the swarm waits.
-                    tokio::task::yield_now().await;
-                }
-            }
-        });
-    }
+    let mut running = start_receivers(sockets, &tx, &mut receivers)?;
     let mut pieces = Vec::new();
     let mut unsent = vec![0u64; swarm.vehicle_count()];
     let mut listening = Listening::new(running.len());
@@ -308,29 +282,15 @@ pub async fn run_swarm<O: Observer>(
             );
         }
         swarm.set_listen_lag(t, listening.lag(t));
-        // At most SEND_BUDGET datagrams a round: a thousand vehicles discovered together
-        // queue some twenty thousand (heartbeats, stream settings), tens of milliseconds
-        // of system calls that must not hold the next control tick back.
-        for _ in 0..SEND_BUDGET {
-            let Some((i, bytes)) = swarm.poll_transmit() else {
-                break;
-            };
-            observer.datagram(now(), i, true, &bytes);
-            match router.destination(i) {
-                Some((socket, to)) => match running.get_mut(socket) {
-                    Some(Running::Udp(socket)) => {
-                        if let Err(err) = socket.send_to(&bytes, to).await {
-                            tracing::warn!(vehicle = i, error = %err, "send failed");
-                        }
-                    }
-                    Some(Running::Serial(line)) => line.send(&bytes),
-                    None => unsent[i] += 1,
-                },
-                // A network vehicle not heard from yet: nowhere to send.
-                None => unsent[i] += 1,
-            }
-            swarm.recycle(i, bytes);
-        }
+        send_round(
+            &mut swarm,
+            &router,
+            &mut running,
+            &mut observer,
+            &mut unsent,
+            now,
+        )
+        .await;
         if let Some(s) = shards.as_mut() {
             while let Some(message) = swarm.poll_shard_message() {
                 s.publish(&message);
@@ -344,6 +304,92 @@ pub async fn run_swarm<O: Observer>(
             break;
         }
     }
+    report_left_over(&unsent, &running);
+    receivers.abort_all();
+    while let Some(joined) = receivers.join_next().await {
+        if let Ok(Err(err)) = joined {
+            return Err(err);
+        }
+    }
+    Ok((swarm, observer))
+}
+
+/// A receive task for every UDP socket (batches into `tx`), a reader thread for every
+/// serial line; what the loop sends through, in socket order.
+///
+/// # Errors
+/// A serial line whose reader cannot be started.
+fn start_receivers(
+    sockets: Vec<Port>,
+    tx: &mpsc::Sender<Batch>,
+    receivers: &mut JoinSet<io::Result<()>>,
+) -> io::Result<Vec<Running>> {
+    let mut running = Vec::with_capacity(sockets.len());
+    for (s, port) in sockets.into_iter().enumerate() {
+        let socket = match port {
+            Port::Udp(socket) => Arc::new(socket),
+            Port::Serial(line) => {
+                running.push(Running::Serial(serial_reader(s, line, tx.clone())?));
+                continue;
+            }
+        };
+        running.push(Running::Udp(Arc::clone(&socket)));
+        let tx = tx.clone();
+        receivers.spawn(async move {
+            loop {
+                let batch = receive_batch(s, &socket).await?;
+                let full = batch.full;
+                if tx.send(batch).await.is_err() {
+                    return Ok::<(), io::Error>(());
+                }
+                if full {
+                    // More is likely waiting. Without a yield, this task would go on
+                    // reading until tokio's budget (128 awaits: some four thousand
+                    // datagrams, milliseconds) runs out while the swarm waits.
+                    tokio::task::yield_now().await;
+                }
+            }
+        });
+    }
+    Ok(running)
+}
+
+/// One round of sends, at most [`SEND_BUDGET`] datagrams: a thousand vehicles discovered
+/// together queue some twenty thousand (heartbeats, stream settings), tens of
+/// milliseconds of system calls that must not hold the next control tick back.
+async fn send_round<O: Observer>(
+    swarm: &mut Swarm,
+    router: &Router,
+    running: &mut [Running],
+    observer: &mut O,
+    unsent: &mut [u64],
+    now: impl Fn() -> SimTime,
+) {
+    for _ in 0..SEND_BUDGET {
+        let Some((i, bytes)) = swarm.poll_transmit() else {
+            break;
+        };
+        observer.datagram(now(), i, true, &bytes);
+        match router.destination(i) {
+            Some((socket, to)) => match running.get_mut(socket) {
+                Some(Running::Udp(socket)) => {
+                    if let Err(err) = socket.send_to(&bytes, to).await {
+                        tracing::warn!(vehicle = i, error = %err, "send failed");
+                    }
+                }
+                Some(Running::Serial(line)) => line.send(&bytes),
+                None => unsent[i] += 1,
+            },
+            // A network vehicle not heard from yet: nowhere to send.
+            None => unsent[i] += 1,
+        }
+        swarm.recycle(i, bytes);
+    }
+}
+
+/// Says what could not be sent: datagrams for vehicles whose address never came, frames
+/// a serial line dropped or failed to write.
+fn report_left_over(unsent: &[u64], running: &[Running]) {
     for (i, n) in unsent.iter().enumerate().filter(|(_, n)| **n > 0) {
         tracing::info!(
             vehicle = i,
@@ -363,11 +409,4 @@ pub async fn run_swarm<O: Observer>(
             );
         }
     }
-    receivers.abort_all();
-    while let Some(joined) = receivers.join_next().await {
-        if let Ok(Err(err)) = joined {
-            return Err(err);
-        }
-    }
-    Ok((swarm, observer))
 }
