@@ -78,7 +78,9 @@ if ! wait "$setup_pid"; then
   exit 1
 fi
 cat "$setup_log"
-export RINGSWARM_BIN="$PWD/target/debug/ringswarm"
+# The binary the Python checks run: where Cargo put it (CARGO_TARGET_DIR, when a build
+# cache is kept outside the clone).
+export RINGSWARM_BIN="$(realpath -m "${CARGO_TARGET_DIR:-target}")/debug/ringswarm"
 # Most of these tests wait on real time (flights over UDP, MAVSDK's examples), so they run
 # in parallel, on pytest-xdist's workers. They use PX4's fixed ports (14540, 14550, …), so
 # each worker takes a network namespace of its own with its own loopback

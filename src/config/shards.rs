@@ -209,44 +209,45 @@ impl Config {
             }
             (Some(d), false) => (d, &self.shard),
         };
-        let mut problems = Vec::new();
-        if !key_safe(&d.swarm) {
-            problems.push(format!(
-                "distributed.swarm \"{}\" must be letters, digits, '-', '_' or '.' (it is a Zenoh key chunk)",
-                d.swarm
-            ));
+        let mut problems = distributed_problems(d, self.safety.enabled);
+        let owner = self.shard_owners(shards, &mut problems);
+        if problems.is_empty() {
+            // Judged on a split that is otherwise sound: names unique, endpoints parsed.
+            problems.extend(mesh_problems(shards));
         }
-        let lead_ok = d.start_lead_ms.is_finite() && (1.0..=10_000.0).contains(&d.start_lead_ms);
-        if !lead_ok {
-            problems.push(format!(
-                "distributed.start_lead_ms must be in [1, 10000] ms, got {}",
-                super::show(d.start_lead_ms)
-            ));
+        for (i, o) in owner.iter().enumerate() {
+            if o.is_none() {
+                let v = &self.vehicle[i];
+                let named = vehicle_named(v.system_id, v.network.as_deref());
+                problems.push(format!("vehicle[{i}] ({named}) is in no [[shard]]"));
+            }
         }
-        if !(d.tile_m.is_finite() && (1.0..=100_000.0).contains(&d.tile_m)) {
-            problems.push(format!(
-                "distributed.tile_m must be in [1, 100000] m, got {}",
-                super::show(d.tile_m)
-            ));
+        if !problems.is_empty() {
+            return Err(problems.join("\n"));
         }
-        if !(d.hop_ms.is_finite() && (0.0..=5_000.0).contains(&d.hop_ms)) {
-            problems.push(format!(
-                "distributed.hop_ms must be in [0, 5000] ms, got {}",
-                super::show(d.hop_ms)
-            ));
-        } else if lead_ok && d.start_lead_ms <= 2.0 * d.hop_ms {
-            problems.push(format!(
-                "distributed.start_lead_ms ({} ms) must exceed two hops (2 × hop_ms = {} ms): \
-                 a start is proposed and vouched for across them",
-                super::show(d.start_lead_ms),
-                super::show(2.0 * d.hop_ms)
-            ));
-        }
-        if d.watch == WatchName::Neighbours && self.safety.enabled {
-            problems.push(
-                "distributed.watch = \"neighbours\" leaves the safety filter blind to other shards' vehicles that are not ring neighbours: use watch = \"horizon\" or \"all\", or set [safety] enabled = false".to_owned(),
-            );
-        }
+        Ok(Some(ShardLayout {
+            swarm: d.swarm.clone(),
+            names: shards.iter().map(|s| s.name.clone()).collect(),
+            owner: owner.into_iter().flatten().collect(),
+            listen: shards.iter().map(|s| s.listen.clone()).collect(),
+            connect: shards.iter().map(|s| s.connect.clone()).collect(),
+            watch: match d.watch {
+                WatchName::All => Watch::All,
+                WatchName::Horizon => Watch::Horizon,
+                WatchName::Neighbours => Watch::Neighbours,
+            },
+            tile_m: d.tile_m,
+            start_lead: Duration::from_secs_f64(d.start_lead_ms / 1000.0),
+        }))
+    }
+
+    /// Each vehicle's shard, as the `[[shard]]` tables list them (`None`: in none), and
+    /// the tables' problems: names, vehicles not in the file or listed twice, endpoints.
+    fn shard_owners(
+        &self,
+        shards: &[ShardSection],
+        problems: &mut Vec<String>,
+    ) -> Vec<Option<usize>> {
         let mut seen_names: HashMap<&str, usize> = HashMap::new();
         let vehicle_index: HashMap<(u8, Option<&str>), usize> = self
             .vehicle
@@ -269,10 +270,7 @@ impl Config {
                 problems.push(format!("{label} flies no vehicle"));
             }
             for v in &shard.vehicles {
-                let named = match &v.network {
-                    Some(n) => format!("vehicle {} on network \"{n}\"", v.system_id),
-                    None => format!("vehicle {}", v.system_id),
-                };
+                let named = vehicle_named(v.system_id, v.network.as_deref());
                 let Some(&i) = vehicle_index.get(&(v.system_id, v.network.as_deref())) else {
                     problems.push(format!("{label}: {named} is not a [[vehicle]] of the file"));
                     continue;
@@ -296,37 +294,7 @@ impl Config {
                 }
             }
         }
-        if problems.is_empty() {
-            // Judged on a split that is otherwise sound: names unique, endpoints parsed.
-            problems.extend(mesh_problems(shards));
-        }
-        for (i, o) in owner.iter().enumerate() {
-            if o.is_none() {
-                let v = &self.vehicle[i];
-                let named = match &v.network {
-                    Some(n) => format!("vehicle {} on network \"{n}\"", v.system_id),
-                    None => format!("vehicle {}", v.system_id),
-                };
-                problems.push(format!("vehicle[{i}] ({named}) is in no [[shard]]"));
-            }
-        }
-        if !problems.is_empty() {
-            return Err(problems.join("\n"));
-        }
-        Ok(Some(ShardLayout {
-            swarm: d.swarm.clone(),
-            names: shards.iter().map(|s| s.name.clone()).collect(),
-            owner: owner.into_iter().flatten().collect(),
-            listen: shards.iter().map(|s| s.listen.clone()).collect(),
-            connect: shards.iter().map(|s| s.connect.clone()).collect(),
-            watch: match d.watch {
-                WatchName::All => Watch::All,
-                WatchName::Horizon => Watch::Horizon,
-                WatchName::Neighbours => Watch::Neighbours,
-            },
-            tile_m: d.tile_m,
-            start_lead: Duration::from_secs_f64(d.start_lead_ms / 1000.0),
-        }))
+        owner
     }
 
     /// Shard `name`'s plan, over `ring`.
@@ -361,6 +329,58 @@ impl Config {
                 .with_tile_m(layout.tile_m)
         })
         .map_err(|e| e.to_string())
+    }
+}
+
+/// `[distributed]`'s problems: the swarm's key name, the start lead against the hop,
+/// the tile size, and a watch that would leave the safety filter blind.
+fn distributed_problems(d: &DistributedSection, safety_enabled: bool) -> Vec<String> {
+    let mut problems = Vec::new();
+    if !key_safe(&d.swarm) {
+        problems.push(format!(
+            "distributed.swarm \"{}\" must be letters, digits, '-', '_' or '.' (it is a Zenoh key chunk)",
+            d.swarm
+        ));
+    }
+    let lead_ok = d.start_lead_ms.is_finite() && (1.0..=10_000.0).contains(&d.start_lead_ms);
+    if !lead_ok {
+        problems.push(format!(
+            "distributed.start_lead_ms must be in [1, 10000] ms, got {}",
+            super::show(d.start_lead_ms)
+        ));
+    }
+    if !(d.tile_m.is_finite() && (1.0..=100_000.0).contains(&d.tile_m)) {
+        problems.push(format!(
+            "distributed.tile_m must be in [1, 100000] m, got {}",
+            super::show(d.tile_m)
+        ));
+    }
+    if !(d.hop_ms.is_finite() && (0.0..=5_000.0).contains(&d.hop_ms)) {
+        problems.push(format!(
+            "distributed.hop_ms must be in [0, 5000] ms, got {}",
+            super::show(d.hop_ms)
+        ));
+    } else if lead_ok && d.start_lead_ms <= 2.0 * d.hop_ms {
+        problems.push(format!(
+            "distributed.start_lead_ms ({} ms) must exceed two hops (2 × hop_ms = {} ms): \
+             a start is proposed and vouched for across them",
+            super::show(d.start_lead_ms),
+            super::show(2.0 * d.hop_ms)
+        ));
+    }
+    if d.watch == WatchName::Neighbours && safety_enabled {
+        problems.push(
+            "distributed.watch = \"neighbours\" leaves the safety filter blind to other shards' vehicles that are not ring neighbours: use watch = \"horizon\" or \"all\", or set [safety] enabled = false".to_owned(),
+        );
+    }
+    problems
+}
+
+/// `vehicle 3`, or `vehicle 3 on network "a"`.
+fn vehicle_named(system_id: u8, network: Option<&str>) -> String {
+    match network {
+        Some(n) => format!("vehicle {system_id} on network \"{n}\""),
+        None => format!("vehicle {system_id}"),
     }
 }
 

@@ -58,19 +58,7 @@ pub async fn fly_over_udp(
     for m in &live.mirror {
         eprintln!("mirroring every datagram to udp {m}");
     }
-    let (feed, web) = match live.web {
-        Some(addr) => {
-            let (feed, states) = LiveFeed::new();
-            let content = Content::Live {
-                setup: RunSetup::of(&swarm),
-                states,
-            };
-            let server = WebServer::start(addr, content).map_err(anyhow::Error::msg)?;
-            crate::view::announce(server.addr());
-            (Some(feed), Some(server))
-        }
-        None => (None, None),
-    };
+    let (feed, web) = start_live_view(live, &swarm)?;
     let epoch_us = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_micros() as u64);
@@ -81,24 +69,7 @@ pub async fn fly_over_udp(
         swarm.vehicle_count(),
         out.display()
     );
-    let (command_tx, command_rx) = watch::channel(DriverCommand::Fly);
-    let mut terminations = crate::driver::signals::Terminations::new()
-        .context("install the handlers of SIGINT, SIGTERM and SIGHUP")?;
-    tokio::spawn(async move {
-        for command in [DriverCommand::Land, DriverCommand::Stop] {
-            let Some(signal) = terminations.next().await else {
-                return;
-            };
-            eprintln!(
-                "\n{signal}: {}",
-                match command {
-                    DriverCommand::Land => "landing every vehicle (again to stop now)",
-                    _ => "stopping",
-                }
-            );
-            command_tx.send_replace(command);
-        }
-    });
+    let command_rx = watch_terminations()?;
     let observer = FlyObserver {
         recorder,
         next_status: SimTime::ZERO,
@@ -153,6 +124,54 @@ pub async fn fly_over_udp(
         eprintln!("plots not written: {e}");
     }
     Ok(summary)
+}
+
+/// With `--web`: the live view's feed and its server, started and announced.
+///
+/// # Errors
+/// An address that cannot be bound.
+fn start_live_view(
+    live: &LiveArgs,
+    swarm: &Swarm,
+) -> anyhow::Result<(Option<LiveFeed>, Option<WebServer>)> {
+    let Some(addr) = live.web else {
+        return Ok((None, None));
+    };
+    let (feed, states) = LiveFeed::new();
+    let content = Content::Live {
+        setup: RunSetup::of(swarm),
+        states,
+    };
+    let server = WebServer::start(addr, content).map_err(anyhow::Error::msg)?;
+    crate::view::announce(server.addr());
+    Ok((Some(feed), Some(server)))
+}
+
+/// The driver's commands from the signals: the first SIGINT, SIGTERM or SIGHUP lands
+/// every vehicle, the second stops at once.
+///
+/// # Errors
+/// The handlers cannot be installed.
+fn watch_terminations() -> anyhow::Result<watch::Receiver<DriverCommand>> {
+    let (command_tx, command_rx) = watch::channel(DriverCommand::Fly);
+    let mut terminations = crate::driver::signals::Terminations::new()
+        .context("install the handlers of SIGINT, SIGTERM and SIGHUP")?;
+    tokio::spawn(async move {
+        for command in [DriverCommand::Land, DriverCommand::Stop] {
+            let Some(signal) = terminations.next().await else {
+                return;
+            };
+            eprintln!(
+                "\n{signal}: {}",
+                match command {
+                    DriverCommand::Land => "landing every vehicle (again to stop now)",
+                    _ => "stopping",
+                }
+            );
+            command_tx.send_replace(command);
+        }
+    });
+    Ok(command_rx)
 }
 
 /// How long the live view's clients are given, after the flight, to receive its last state.
