@@ -35,6 +35,18 @@ impl Config {
 
     /// Builds the plan, pushing every problem found.
     pub(super) fn transport(&self, p: &mut Problems) -> TransportLayout {
+        let (mut sockets, by_name) = self.network_sockets(p);
+        let (routes, listening) = self.vehicle_routes(&mut sockets, &by_name, p);
+        self.check_binds(&sockets, &routes, &listening, p);
+        self.check_system_ids(p);
+        TransportLayout { sockets, routes }
+    }
+
+    /// A socket per `[[network]]`, and the networks by name.
+    fn network_sockets<'a>(
+        &'a self,
+        p: &mut Problems,
+    ) -> (Vec<SocketLayout>, HashMap<&'a str, usize>) {
         let mut sockets = Vec::new();
         let mut by_name = HashMap::new();
         for (j, n) in self.network.iter().enumerate() {
@@ -52,12 +64,23 @@ impl Config {
                 network: Some(n.name.clone()),
             });
         }
+        (sockets, by_name)
+    }
+
+    /// Each vehicle's route (a socket of its own on PX4's ports, its network's, or its
+    /// serial line), and the addresses vehicles listen on.
+    fn vehicle_routes(
+        &self,
+        sockets: &mut Vec<SocketLayout>,
+        by_name: &HashMap<&str, usize>,
+        p: &mut Problems,
+    ) -> (Vec<VehicleRoute>, Vec<(usize, SocketAddr)>) {
         let mut routes = Vec::new();
         let mut listening = Vec::new();
         let mut devices = HashMap::new();
         for (i, v) in self.vehicle.iter().enumerate() {
             if let Some(serial) = &v.serial {
-                routes.push(serial_route(i, v, serial, &mut sockets, &mut devices, p));
+                routes.push(serial_route(i, v, serial, sockets, &mut devices, p));
                 continue;
             }
             let route = match &v.network {
@@ -104,11 +127,23 @@ impl Config {
             }
             routes.push(route);
         }
+        (routes, listening)
+    }
+
+    /// No two sockets bind one port, and none binds where a vehicle on this host
+    /// listens.
+    fn check_binds(
+        &self,
+        sockets: &[SocketLayout],
+        routes: &[VehicleRoute],
+        listening: &[(usize, SocketAddr)],
+        p: &mut Problems,
+    ) {
         let describe = |s: &SocketLayout, k: usize| match &s.network {
             Some(name) => format!("network \"{name}\""),
             None => format!(
                 "the coordinator's socket for vehicle[{}]",
-                vehicle_of(&routes, k)
+                vehicle_of(routes, k)
             ),
         };
         let udp: Vec<(usize, &SocketLayout, SocketAddr)> = sockets
@@ -148,8 +183,6 @@ impl Config {
                 ));
             }
         }
-        self.check_system_ids(p);
-        TransportLayout { sockets, routes }
     }
 
     /// System ids: 1..=250 (PX4's MAV_SYS_ID range), unique within each network and
