@@ -68,10 +68,14 @@ def command(link, target, cmd, *params):
 
 
 def stream(link, target, seconds, thrust, hz=20.0):
+    """Streams a level attitude at `thrust` for `seconds`; the time of the last send."""
     end = time.time() + seconds
+    sent = time.time()
     while time.time() < end:
         link.mav.set_attitude_target_send(0, target, 1, 7, LEVEL, 0, 0, 0, thrust)
+        sent = time.time()
         drain(link, 1.0 / hz)
+    return sent
 
 
 def drain(link, seconds):
@@ -160,8 +164,9 @@ def test_failsafe_fires_after_com_of_loss_t(sitl):
     link = sitl(0)
     assert command(link, 1, SET_INTERVAL, 0, 20_000).result == 0  # heartbeat at 50 Hz
     offboard_flight(link)
-    stream(link, 1, 1.5, 0.6)
-    last = time.time()
+    # Timed from the last setpoint sent, not from the end of the stream's last drain (50 ms
+    # later): the vehicle counts its timeout from the last setpoint it received.
+    last = stream(link, 1, 1.5, 0.6)
     seen = None
     while time.time() - last < 3.0:
         hb = link.recv_match(type="HEARTBEAT", blocking=True, timeout=0.1)
