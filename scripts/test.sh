@@ -61,9 +61,12 @@ cargo test --workspace --locked --no-run --all-targets
 # The flight coordinator alone, without the emulator, as a companion computer builds it
 # (with Zenoh, for its shard). Without Zenoh as well, Cargo unifies the dependencies'
 # features further from the workspace's and builds many of them again. What that leaves
-# out is two five-line fallbacks that refuse `--shard` and `view --zenoh`.
-step "cargo build, the coordinator without the emulator (linted)"
-cargo build --no-default-features --features zenoh --lib --bins --locked
+# out is two five-line fallbacks that refuse `--shard` and `view --zenoh`. Checked, not
+# built: type and borrow checking and the lints are what differ between feature sets, and
+# a check skips the code generation of every dependency built again (measured from a cold
+# cache: 2 min 26 s against 4 min 1 s for the build).
+step "cargo check, the coordinator without the emulator (linted)"
+cargo check --no-default-features --features zenoh --lib --bins --locked
 step "fuzz/Cargo.lock resolves as committed"
 cargo metadata --locked --format-version 1 --manifest-path fuzz/Cargo.toml >/dev/null
 step "cargo test"
