@@ -91,14 +91,14 @@ impl Swarm {
         let all_flying = self
             .indices()
             .filter(known)
-            .all(|i| self.member_phase(i) == Phase::Flying && self.law.states[i].is_some())
+            .all(|i| self.vehicle_phase(i) == Phase::Flying && self.law.states[i].is_some())
             && self.others_flying(now);
         // A vehicle taken out of OFFBOARD (pilot, its failsafe) counts as lost: it never
         // comes back on its own, so the swarm holds (or lands) until told otherwise. So
         // does one that flies on a position too old to use, or that was handed to its own
         // Hold.
         let any_lost = self.indices().filter(known).any(|i| {
-            let phase = self.member_phase(i);
+            let phase = self.vehicle_phase(i);
             matches!(phase, Phase::Lost | Phase::Overridden | Phase::VehicleHold)
                 || (phase == Phase::Flying && self.law.states[i].is_none())
         }) || self.others_lost(now).is_some();
@@ -237,7 +237,7 @@ impl Swarm {
         let failed = self
             .indices()
             .filter(|i| self.is_known(*i))
-            .any(|i| self.member_phase(i) == Phase::Failed);
+            .any(|i| self.vehicle_phase(i) == Phase::Failed);
         let timed_out = now >= SimTime::ZERO + self.setup.handshake_timeout;
         if !(failed || timed_out) {
             return false;
@@ -251,7 +251,7 @@ impl Swarm {
                     return (!self.others_flying(now))
                         .then(|| (cfg.system_id, "its shard not all flying".to_owned()));
                 }
-                let phase = self.member_phase(i);
+                let phase = self.vehicle_phase(i);
                 let state = self.law.states[i];
                 if phase == Phase::Flying && state.is_some() {
                     return None;

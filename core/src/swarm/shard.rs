@@ -94,17 +94,12 @@ impl Swarm {
     /// vehicle another shard flies, that shard's report of it (`discovering` until one
     /// comes). What a run directory and the live view show.
     pub fn vehicle_phase(&self, i: VehicleIndex) -> Phase {
-        self.member_phase(i)
+        self.slots[i].phase()
     }
 
     /// Whether vehicle `i` is flown by this process (always, without shards).
     pub fn is_flown_here(&self, i: VehicleIndex) -> bool {
         !self.is_remote(i)
-    }
-
-    /// Vehicle `i`'s link phase: its link's, or its shard's report of it.
-    pub(super) fn member_phase(&self, i: VehicleIndex) -> Phase {
-        self.slots[i].phase()
     }
 
     /// A remote vehicle's state, when fresh, carried forward to `now` at its velocity:
