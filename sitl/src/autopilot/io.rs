@@ -19,4 +19,6 @@ pub(super) struct MavlinkIo {
     pub(super) spare: crate::codec::FramePool,
     /// The id of the last STATUSTEXT sent in chunks.
     pub(super) statustext_id: u16,
+    /// The message ids due on a link, kept between steps (no allocation per step).
+    pub(super) due_scratch: Vec<u32>,
 }

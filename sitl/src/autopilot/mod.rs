@@ -43,6 +43,7 @@ mod navigator;
 pub mod offboard;
 mod signing;
 mod steer;
+mod streams;
 mod telemetry;
 mod tuning;
 
@@ -164,22 +165,11 @@ pub struct VehicleStatus {
     pub counters: Counters,
 }
 
-/// One telemetry stream on one link.
-#[derive(Debug, Clone, Copy)]
-struct Stream {
-    msg_id: u32,
-    default_interval: Option<Duration>,
-    interval: Option<Duration>,
-    next_due: SimTime,
-}
-
 /// Per-link state.
 #[derive(Debug, Clone)]
 struct Link {
     encoder: Encoder,
-    streams: Vec<Stream>,
-    /// No stream is due before this (a lower bound: the table is scanned only then).
-    streams_due: SimTime,
+    streams: streams::StreamTable,
     last_heard: Option<SimTime>,
     /// Whether a driver carries this link's frames (see [`Vehicle::set_link_wired`]).
     wired: bool,
@@ -289,7 +279,6 @@ impl Vehicle {
                 Some(_) => telemetry::heartbeat_only(),
                 None => telemetry::default_streams(cfg.fast_rate_hz),
             },
-            streams_due: SimTime::ZERO,
             last_heard: None,
             wired: true,
         });
@@ -343,6 +332,7 @@ impl Vehicle {
                 outbox: VecDeque::new(),
                 spare: crate::codec::FramePool::default(),
                 statustext_id: 0,
+                due_scratch: Vec::new(),
             },
             events: VecDeque::new(),
             last_step: SimTime::ZERO,
@@ -374,10 +364,7 @@ impl Vehicle {
         self.last_step = now;
         self.boot_at = now;
         for link in &mut self.io.links {
-            for stream in &mut link.streams {
-                stream.next_due = now;
-            }
-            link.streams_due = now;
+            link.streams.restart_at(now);
         }
     }
 

@@ -1,5 +1,6 @@
-//! Outgoing messages: one builder per message and the per-link stream scheduler. Every
-//! field is set explicitly (the crate's defaults for bitflag fields are not empty).
+//! Outgoing messages: one builder per message, and sending what each link's stream table
+//! (`streams`) finds due. Every field is set explicitly (the crate's defaults for bitflag
+//! fields are not empty).
 
 use std::time::Duration;
 
@@ -16,7 +17,8 @@ use mavlink::dialects::common::{
 use nalgebra::Vector3;
 
 use super::mode::FlightMode;
-use super::{LinkId, Stream, Transmit, Vehicle};
+use super::streams::StreamTable;
+use super::{LinkId, Transmit, Vehicle};
 use crate::params::ParamKind;
 use crate::time::SimTime;
 
@@ -35,8 +37,8 @@ const HOME_POSITION: u32 = 242;
 const ESTIMATOR_STATUS: u32 = 230;
 
 /// The streams every link starts with: `(message id, rate in Hz)`.
-pub(super) fn default_streams(fast_rate_hz: f64) -> Vec<Stream> {
-    [
+pub(super) fn default_streams(fast_rate_hz: f64) -> StreamTable {
+    StreamTable::at_rates(&[
         (HEARTBEAT, 1.0),
         (SYS_STATUS, 2.0),
         (EXTENDED_SYS_STATE, 5.0),
@@ -50,29 +52,12 @@ pub(super) fn default_streams(fast_rate_hz: f64) -> Vec<Stream> {
         (ATTITUDE_QUATERNION, fast_rate_hz),
         (LOCAL_POSITION_NED, fast_rate_hz),
         (GLOBAL_POSITION_INT, fast_rate_hz),
-    ]
-    .into_iter()
-    .map(|(msg_id, hz)| {
-        let interval = Some(Duration::from_secs_f64(1.0 / hz));
-        Stream {
-            msg_id,
-            default_interval: interval,
-            interval,
-            next_due: SimTime::ZERO,
-        }
-    })
-    .collect()
+    ])
 }
 
 /// The ArduPilot personality's streams at boot: the heartbeat, nothing else until asked.
-pub(super) fn heartbeat_only() -> Vec<Stream> {
-    let interval = Some(Duration::from_secs(1));
-    vec![Stream {
-        msg_id: HEARTBEAT,
-        default_interval: interval,
-        interval,
-        next_due: SimTime::ZERO,
-    }]
+pub(super) fn heartbeat_only() -> StreamTable {
+    StreamTable::at_rates(&[(HEARTBEAT, 1.0)])
 }
 
 /// Messages that can be streamed or requested once.
@@ -150,31 +135,20 @@ impl Vehicle {
                 }
             }
         }
+        let mut due = std::mem::take(&mut self.io.due_scratch);
         for link in [LinkId::Offboard, LinkId::Gcs] {
-            if self.io.links[link as usize].streams_due > now || !self.io.links[link as usize].wired
-            {
+            if !self.io.links[link as usize].wired {
                 continue;
             }
-            let mut earliest = SimTime::MAX;
-            for i in 0..self.io.links[link as usize].streams.len() {
-                let stream = self.io.links[link as usize].streams[i];
-                let Some(interval) = stream.interval else {
-                    continue;
-                };
-                if stream.next_due > now {
-                    earliest = earliest.min(stream.next_due);
-                    continue;
-                }
-                if let Some(msg) = self.build(now, stream.msg_id) {
+            due.clear();
+            self.io.links[link as usize].streams.take_due(now, &mut due);
+            for &msg_id in &due {
+                if let Some(msg) = self.build(now, msg_id) {
                     self.send(link, &msg);
                 }
-                let next = stream.next_due + interval;
-                let next = if next <= now { now + interval } else { next };
-                self.io.links[link as usize].streams[i].next_due = next;
-                earliest = earliest.min(next);
             }
-            self.io.links[link as usize].streams_due = earliest;
         }
+        self.io.due_scratch = due;
     }
 
     /// Sets a stream's interval on one link: `Some(None)` stops it, `None` restores its
@@ -189,24 +163,9 @@ impl Vehicle {
         if !is_known(msg_id) || msg_id == AUTOPILOT_VERSION {
             return false;
         }
-        let streams = &mut self.io.links[link as usize].streams;
-        let index = match streams.iter().position(|s| s.msg_id == msg_id) {
-            Some(i) => i,
-            None => {
-                streams.push(Stream {
-                    msg_id,
-                    default_interval: None,
-                    interval: None,
-                    next_due: now,
-                });
-                streams.len() - 1
-            }
-        };
-        let stream = &mut streams[index];
-        stream.interval = interval.unwrap_or(stream.default_interval);
-        stream.next_due = now;
-        let link = &mut self.io.links[link as usize];
-        link.streams_due = link.streams_due.min(now);
+        self.io.links[link as usize]
+            .streams
+            .set_interval(now, msg_id, interval);
         true
     }
 
