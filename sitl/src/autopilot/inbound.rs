@@ -7,10 +7,9 @@
 #![allow(deprecated)]
 
 use mavlink::dialects::common::{
-    COMMAND_INT_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, MISSION_ITEM_DATA, MISSION_ITEM_INT_DATA,
-    MavFrame, MavMessage, MavType, PARAM_REQUEST_READ_DATA, PARAM_SET_DATA,
-    SET_ATTITUDE_TARGET_DATA, SET_MODE_DATA, SET_POSITION_TARGET_GLOBAL_INT_DATA,
-    SET_POSITION_TARGET_LOCAL_NED_DATA, TIMESYNC_DATA,
+    COMMAND_INT_DATA, COMMAND_LONG_DATA, HEARTBEAT_DATA, MavFrame, MavMessage, MavType,
+    PARAM_REQUEST_READ_DATA, PARAM_SET_DATA, SET_ATTITUDE_TARGET_DATA, SET_MODE_DATA,
+    SET_POSITION_TARGET_GLOBAL_INT_DATA, SET_POSITION_TARGET_LOCAL_NED_DATA, TIMESYNC_DATA,
 };
 
 use super::commands::ReceivedCommand;
@@ -82,48 +81,18 @@ impl Vehicle {
             MavMessage::SET_POSITION_TARGET_GLOBAL_INT(m) => {
                 self.on_position_target_global(now, &m)
             }
-            MavMessage::MISSION_COUNT(m) => self.on_mission_count(now, link, sender, &m),
-            MavMessage::MISSION_ITEM_INT(m) => self.on_mission_item(now, link, sender, &m, false),
-            #[allow(deprecated)]
-            MavMessage::MISSION_ITEM(m) => {
-                let m = item_int_from_float(&m);
-                self.on_mission_item(now, link, sender, &m, true)
+            MavMessage::MISSION_COUNT(_)
+            | MavMessage::MISSION_ITEM_INT(_)
+            | MavMessage::MISSION_REQUEST_LIST(_)
+            | MavMessage::MISSION_REQUEST_INT(_)
+            | MavMessage::MISSION_ACK(_)
+            | MavMessage::MISSION_CLEAR_ALL(_)
+            | MavMessage::MISSION_SET_CURRENT(_) => {
+                self.on_mission_message(now, link, sender, &msg)
             }
-            MavMessage::MISSION_REQUEST_LIST(m) => self.on_mission_request_list(
-                now,
-                link,
-                sender,
-                (m.target_system, m.target_component),
-                m.mission_type,
-            ),
-            MavMessage::MISSION_REQUEST_INT(m) => self.on_mission_request(
-                now,
-                link,
-                sender,
-                (m.target_system, m.target_component),
-                m.seq,
-                false,
-            ),
             #[allow(deprecated)]
-            MavMessage::MISSION_REQUEST(m) => self.on_mission_request(
-                now,
-                link,
-                sender,
-                (m.target_system, m.target_component),
-                m.seq,
-                true,
-            ),
-            MavMessage::MISSION_ACK(m) => {
-                self.on_mission_ack(sender, (m.target_system, m.target_component))
-            }
-            MavMessage::MISSION_CLEAR_ALL(m) => self.on_mission_clear(
-                link,
-                sender,
-                (m.target_system, m.target_component),
-                m.mission_type,
-            ),
-            MavMessage::MISSION_SET_CURRENT(m) => {
-                self.on_mission_set_current((m.target_system, m.target_component), m.seq)
+            MavMessage::MISSION_ITEM(_) | MavMessage::MISSION_REQUEST(_) => {
+                self.on_mission_message(now, link, sender, &msg)
             }
             MavMessage::COMMAND_LONG(m) => self.on_command_long(now, link, sender, &m),
             MavMessage::COMMAND_INT(m) => self.on_command_int(now, link, sender, &m),
@@ -389,40 +358,5 @@ impl Vehicle {
             self.send(link, &reply);
         }
         true
-    }
-}
-
-/// A legacy MISSION_ITEM (degrees as floats) as the MISSION_ITEM_INT it stands for.
-#[allow(deprecated)]
-fn item_int_from_float(m: &MISSION_ITEM_DATA) -> MISSION_ITEM_INT_DATA {
-    let global = matches!(
-        m.frame,
-        MavFrame::MAV_FRAME_GLOBAL | MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT
-    );
-    let e7 = |v: f32| {
-        if global {
-            (f64::from(v) * 1e7)
-                .round()
-                .clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
-        } else {
-            v as i32
-        }
-    };
-    MISSION_ITEM_INT_DATA {
-        param1: m.param1,
-        param2: m.param2,
-        param3: m.param3,
-        param4: m.param4,
-        x: e7(m.x),
-        y: e7(m.y),
-        z: m.z,
-        seq: m.seq,
-        command: m.command,
-        target_system: m.target_system,
-        target_component: m.target_component,
-        frame: m.frame,
-        current: m.current,
-        autocontinue: m.autocontinue,
-        mission_type: m.mission_type,
     }
 }

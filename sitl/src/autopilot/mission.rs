@@ -1,16 +1,20 @@
-//! The stored mission: its items, progress and transfer, and the reports
+//! The stored mission: its items and progress, the reports
 //! (MISSION_CURRENT, MISSION_ITEM_REACHED). An item and its rules are in `mission_item`,
 //! the transfer protocol in `mission_transfer`, the flying in `mission_run`.
 
+use std::time::Duration;
+
 use mavlink::dialects::common::{
-    MISSION_CURRENT_DATA, MISSION_ITEM_REACHED_DATA, MavMessage, MissionState,
+    MISSION_ACK_DATA, MISSION_CURRENT_DATA, MISSION_ITEM_REACHED_DATA, MavMessage,
+    MavMissionResult, MavMissionType, MissionState,
 };
 
 use super::mission_item::{MissionItem, crc_of};
-use super::mission_transfer::Transfer;
+use super::mission_transfer::{StoredPlans, TransferStep, item_int_from_float};
 use super::{LinkId, Vehicle};
+use crate::time::SimTime;
 
-/// The stored mission, its progress and the transfer in progress.
+/// The stored mission and its progress.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MissionStore {
     items: Vec<MissionItem>,
@@ -18,7 +22,6 @@ pub struct MissionStore {
     finished: bool,
     started: bool,
     reached: Option<(u16, u8)>,
-    pub(super) transfer: Transfer,
     pub(super) next_report: crate::time::SimTime,
     pub(super) crc: u32,
 }
@@ -31,7 +34,6 @@ impl Default for MissionStore {
             finished: false,
             started: false,
             reached: None,
-            transfer: Transfer::Idle,
             next_report: crate::time::SimTime::ZERO,
             crc: 0,
         }
@@ -86,6 +88,124 @@ impl MissionStore {
 }
 
 impl Vehicle {
+    /// A mission-protocol message: checked for this autopilot (system, and component 1,
+    /// 190 or broadcast, as PX4 accepts), handed to the transfer, and what the transfer
+    /// asks for done.
+    pub(super) fn on_mission_message(
+        &mut self,
+        now: SimTime,
+        link: LinkId,
+        sender: (u8, u8),
+        msg: &MavMessage,
+    ) -> bool {
+        let Some(target) = mission_target(msg) else {
+            return false;
+        };
+        let ours = target.0 == self.cfg.system_id && matches!(target.1, 0 | 1 | 190);
+        if !ours {
+            self.counters.foreign_target += 1;
+            return false;
+        }
+        let plans = StoredPlans {
+            mission: self.navigator.mission.items(),
+            mission_crc: self.navigator.mission.crc,
+            current_seq: self.navigator.mission.current_seq(),
+            fence: self.geofence.items(),
+            fence_crc: self.geofence.crc,
+        };
+        let transfer = &mut self.mission_transfer;
+        #[allow(deprecated)]
+        match msg {
+            MavMessage::MISSION_COUNT(m) => transfer.on_count(now, link, sender, m),
+            MavMessage::MISSION_ITEM_INT(m) => {
+                transfer.on_item(now, link, sender, m, false, &plans)
+            }
+            MavMessage::MISSION_ITEM(m) => {
+                let m = item_int_from_float(m);
+                transfer.on_item(now, link, sender, &m, true, &plans);
+            }
+            MavMessage::MISSION_REQUEST_LIST(m) => {
+                transfer.on_request_list(now, link, sender, m.mission_type, &plans);
+            }
+            MavMessage::MISSION_REQUEST_INT(m) => {
+                transfer.on_request(now, link, sender, m.seq, false, &plans);
+            }
+            MavMessage::MISSION_REQUEST(m) => {
+                transfer.on_request(now, link, sender, m.seq, true, &plans);
+            }
+            MavMessage::MISSION_ACK(_) => transfer.on_ack(sender),
+            MavMessage::MISSION_CLEAR_ALL(m) => transfer.on_clear(link, sender, m.mission_type),
+            MavMessage::MISSION_SET_CURRENT(m) => {
+                // No answer but the next MISSION_CURRENT, as PX4.
+                let seq = usize::from(m.seq);
+                if transfer.is_idle() && seq < self.navigator.mission.items().len() {
+                    self.jump_to_item(seq);
+                }
+            }
+            _ => {}
+        }
+        self.do_transfer_steps();
+        true
+    }
+
+    /// The transfer's retries and timeouts, and the 1 Hz MISSION_CURRENT.
+    pub(super) fn mission_timers(&mut self, now: SimTime) {
+        let plans = StoredPlans {
+            mission: self.navigator.mission.items(),
+            mission_crc: self.navigator.mission.crc,
+            current_seq: self.navigator.mission.current_seq(),
+            fence: self.geofence.items(),
+            fence_crc: self.geofence.crc,
+        };
+        self.mission_transfer.handle_timeout(now, &plans);
+        self.do_transfer_steps();
+        if now >= self.navigator.mission.next_report {
+            self.navigator.mission.next_report = now + Duration::from_secs(1);
+            self.report_mission();
+        }
+    }
+
+    /// Sends, stores and acknowledges what the transfer asked for, in its order.
+    fn do_transfer_steps(&mut self) {
+        while let Some(step) = self.mission_transfer.poll_step() {
+            match step {
+                TransferStep::Send(link, msg) => self.send(link, &msg),
+                TransferStep::Store {
+                    mission_type: MavMissionType::MAV_MISSION_TYPE_FENCE,
+                    items,
+                    ..
+                } => self.replace_fence(items),
+                TransferStep::Store { items, current, .. } => self.replace_mission(items, current),
+                TransferStep::Ack {
+                    link,
+                    to,
+                    result,
+                    mission_type,
+                } => {
+                    let opaque_id = match (result, mission_type) {
+                        (
+                            MavMissionResult::MAV_MISSION_ACCEPTED,
+                            MavMissionType::MAV_MISSION_TYPE_MISSION,
+                        ) => self.navigator.mission.crc,
+                        (
+                            MavMissionResult::MAV_MISSION_ACCEPTED,
+                            MavMissionType::MAV_MISSION_TYPE_FENCE,
+                        ) => self.geofence.crc,
+                        _ => 0,
+                    };
+                    let ack = MavMessage::MISSION_ACK(MISSION_ACK_DATA {
+                        target_system: to.0,
+                        target_component: to.1,
+                        mavtype: result,
+                        mission_type,
+                        opaque_id,
+                    });
+                    self.send(link, &ack);
+                }
+            }
+        }
+    }
+
     /// MISSION_CURRENT (and a pending MISSION_ITEM_REACHED, repeated up to 10 times at
     /// 1 Hz as PX4 does) on both links. ArduPilot sends neither unasked (they belong to
     /// its stream groups).
@@ -157,4 +277,22 @@ impl Vehicle {
         }
         self.report_mission();
     }
+}
+
+/// The (system, component) a mission-protocol message is addressed to; `None` for any
+/// other message.
+#[allow(deprecated)]
+fn mission_target(msg: &MavMessage) -> Option<(u8, u8)> {
+    Some(match msg {
+        MavMessage::MISSION_COUNT(m) => (m.target_system, m.target_component),
+        MavMessage::MISSION_ITEM_INT(m) => (m.target_system, m.target_component),
+        MavMessage::MISSION_ITEM(m) => (m.target_system, m.target_component),
+        MavMessage::MISSION_REQUEST_LIST(m) => (m.target_system, m.target_component),
+        MavMessage::MISSION_REQUEST_INT(m) => (m.target_system, m.target_component),
+        MavMessage::MISSION_REQUEST(m) => (m.target_system, m.target_component),
+        MavMessage::MISSION_ACK(m) => (m.target_system, m.target_component),
+        MavMessage::MISSION_CLEAR_ALL(m) => (m.target_system, m.target_component),
+        MavMessage::MISSION_SET_CURRENT(m) => (m.target_system, m.target_component),
+        _ => return None,
+    })
 }

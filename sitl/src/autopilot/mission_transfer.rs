@@ -1,6 +1,8 @@
 //! The MAVLink mission protocol as PX4's `mavlink_mission.cpp` speaks it, for mission
-//! items and fence plans (rally plans: only their clearing is accepted); the items' rules
-//! are in `mission` and `geofence`.
+//! items and fence plans (rally plans: only their clearing is accepted), as a sans-IO
+//! machine: it reads the stored plans, asks the vehicle for [`TransferStep`]s (send this,
+//! acknowledge that, store this plan) and keeps no plan of its own. The items' rules are in
+//! `mission_item` and `geofence`.
 //!
 //! ```text
 //!  Idle ──MISSION_COUNT n>0──► Receiving: MISSION_REQUEST_INT seq, re-sent every 250 ms;
@@ -18,16 +20,17 @@
 //!
 //! Legacy MISSION_REQUEST and MISSION_ITEM are answered in kind.
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
 use mavlink::dialects::common::{
-    MISSION_ACK_DATA, MISSION_COUNT_DATA, MISSION_ITEM_INT_DATA, MISSION_REQUEST_INT_DATA,
-    MavFrame, MavMessage, MavMissionResult, MavMissionType,
+    MISSION_COUNT_DATA, MISSION_ITEM_INT_DATA, MISSION_REQUEST_INT_DATA, MavFrame, MavMessage,
+    MavMissionResult, MavMissionType,
 };
 
+use super::LinkId;
 use super::geofence::{MAX_FENCE_ITEMS, check_fence_item};
 use super::mission_item::{MissionItem, check_item, item_from_int, mav_cmd};
-use super::{LinkId, Vehicle};
 use crate::time::SimTime;
 
 /// How often a request (or the count of a download) is repeated.
@@ -37,13 +40,69 @@ const TRANSFER_TIMEOUT: Duration = Duration::from_secs(5);
 /// Most items a mission may have (PX4 SITL's storage).
 const MAX_ITEMS: usize = 10_000;
 
+/// A sender or target: (system, component).
+type Peer = (u8, u8);
+
+/// What the vehicle has stored, as the transfer reads it.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct StoredPlans<'a> {
+    /// The mission's items and checksum.
+    pub(super) mission: &'a [MissionItem],
+    pub(super) mission_crc: u32,
+    /// The mission's current item.
+    pub(super) current_seq: usize,
+    /// The fence plan's items and checksum.
+    pub(super) fence: &'a [MissionItem],
+    pub(super) fence_crc: u32,
+}
+
+impl StoredPlans<'_> {
+    fn items(&self, mission_type: MavMissionType) -> &[MissionItem] {
+        match mission_type {
+            MavMissionType::MAV_MISSION_TYPE_MISSION => self.mission,
+            MavMissionType::MAV_MISSION_TYPE_FENCE => self.fence,
+            _ => &[],
+        }
+    }
+
+    fn crc(&self, mission_type: MavMissionType) -> u32 {
+        match mission_type {
+            MavMissionType::MAV_MISSION_TYPE_MISSION => self.mission_crc,
+            MavMissionType::MAV_MISSION_TYPE_FENCE => self.fence_crc,
+            _ => 0,
+        }
+    }
+}
+
+/// What the transfer asks of the vehicle, in order.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) enum TransferStep {
+    /// Send a request, a count or an item.
+    Send(LinkId, MavMessage),
+    /// Replace the stored plan of a type (`Store` of no items clears it); `current` is
+    /// the mission's new current item, if the plan named one.
+    Store {
+        mission_type: MavMissionType,
+        items: Vec<MissionItem>,
+        current: Option<usize>,
+    },
+    /// MISSION_ACK; an accepted one carries the stored plan's checksum as it is when the
+    /// ack is sent (after a `Store` before it).
+    Ack {
+        link: LinkId,
+        to: Peer,
+        result: MavMissionResult,
+        mission_type: MavMissionType,
+    },
+}
+
 /// Where a transfer is.
 #[derive(Debug, Clone, PartialEq)]
-pub(super) enum Transfer {
+enum Transfer {
     Idle,
     Receiving {
         link: LinkId,
-        partner: (u8, u8),
+        partner: Peer,
         count: usize,
         items: Vec<MissionItem>,
         last_heard: SimTime,
@@ -54,7 +113,7 @@ pub(super) enum Transfer {
     },
     Sending {
         link: LinkId,
-        partner: (u8, u8),
+        partner: Peer,
         last_heard: SimTime,
         last_sent: SimTime,
         requested: bool,
@@ -62,61 +121,62 @@ pub(super) enum Transfer {
     },
 }
 
-impl Vehicle {
-    /// Whether a mission message is for this vehicle's autopilot (system, and component
-    /// 1, 190 or broadcast, as PX4 accepts).
-    fn mission_for_us(&mut self, target_system: u8, target_component: u8) -> bool {
-        let ours = target_system == self.cfg.system_id && matches!(target_component, 0 | 1 | 190);
-        if !ours {
-            self.counters.foreign_target += 1;
+/// One vehicle's mission transfer.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct MissionTransfer {
+    state: Transfer,
+    /// ArduPilot asks every item with MISSION_REQUEST (MissionItemProtocol.cpp).
+    always_legacy_requests: bool,
+    system_id: u8,
+    steps: VecDeque<TransferStep>,
+}
+
+impl MissionTransfer {
+    pub(super) fn new(system_id: u8, always_legacy_requests: bool) -> Self {
+        Self {
+            state: Transfer::Idle,
+            always_legacy_requests,
+            system_id,
+            steps: VecDeque::new(),
         }
-        ours
     }
 
-    fn send_mission_ack(
-        &mut self,
-        link: LinkId,
-        to: (u8, u8),
-        result: MavMissionResult,
-        mission_type: MavMissionType,
-    ) {
-        let opaque_id = if result == MavMissionResult::MAV_MISSION_ACCEPTED {
-            self.plan_crc(mission_type)
-        } else {
-            0
-        };
-        let ack = MavMessage::MISSION_ACK(MISSION_ACK_DATA {
-            target_system: to.0,
-            target_component: to.1,
-            mavtype: result,
-            mission_type,
-            opaque_id,
+    /// Whether no transfer is in progress.
+    pub(super) fn is_idle(&self) -> bool {
+        self.state == Transfer::Idle
+    }
+
+    /// The next thing to do, if any.
+    pub(super) fn poll_step(&mut self) -> Option<TransferStep> {
+        self.steps.pop_front()
+    }
+
+    fn ack(&mut self, link: LinkId, to: Peer, result: MavMissionResult, kind: MavMissionType) {
+        self.steps.push_back(TransferStep::Ack {
+            link,
+            to,
+            result,
+            mission_type: kind,
         });
-        self.send(link, &ack);
     }
 
-    /// The stored plan's checksum (`opaque_id`) of a mission type.
-    fn plan_crc(&self, mission_type: MavMissionType) -> u32 {
-        match mission_type {
-            MavMissionType::MAV_MISSION_TYPE_MISSION => self.navigator.mission.crc,
-            MavMissionType::MAV_MISSION_TYPE_FENCE => self.geofence.crc,
-            _ => 0,
-        }
-    }
-
-    /// Items in the stored plan of a mission type.
-    fn plan_len(&self, mission_type: MavMissionType) -> usize {
-        match mission_type {
-            MavMissionType::MAV_MISSION_TYPE_MISSION => self.navigator.mission.items().len(),
-            MavMissionType::MAV_MISSION_TYPE_FENCE => self.geofence.items().len(),
-            _ => 0,
-        }
+    fn store(
+        &mut self,
+        mission_type: MavMissionType,
+        items: Vec<MissionItem>,
+        current: Option<usize>,
+    ) {
+        self.steps.push_back(TransferStep::Store {
+            mission_type,
+            items,
+            current,
+        });
     }
 
     fn request_item(
         &mut self,
         link: LinkId,
-        to: (u8, u8),
+        to: Peer,
         seq: usize,
         legacy: bool,
         mission_type: MavMissionType,
@@ -127,10 +187,8 @@ impl Vehicle {
             target_component: to.1,
             mission_type,
         };
-        // ArduPilot asks every item with MISSION_REQUEST (MissionItemProtocol.cpp).
-        let legacy = legacy || self.is_ardupilot();
         #[allow(deprecated)]
-        let msg = if legacy {
+        let msg = if legacy || self.always_legacy_requests {
             MavMessage::MISSION_REQUEST(mavlink::dialects::common::MISSION_REQUEST_DATA {
                 seq: data.seq,
                 target_system: data.target_system,
@@ -140,22 +198,37 @@ impl Vehicle {
         } else {
             MavMessage::MISSION_REQUEST_INT(data)
         };
-        self.send(link, &msg);
+        self.steps.push_back(TransferStep::Send(link, msg));
+    }
+
+    fn send_count(
+        &mut self,
+        link: LinkId,
+        to: Peer,
+        plans: &StoredPlans<'_>,
+        mission_type: MavMissionType,
+    ) {
+        let msg = MavMessage::MISSION_COUNT(MISSION_COUNT_DATA {
+            count: plans.items(mission_type).len() as u16,
+            target_system: to.0,
+            target_component: to.1,
+            mission_type,
+            opaque_id: plans.crc(mission_type),
+        });
+        self.steps.push_back(TransferStep::Send(link, msg));
     }
 
     /// MISSION_COUNT: starts an upload (or clears with 0).
-    pub(super) fn on_mission_count(
+    pub(super) fn on_count(
         &mut self,
         now: SimTime,
         link: LinkId,
-        sender: (u8, u8),
+        sender: Peer,
         m: &MISSION_COUNT_DATA,
-    ) -> bool {
-        if !self.mission_for_us(m.target_system, m.target_component) {
-            return false;
-        }
+    ) {
         let count = usize::from(m.count);
-        let max = match m.mission_type {
+        let kind = m.mission_type;
+        let max = match kind {
             MavMissionType::MAV_MISSION_TYPE_MISSION => MAX_ITEMS,
             MavMissionType::MAV_MISSION_TYPE_FENCE => MAX_FENCE_ITEMS,
             _ => {
@@ -165,58 +238,39 @@ impl Vehicle {
                 } else {
                     MavMissionResult::MAV_MISSION_UNSUPPORTED
                 };
-                self.send_mission_ack(link, sender, result, m.mission_type);
-                return true;
+                self.ack(link, sender, result, kind);
+                return;
             }
         };
-        match &self.navigator.mission.transfer {
+        match &self.state {
             Transfer::Receiving {
                 partner,
                 items,
                 legacy,
                 mission_type,
                 ..
-            } if *partner == sender && items.is_empty() && *mission_type == m.mission_type => {
+            } if *partner == sender && items.is_empty() && *mission_type == kind => {
                 // The partner did not hear our first request: ask again.
                 let legacy = *legacy;
-                self.request_item(link, sender, 0, legacy, m.mission_type);
-                return true;
+                self.request_item(link, sender, 0, legacy, kind);
+                return;
             }
             Transfer::Idle => {}
             _ => {
-                self.send_mission_ack(
-                    link,
-                    sender,
-                    MavMissionResult::MAV_MISSION_ERROR,
-                    m.mission_type,
-                );
-                return true;
+                self.ack(link, sender, MavMissionResult::MAV_MISSION_ERROR, kind);
+                return;
             }
         }
         if count > max {
-            self.send_mission_ack(
-                link,
-                sender,
-                MavMissionResult::MAV_MISSION_NO_SPACE,
-                m.mission_type,
-            );
-            return true;
+            self.ack(link, sender, MavMissionResult::MAV_MISSION_NO_SPACE, kind);
+            return;
         }
         if count == 0 {
-            if m.mission_type == MavMissionType::MAV_MISSION_TYPE_FENCE {
-                self.replace_fence(Vec::new());
-            } else {
-                self.replace_mission(Vec::new(), Some(0));
-            }
-            self.send_mission_ack(
-                link,
-                sender,
-                MavMissionResult::MAV_MISSION_ACCEPTED,
-                m.mission_type,
-            );
-            return true;
+            self.store(kind, Vec::new(), Some(0));
+            self.ack(link, sender, MavMissionResult::MAV_MISSION_ACCEPTED, kind);
+            return;
         }
-        self.navigator.mission.transfer = Transfer::Receiving {
+        self.state = Transfer::Receiving {
             link,
             partner: sender,
             count,
@@ -225,155 +279,138 @@ impl Vehicle {
             last_request: now,
             legacy: false,
             current: None,
-            mission_type: m.mission_type,
+            mission_type: kind,
         };
-        self.request_item(link, sender, 0, false, m.mission_type);
-        true
+        self.request_item(link, sender, 0, false, kind);
     }
 
     /// MISSION_ITEM_INT (or a legacy MISSION_ITEM converted to it) during an upload.
-    pub(super) fn on_mission_item(
+    pub(super) fn on_item(
         &mut self,
         now: SimTime,
         link: LinkId,
-        sender: (u8, u8),
+        sender: Peer,
         m: &MISSION_ITEM_INT_DATA,
         legacy: bool,
-    ) -> bool {
-        if !self.mission_for_us(m.target_system, m.target_component) {
-            return false;
-        }
+        plans: &StoredPlans<'_>,
+    ) {
         let Transfer::Receiving {
             partner,
-            count,
             items,
             last_heard,
-            last_request,
             legacy: transfer_legacy,
-            current,
             mission_type,
             ..
-        } = &mut self.navigator.mission.transfer
+        } = &mut self.state
         else {
             // The last item again after the final ack: the partner missed the ack.
-            if usize::from(m.seq) + 1 == self.plan_len(m.mission_type) {
-                self.send_mission_ack(
+            if usize::from(m.seq) + 1 == plans.items(m.mission_type).len() {
+                self.ack(
                     link,
                     sender,
                     MavMissionResult::MAV_MISSION_ACCEPTED,
                     m.mission_type,
                 );
             }
-            return true;
+            return;
         };
         if *partner != sender {
-            return true;
+            return;
         }
-        let mission_type = *mission_type;
-        if m.mission_type != mission_type {
-            self.send_mission_ack(
+        if m.mission_type != *mission_type {
+            self.ack(
                 link,
                 sender,
                 MavMissionResult::MAV_MISSION_ERROR,
                 m.mission_type,
             );
-            return true;
+            return;
         }
         *last_heard = now;
         *transfer_legacy = legacy;
         if usize::from(m.seq) != items.len() {
-            return true; // out of sequence: the retry timer asks for the right one
+            return; // out of sequence: the retry timer asks for the right one
         }
+        let kind = *mission_type;
         let item = item_from_int(m);
-        // A legacy MISSION_ITEM carries degrees as floats; an _INT frame there is wrong.
-        if legacy && matches!(item.frame, 5 | 6) {
-            self.navigator.mission.transfer = Transfer::Idle;
-            self.send_mission_ack(
-                link,
-                sender,
-                MavMissionResult::MAV_MISSION_UNSUPPORTED_FRAME,
-                m.mission_type,
-            );
-            return true;
-        }
-        let checked = if mission_type == MavMissionType::MAV_MISSION_TYPE_FENCE {
-            check_fence_item(&item, legacy)
-        } else {
-            check_item(&item)
-        };
-        if let Err(result) = checked {
+        if let Err(result) = check_uploaded(&item, kind, legacy) {
             tracing::debug!(
-                sysid = self.cfg.system_id,
+                sysid = self.system_id,
                 seq = m.seq,
                 ?result,
                 "mission item refused"
             );
-            self.navigator.mission.transfer = Transfer::Idle;
-            self.send_mission_ack(link, sender, result, m.mission_type);
-            return true;
+            self.state = Transfer::Idle;
+            self.ack(link, sender, result, kind);
+            return;
         }
-        items.push(item);
-        if m.current != 0 {
-            *current = Some(usize::from(m.seq));
-        }
-        if items.len() < *count {
-            *last_request = now;
-            let (next, legacy) = (items.len(), *transfer_legacy);
-            self.request_item(link, sender, next, legacy, mission_type);
-            return true;
-        }
-        let (items, current) = (std::mem::take(items), *current);
-        self.navigator.mission.transfer = Transfer::Idle;
-        if mission_type == MavMissionType::MAV_MISSION_TYPE_FENCE {
-            self.replace_fence(items);
-            self.send_mission_ack(
-                link,
-                sender,
-                MavMissionResult::MAV_MISSION_ACCEPTED,
-                mission_type,
-            );
-            return true;
-        }
-        self.replace_mission(items, current);
-        self.send_mission_ack(
-            link,
-            sender,
-            MavMissionResult::MAV_MISSION_ACCEPTED,
-            m.mission_type,
-        );
-        tracing::info!(
-            sysid = self.cfg.system_id,
-            items = self.navigator.mission.items().len(),
-            "mission stored"
-        );
-        true
+        self.accept_item(now, link, sender, item, m.current != 0);
     }
 
-    /// MISSION_REQUEST_LIST: starts a download.
-    pub(super) fn on_mission_request_list(
+    /// Keeps an item that passed its checks; asks for the next one, or stores the plan
+    /// after the last.
+    fn accept_item(
         &mut self,
         now: SimTime,
         link: LinkId,
-        sender: (u8, u8),
-        target: (u8, u8),
-        mission_type: MavMissionType,
-    ) -> bool {
-        if !self.mission_for_us(target.0, target.1) {
-            return false;
+        sender: Peer,
+        item: MissionItem,
+        is_current: bool,
+    ) {
+        let Transfer::Receiving {
+            count,
+            items,
+            last_request,
+            legacy,
+            current,
+            mission_type,
+            ..
+        } = &mut self.state
+        else {
+            return;
+        };
+        let kind = *mission_type;
+        if is_current {
+            *current = Some(items.len());
         }
+        items.push(item);
+        if items.len() < *count {
+            *last_request = now;
+            let (next, legacy) = (items.len(), *legacy);
+            self.request_item(link, sender, next, legacy, kind);
+            return;
+        }
+        let (items, current) = (std::mem::take(items), *current);
+        self.state = Transfer::Idle;
+        let n = items.len();
+        self.store(kind, items, current);
+        self.ack(link, sender, MavMissionResult::MAV_MISSION_ACCEPTED, kind);
+        if kind == MavMissionType::MAV_MISSION_TYPE_MISSION {
+            tracing::info!(sysid = self.system_id, items = n, "mission stored");
+        }
+    }
+
+    /// MISSION_REQUEST_LIST: starts a download.
+    pub(super) fn on_request_list(
+        &mut self,
+        now: SimTime,
+        link: LinkId,
+        sender: Peer,
+        mission_type: MavMissionType,
+        plans: &StoredPlans<'_>,
+    ) {
         let restart = matches!(
-            self.navigator.mission.transfer,
+            self.state,
             Transfer::Sending { partner, .. } if partner == sender
         );
-        if self.navigator.mission.transfer != Transfer::Idle && !restart {
-            return true; // busy: PX4 only says so in a status text
+        if !self.is_idle() && !restart {
+            return; // busy: PX4 only says so in a status text
         }
-        let count = self.plan_len(mission_type);
         if matches!(
             mission_type,
             MavMissionType::MAV_MISSION_TYPE_MISSION | MavMissionType::MAV_MISSION_TYPE_FENCE
         ) {
-            self.navigator.mission.transfer = Transfer::Sending {
+            self.state = Transfer::Sending {
                 link,
                 partner: sender,
                 last_heard: now,
@@ -382,73 +419,41 @@ impl Vehicle {
                 mission_type,
             };
         }
-        self.send_mission_count(link, sender, count, mission_type);
-        true
-    }
-
-    fn send_mission_count(
-        &mut self,
-        link: LinkId,
-        to: (u8, u8),
-        count: usize,
-        mission_type: MavMissionType,
-    ) {
-        let msg = MavMessage::MISSION_COUNT(MISSION_COUNT_DATA {
-            count: count as u16,
-            target_system: to.0,
-            target_component: to.1,
-            mission_type,
-            opaque_id: self.plan_crc(mission_type),
-        });
-        self.send(link, &msg);
+        self.send_count(link, sender, plans, mission_type);
     }
 
     /// MISSION_REQUEST_INT (or legacy MISSION_REQUEST) during a download.
-    pub(super) fn on_mission_request(
+    pub(super) fn on_request(
         &mut self,
         now: SimTime,
         link: LinkId,
-        sender: (u8, u8),
-        target: (u8, u8),
+        sender: Peer,
         seq: u16,
         legacy: bool,
-    ) -> bool {
-        if !self.mission_for_us(target.0, target.1) {
-            return false;
-        }
+        plans: &StoredPlans<'_>,
+    ) {
         let Transfer::Sending {
             partner,
             last_heard,
             requested,
             mission_type,
             ..
-        } = &mut self.navigator.mission.transfer
+        } = &mut self.state
         else {
-            return true;
+            return;
         };
         if *partner != sender {
-            return true;
+            return;
         }
         *last_heard = now;
         *requested = true;
-        let mission_type = *mission_type;
-        let fence = mission_type == MavMissionType::MAV_MISSION_TYPE_FENCE;
-        let stored = if fence {
-            self.geofence.items()
-        } else {
-            self.navigator.mission.items()
+        let kind = *mission_type;
+        let Some(mut item) = plans.items(kind).get(usize::from(seq)).copied() else {
+            self.state = Transfer::Idle;
+            self.ack(link, sender, MavMissionResult::MAV_MISSION_ERROR, kind);
+            return;
         };
-        let Some(mut item) = stored.get(usize::from(seq)).copied() else {
-            self.navigator.mission.transfer = Transfer::Idle;
-            self.send_mission_ack(
-                link,
-                sender,
-                MavMissionResult::MAV_MISSION_ERROR,
-                mission_type,
-            );
-            return true;
-        };
-        if fence {
+        if kind == MavMissionType::MAV_MISSION_TYPE_FENCE {
             // PX4 keeps no altitude frame for fence points: they come back absolute, with
             // param2-4 zero and autocontinue 0.
             item.frame = 0;
@@ -456,86 +461,54 @@ impl Vehicle {
             item.autocontinue = 0;
         }
         // As PX4, `current` compares with the mission's current item whatever the type.
-        let current = u8::from(usize::from(seq) == self.navigator.mission.current_seq());
+        let current = u8::from(usize::from(seq) == plans.current_seq);
         let mut msg = if legacy {
             item_message_float(&item, seq, sender, current)
         } else {
             item_message_int(&item, seq, sender, current)
         };
         match &mut msg {
-            MavMessage::MISSION_ITEM_INT(d) => d.mission_type = mission_type,
+            MavMessage::MISSION_ITEM_INT(d) => d.mission_type = kind,
             #[allow(deprecated)]
-            MavMessage::MISSION_ITEM(d) => d.mission_type = mission_type,
+            MavMessage::MISSION_ITEM(d) => d.mission_type = kind,
             _ => {}
         }
-        self.send(link, &msg);
-        true
+        self.steps.push_back(TransferStep::Send(link, msg));
     }
 
     /// MISSION_ACK from the client: a download is over.
-    pub(super) fn on_mission_ack(&mut self, sender: (u8, u8), target: (u8, u8)) -> bool {
-        if !self.mission_for_us(target.0, target.1) {
-            return false;
-        }
-        if let Transfer::Sending { partner, .. } = self.navigator.mission.transfer
+    pub(super) fn on_ack(&mut self, sender: Peer) {
+        if let Transfer::Sending { partner, .. } = self.state
             && partner == sender
         {
-            self.navigator.mission.transfer = Transfer::Idle;
+            self.state = Transfer::Idle;
         }
-        true
     }
 
-    /// MISSION_CLEAR_ALL.
-    pub(super) fn on_mission_clear(
-        &mut self,
-        link: LinkId,
-        sender: (u8, u8),
-        target: (u8, u8),
-        mission_type: MavMissionType,
-    ) -> bool {
-        if !self.mission_for_us(target.0, target.1) {
-            return false;
+    /// MISSION_CLEAR_ALL (ignored during a transfer).
+    pub(super) fn on_clear(&mut self, link: LinkId, sender: Peer, mission_type: MavMissionType) {
+        if !self.is_idle() {
+            return;
         }
-        if self.navigator.mission.transfer != Transfer::Idle {
-            return true;
+        for kind in [
+            MavMissionType::MAV_MISSION_TYPE_MISSION,
+            MavMissionType::MAV_MISSION_TYPE_FENCE,
+        ] {
+            if mission_type == kind || mission_type == MavMissionType::MAV_MISSION_TYPE_ALL {
+                self.store(kind, Vec::new(), Some(0));
+            }
         }
-        if matches!(
-            mission_type,
-            MavMissionType::MAV_MISSION_TYPE_MISSION | MavMissionType::MAV_MISSION_TYPE_ALL
-        ) {
-            self.replace_mission(Vec::new(), Some(0));
-        }
-        if matches!(
-            mission_type,
-            MavMissionType::MAV_MISSION_TYPE_FENCE | MavMissionType::MAV_MISSION_TYPE_ALL
-        ) {
-            self.replace_fence(Vec::new());
-        }
-        self.send_mission_ack(
+        self.ack(
             link,
             sender,
             MavMissionResult::MAV_MISSION_ACCEPTED,
             mission_type,
         );
-        true
     }
 
-    /// MISSION_SET_CURRENT: no answer but the next MISSION_CURRENT, as PX4.
-    pub(super) fn on_mission_set_current(&mut self, target: (u8, u8), seq: u16) -> bool {
-        if !self.mission_for_us(target.0, target.1) {
-            return false;
-        }
-        if self.navigator.mission.transfer == Transfer::Idle
-            && usize::from(seq) < self.navigator.mission.items().len()
-        {
-            self.jump_to_item(usize::from(seq));
-        }
-        true
-    }
-
-    /// Retries and timeouts of the transfer in progress, and the 1 Hz MISSION_CURRENT.
-    pub(super) fn mission_timers(&mut self, now: SimTime) {
-        match &mut self.navigator.mission.transfer {
+    /// Retries and timeouts of the transfer in progress.
+    pub(super) fn handle_timeout(&mut self, now: SimTime, plans: &StoredPlans<'_>) {
+        match &mut self.state {
             Transfer::Receiving {
                 link,
                 partner,
@@ -547,8 +520,8 @@ impl Vehicle {
                 ..
             } => {
                 if now.saturating_since(*last_heard) > TRANSFER_TIMEOUT {
-                    tracing::warn!(sysid = self.cfg.system_id, "mission sync timeout");
-                    self.navigator.mission.transfer = Transfer::Idle;
+                    tracing::warn!(sysid = self.system_id, "mission sync timeout");
+                    self.state = Transfer::Idle;
                 } else if now.saturating_since(*last_request) >= RETRY {
                     *last_request = now;
                     let (link, partner, seq, legacy, kind) =
@@ -565,20 +538,32 @@ impl Vehicle {
                 mission_type,
             } => {
                 if now.saturating_since(*last_heard) > TRANSFER_TIMEOUT {
-                    self.navigator.mission.transfer = Transfer::Idle;
+                    self.state = Transfer::Idle;
                 } else if !*requested && now.saturating_since(*last_sent) >= RETRY {
                     *last_sent = now;
                     let (link, partner, kind) = (*link, *partner, *mission_type);
-                    let n = self.plan_len(kind);
-                    self.send_mission_count(link, partner, n, kind);
+                    self.send_count(link, partner, plans, kind);
                 }
             }
             Transfer::Idle => {}
         }
-        if now >= self.navigator.mission.next_report {
-            self.navigator.mission.next_report = now + Duration::from_secs(1);
-            self.report_mission();
-        }
+    }
+}
+
+/// An uploaded item's checks: a legacy MISSION_ITEM carries degrees as floats, so an
+/// _INT frame there is wrong; then the rules of its plan type.
+fn check_uploaded(
+    item: &MissionItem,
+    kind: MavMissionType,
+    legacy: bool,
+) -> Result<(), MavMissionResult> {
+    if legacy && matches!(item.frame, 5 | 6) {
+        return Err(MavMissionResult::MAV_MISSION_UNSUPPORTED_FRAME);
+    }
+    if kind == MavMissionType::MAV_MISSION_TYPE_FENCE {
+        check_fence_item(item, legacy)
+    } else {
+        check_item(item)
     }
 }
 
@@ -637,3 +622,44 @@ fn item_message_float(item: &MissionItem, seq: u16, to: (u8, u8), current: u8) -
         mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
     })
 }
+
+/// A legacy MISSION_ITEM (degrees as floats) as the MISSION_ITEM_INT it stands for.
+#[allow(deprecated)]
+pub(super) fn item_int_from_float(
+    m: &mavlink::dialects::common::MISSION_ITEM_DATA,
+) -> MISSION_ITEM_INT_DATA {
+    let global = matches!(
+        m.frame,
+        MavFrame::MAV_FRAME_GLOBAL | MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT
+    );
+    let e7 = |v: f32| {
+        if global {
+            (f64::from(v) * 1e7)
+                .round()
+                .clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+        } else {
+            v as i32
+        }
+    };
+    MISSION_ITEM_INT_DATA {
+        param1: m.param1,
+        param2: m.param2,
+        param3: m.param3,
+        param4: m.param4,
+        x: e7(m.x),
+        y: e7(m.y),
+        z: m.z,
+        seq: m.seq,
+        command: m.command,
+        target_system: m.target_system,
+        target_component: m.target_component,
+        frame: m.frame,
+        current: m.current,
+        autocontinue: m.autocontinue,
+        mission_type: m.mission_type,
+    }
+}
+
+#[cfg(test)]
+#[path = "tests_transfer.rs"]
+mod tests;

@@ -205,6 +205,9 @@ pub struct Vehicle {
     /// What it navigates by: the mode's target, the heading, the mission, the position
     /// controller.
     navigator: Navigator,
+    /// The mission protocol's transfer in progress (plans are stored in `navigator` and
+    /// `geofence`).
+    mission_transfer: mission_transfer::MissionTransfer,
     geofence: Geofence,
     datalink: datalink::DataLink,
     battery: Battery,
@@ -313,6 +316,7 @@ impl Vehicle {
             offboard: None,
             offboard_signal: None,
             navigator: Navigator::new(nav, start.yaw_rad),
+            mission_transfer: mission_transfer::MissionTransfer::new(cfg.system_id, ap.is_some()),
             geofence: Geofence::default(),
             datalink: datalink::DataLink::default(),
             battery: Battery {
