@@ -145,8 +145,8 @@ impl Vehicle {
     /// The heartbeat's mode number.
     pub(super) fn ap_custom_mode(&self) -> u32 {
         match &self.ap {
-            Some(s) if reports(s.mode_number, self.mode) => s.mode_number,
-            _ => number_of(self.mode),
+            Some(s) if reports(s.mode_number, self.modes.mode) => s.mode_number,
+            _ => number_of(self.modes.mode),
         }
     }
 
@@ -154,10 +154,10 @@ impl Vehicle {
     /// system status CRITICAL in a failsafe, STANDBY on the ground, ACTIVE in the air.
     pub(super) fn ap_heartbeat(&self) -> MavMessage {
         let mut base_mode = MavModeFlag::from_bits_truncate(ap::BASE_MODE);
-        if self.armed {
+        if self.modes.armed() {
             base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
         }
-        let system_status = match (self.failsafe, self.landed) {
+        let system_status = match (self.modes.failsafe, self.modes.landed()) {
             (true, _) => MavState::MAV_STATE_CRITICAL,
             (false, true) => MavState::MAV_STATE_STANDBY,
             (false, false) => MavState::MAV_STATE_ACTIVE,
@@ -197,7 +197,7 @@ impl Vehicle {
             );
             return MavResult::MAV_RESULT_FAILED;
         };
-        if self.armed && needs_position(number) && !self.ekf_ready(now) {
+        if self.modes.armed() && needs_position(number) && !self.ekf_ready(now) {
             self.send_statustext(
                 MavSeverity::MAV_SEVERITY_WARNING,
                 &format!("Mode change to {name} failed: requires position"),
@@ -208,7 +208,7 @@ impl Vehicle {
             s.mode_number = number;
             s.last_target = None;
         }
-        self.failsafe = false;
+        self.modes.failsafe = false;
         if mode == FlightMode::Offboard {
             // Guided's angle controller starts level on the current heading, climb 0.
             self.offboard = Some(self.guided_hold_target());
@@ -234,7 +234,7 @@ impl Vehicle {
     pub(super) fn ap_arm_disarm(&mut self, now: SimTime, cmd: &ReceivedCommand) -> MavResult {
         let force = cmd.params[1].is_some_and(|p| FORCE_ARM.contains(&p));
         match cmd.params[0] {
-            Some(1.0) if self.armed => MavResult::MAV_RESULT_ACCEPTED,
+            Some(1.0) if self.modes.armed() => MavResult::MAV_RESULT_ACCEPTED,
             Some(1.0) => {
                 let number = self.ap_custom_mode();
                 let refusal = if !self.ekf_ready(now) {
@@ -256,9 +256,9 @@ impl Vehicle {
                 MavResult::MAV_RESULT_ACCEPTED
             }
             Some(0.0) => {
-                if !self.armed {
+                if !self.modes.armed() {
                     MavResult::MAV_RESULT_ACCEPTED
-                } else if self.landed || cmd.params[1] == Some(FORCE_DISARM) {
+                } else if self.modes.landed() || cmd.params[1] == Some(FORCE_DISARM) {
                     self.disarm("commanded");
                     MavResult::MAV_RESULT_ACCEPTED
                 } else {
@@ -277,7 +277,7 @@ impl Vehicle {
         let Some(alt) = cmd.params[6].filter(|a| *a > height) else {
             return MavResult::MAV_RESULT_FAILED;
         };
-        if !(guided && self.armed && self.landed) {
+        if !(guided && self.modes.armed() && self.modes.landed()) {
             return MavResult::MAV_RESULT_FAILED;
         }
         self.enter_mode(FlightMode::Takeoff);
@@ -294,7 +294,7 @@ impl Vehicle {
         if let Some(s) = &mut self.ap {
             s.mode_number = ap::LAND;
         }
-        self.failsafe = false;
+        self.modes.failsafe = false;
         self.enter_mode(FlightMode::Land);
         self.heartbeat_now();
         MavResult::MAV_RESULT_ACCEPTED
@@ -307,7 +307,7 @@ impl Vehicle {
         let guided = self
             .ap
             .is_some_and(|s| matches!(s.mode_number, ap::GUIDED | ap::GUIDED_NOGPS));
-        if !guided || !reports(self.ap_custom_mode(), self.mode) {
+        if !guided || !reports(self.ap_custom_mode(), self.modes.mode) {
             self.counters.rejected_setpoints += 1;
             return;
         }
@@ -367,7 +367,7 @@ impl Vehicle {
                 yawspeed_ff_rps,
             }
         };
-        if self.mode != FlightMode::Offboard {
+        if self.modes.mode != FlightMode::Offboard {
             // GUIDED after a takeoff holds; an attitude target takes the angle controller.
             self.enter_mode(FlightMode::Offboard);
         }
@@ -381,7 +381,7 @@ impl Vehicle {
     /// thrust as a climb rate again; no mode change.
     pub(super) fn ap_guided_timeout(&mut self, t: SimTime) {
         let Some(s) = self.ap else { return };
-        if self.mode != FlightMode::Offboard {
+        if self.modes.mode != FlightMode::Offboard {
             return;
         }
         let timeout = Duration::from_secs_f64(self.params.value("GUID_TIMEOUT").max(0.1));
@@ -440,22 +440,23 @@ impl Vehicle {
     /// Whether the motors run (ArduPilot: 2 s after arming).
     pub(super) fn motors_started(&self, t: SimTime) -> bool {
         !self.is_ardupilot()
-            || self.took_off
-            || t.saturating_since(self.armed_at) >= MOTOR_START_DELAY
+            || self.modes.took_off()
+            || t.saturating_since(self.modes.armed_at()) >= MOTOR_START_DELAY
     }
 
     /// ArduCopter's automatic disarms on the ground: right after touchdown in LAND, and
     /// after DISARM_DELAY s landed with the motors idle (`motors.cpp auto_disarm_check`).
     pub(super) fn ap_landed_disarm(&mut self, t: SimTime) {
-        if !self.armed || !self.landed {
+        if !self.modes.armed() || !self.modes.landed() {
             if let Some(s) = &mut self.ap {
                 s.idle_since = None;
             }
             return;
         }
-        if self.mode == FlightMode::Land && self.took_off {
+        if self.modes.mode == FlightMode::Land && self.modes.took_off() {
             let settled = self
-                .landed_since
+                .modes
+                .landed_since()
                 .is_some_and(|since| t.saturating_since(since) >= Duration::from_secs(1));
             if settled {
                 self.disarm("landed");

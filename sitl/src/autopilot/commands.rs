@@ -85,13 +85,13 @@ impl Vehicle {
             MavCmd::MAV_CMD_COMPONENT_ARM_DISARM => self.cmd_arm_disarm(now, &cmd),
             MavCmd::MAV_CMD_DO_SET_MODE => self.cmd_set_mode(now, &cmd),
             MavCmd::MAV_CMD_NAV_LAND => {
-                self.failsafe = false;
+                self.modes.failsafe = false;
                 self.enter_mode(FlightMode::Land);
                 MavResult::MAV_RESULT_ACCEPTED
             }
             MavCmd::MAV_CMD_NAV_TAKEOFF => self.cmd_takeoff(&cmd),
             MavCmd::MAV_CMD_NAV_RETURN_TO_LAUNCH => {
-                self.failsafe = false;
+                self.modes.failsafe = false;
                 self.enter_mode(FlightMode::Return);
                 MavResult::MAV_RESULT_ACCEPTED
             }
@@ -157,16 +157,16 @@ impl Vehicle {
         let force = cmd.params[1] == Some(FORCE_MAGIC);
         match cmd.params[0] {
             Some(1.0) => {
-                if !self.armed && !force && !self.arming_allowed(now) {
+                if !self.modes.armed() && !force && !self.arming_allowed(now) {
                     return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
                 }
                 self.arm(now);
                 MavResult::MAV_RESULT_ACCEPTED
             }
             Some(0.0) => {
-                if !self.armed {
+                if !self.modes.armed() {
                     MavResult::MAV_RESULT_ACCEPTED
-                } else if self.landed || force {
+                } else if self.modes.landed() || force {
                     self.disarm(if force { "forced" } else { "commanded" });
                     MavResult::MAV_RESULT_ACCEPTED
                 } else {
@@ -192,10 +192,10 @@ impl Vehicle {
             );
             return false;
         }
-        if !self.can_run(now, self.mode) {
+        if !self.can_run(now, self.modes.mode) {
             tracing::info!(
                 sysid = self.cfg.system_id,
-                mode = self.mode.name(),
+                mode = self.modes.mode.name(),
                 "arming denied: mode cannot run"
             );
             return false;
@@ -217,10 +217,10 @@ impl Vehicle {
         let Some(mode) = FlightMode::from_px4(main as u32, sub as u32) else {
             return MavResult::MAV_RESULT_UNSUPPORTED;
         };
-        if self.armed && !self.can_run(now, mode) {
+        if self.modes.armed() && !self.can_run(now, mode) {
             return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
         }
-        self.failsafe = false;
+        self.modes.failsafe = false;
         self.enter_mode(mode);
         MavResult::MAV_RESULT_ACCEPTED
     }
@@ -228,7 +228,7 @@ impl Vehicle {
     /// NAV_TAKEOFF: param7 is the target altitude AMSL (NaN: the current altitude plus
     /// MIS_TAKEOFF_ALT), never below the current altitude.
     fn cmd_takeoff(&mut self, cmd: &ReceivedCommand) -> MavResult {
-        self.failsafe = false;
+        self.modes.failsafe = false;
         self.enter_mode(FlightMode::Takeoff);
         if let Some(alt_amsl) = cmd.params[6].filter(|a| a.is_finite()) {
             let frame = self.global_frame();
@@ -248,17 +248,17 @@ impl Vehicle {
     /// reads it; NaN: the current heading).
     fn cmd_reposition(&mut self, cmd: &ReceivedCommand) -> MavResult {
         let flags = cmd.params[1].map_or(0, |f| f as u32);
-        if flags & REPOSITION_CHANGE_MODE == 0 && self.mode != FlightMode::Hold {
+        if flags & REPOSITION_CHANGE_MODE == 0 && self.modes.mode != FlightMode::Hold {
             return MavResult::MAV_RESULT_DENIED;
         }
         let Some(target) = self.target_of(cmd) else {
             return MavResult::MAV_RESULT_DENIED;
         };
-        if self.mode != FlightMode::Hold {
-            self.failsafe = false;
+        if self.modes.mode != FlightMode::Hold {
+            self.modes.failsafe = false;
             self.enter_mode(FlightMode::Hold);
         }
-        if !self.armed || self.landed {
+        if !self.modes.armed() || self.modes.landed() {
             return MavResult::MAV_RESULT_ACCEPTED;
         }
         let here = self.state.pos_ned_m;
@@ -305,7 +305,7 @@ impl Vehicle {
     /// (0 centre, 1 initial heading, 2 free, 3 tangent; NaN: 0), centre param5/6
     /// (lat/lon; NaN: here), altitude param7 (AMSL; NaN: here). Needs a flying vehicle.
     fn cmd_orbit(&mut self, cmd: &ReceivedCommand) -> MavResult {
-        if !self.armed || self.landed {
+        if !self.modes.armed() || self.modes.landed() {
             return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
         }
         let radius = cmd.params[0].unwrap_or(10.0);
@@ -331,7 +331,7 @@ impl Vehicle {
             nalgebra::Vector2::new(1.0, 0.0)
         };
         let entry = centre.xy() + dir * radius.abs();
-        self.failsafe = false;
+        self.modes.failsafe = false;
         self.enter_mode(FlightMode::Orbit);
         self.navigator.nav = Nav::Orbit(Orbit {
             centre_m: centre.xy(),
@@ -372,12 +372,12 @@ impl Vehicle {
         if !self.navigator.mission.is_valid() || first.is_none_or(|f| !(-1.0..n).contains(&f)) {
             return MavResult::MAV_RESULT_DENIED;
         }
-        self.failsafe = false;
+        self.modes.failsafe = false;
         self.enter_mode(FlightMode::Mission);
         if let Some(f) = first.filter(|f| *f >= 0.0) {
             self.jump_to_item(f as usize);
         }
-        if !self.armed {
+        if !self.modes.armed() {
             if !self.arming_allowed(now) {
                 return MavResult::MAV_RESULT_TEMPORARILY_REJECTED;
             }

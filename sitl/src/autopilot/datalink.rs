@@ -59,10 +59,10 @@ impl Vehicle {
             "connection to ground station lost"
         );
         let action = self.tuning.datalink_loss_action;
-        if action == 0 || !self.armed || self.mode == FlightMode::Land {
+        if action == 0 || !self.modes.armed() || self.modes.mode == FlightMode::Land {
             return;
         }
-        self.failsafe = true;
+        self.modes.failsafe = true;
         match action {
             1 => self.enter_mode(FlightMode::Hold),
             2 => self.enter_mode(FlightMode::Return),

@@ -263,7 +263,8 @@ impl Vehicle {
         };
         let home = self.home_geodetic();
         let here = self.position_geodetic();
-        let check_here = self.armed && !self.landed && self.gf_action() != action::NONE;
+        let check_here =
+            self.modes.armed() && !self.modes.landed() && self.gf_action() != action::NONE;
         let mut kept = Vec::new();
         for shape in shapes_of(&items) {
             if !shape.passes(home.lat_deg, home.lon_deg) {
@@ -316,7 +317,7 @@ impl Vehicle {
         {
             self.geofence.delayed = None;
             // Still in the failsafe's Hold: no one took over.
-            if self.armed && self.failsafe && self.mode == FlightMode::Hold {
+            if self.modes.armed() && self.modes.failsafe && self.modes.mode == FlightMode::Hold {
                 self.enter_mode(mode);
             }
         }
@@ -335,11 +336,11 @@ impl Vehicle {
             MavSeverity::MAV_SEVERITY_CRITICAL,
             "Geofence: approaching or outside geofence",
         );
-        if !self.armed || gf_action == action::WARN {
+        if !self.modes.armed() || gf_action == action::WARN {
             return;
         }
         tracing::warn!(sysid = self.cfg.system_id, gf_action, "geofence breached");
-        self.failsafe = true;
+        self.modes.failsafe = true;
         let delay = Duration::from_secs_f64(self.params.value("COM_FAIL_ACT_T").max(0.0));
         match gf_action {
             action::HOLD => {

@@ -217,7 +217,7 @@ impl Vehicle {
             MissionState::MISSION_STATE_NO_MISSION
         } else if self.navigator.mission.finished {
             MissionState::MISSION_STATE_COMPLETE
-        } else if self.mode == super::FlightMode::Mission {
+        } else if self.modes.mode == super::FlightMode::Mission {
             MissionState::MISSION_STATE_ACTIVE
         } else if self.navigator.mission.started {
             MissionState::MISSION_STATE_PAUSED
@@ -225,7 +225,7 @@ impl Vehicle {
             MissionState::MISSION_STATE_NOT_STARTED
         };
         let in_mission = matches!(
-            self.mode,
+            self.modes.mode,
             super::FlightMode::Mission | super::FlightMode::Takeoff | super::FlightMode::Land
         );
         let current = MavMessage::MISSION_CURRENT(MISSION_CURRENT_DATA {

@@ -130,7 +130,7 @@ impl Vehicle {
             let Some(item) = self.navigator.mission.items().get(run.seq).copied() else {
                 self.navigator.mission.mark_finished();
                 self.report_mission();
-                if self.landed {
+                if self.modes.landed() {
                     tracing::info!(sysid = self.cfg.system_id, "mission finished, landed");
                 } else {
                     tracing::info!(sysid = self.cfg.system_id, "mission finished, loitering");
@@ -197,7 +197,7 @@ impl Vehicle {
                 let yaw = f64::from(item.params[3]);
                 run.yaw_rad = yaw.is_finite().then(|| yaw.to_radians());
                 let higher = here.z - target.z > self.tuning.altitude_radius_m;
-                run.stage = if self.landed && higher && c != cmd::NAV_LAND {
+                run.stage = if self.modes.landed() && higher && c != cmd::NAV_LAND {
                     let mut climb = Approach::new(here, Vector3::zeros(), here);
                     climb.retarget(Vector3::new(here.x, here.y, target.z));
                     run.approach = Some(climb);
@@ -287,7 +287,7 @@ impl Vehicle {
             }
             Stage::Landing => {
                 let sp = self.land_setpoint(target.xy());
-                if self.landed {
+                if self.modes.landed() {
                     self.advance(run);
                 }
                 (Some(sp), self.navigator.yaw_rad, None)

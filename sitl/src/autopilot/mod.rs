@@ -39,6 +39,7 @@ mod mission_item;
 mod mission_run;
 mod mission_transfer;
 mod mode;
+mod mode_machine;
 mod navigator;
 pub mod offboard;
 mod signing;
@@ -193,13 +194,8 @@ pub struct Vehicle {
     controller: AttitudeController,
     params: ParamTable,
     tuning: Tuning,
-    armed: bool,
-    mode: FlightMode,
-    failsafe: bool,
-    landed: bool,
-    took_off: bool,
-    landed_since: Option<SimTime>,
-    armed_at: SimTime,
+    /// Armed or not, the flight mode and failsafe, on the ground or not.
+    modes: mode_machine::ModeMachine,
     offboard: Option<OffboardTarget>,
     offboard_signal: Option<SimTime>,
     /// What it navigates by: the mode's target, the heading, the mission, the position
@@ -300,19 +296,7 @@ impl Vehicle {
             controller: AttitudeController::default(),
             params,
             tuning,
-            armed: in_air,
-            // PX4 boots into Hold (AUTO.LOITER) on the ground; a vehicle started in the
-            // air has a pilot in Position mode holding its start velocity.
-            mode: if in_air {
-                FlightMode::Position
-            } else {
-                FlightMode::Hold
-            },
-            failsafe: false,
-            landed: !in_air,
-            took_off: in_air,
-            landed_since: None,
-            armed_at: SimTime::ZERO,
+            modes: mode_machine::ModeMachine::at_boot(in_air),
             offboard: None,
             offboard_signal: None,
             navigator: Navigator::new(nav, start.yaw_rad),
@@ -426,10 +410,10 @@ impl Vehicle {
         VehicleStatus {
             at: self.last_step,
             system_id: self.cfg.system_id,
-            mode: self.mode,
-            armed: self.armed,
-            failsafe: self.failsafe,
-            landed: self.landed,
+            mode: self.modes.mode,
+            armed: self.modes.armed(),
+            failsafe: self.modes.failsafe,
+            landed: self.modes.landed(),
             height_m: self.env.ground_z_ned_m - self.state.pos_ned_m.z,
             pos_world_ned_m: self.cfg.start.pos_world_ned_m + self.state.pos_ned_m,
             vel_ned_mps: self.state.vel_ned_mps,
@@ -518,8 +502,7 @@ impl Vehicle {
         }
         self.navigator.nav = self.nav_for(mode);
         self.navigator.yaw_rad = self.yaw_rad();
-        if self.mode != mode {
-            self.mode = mode;
+        if self.modes.set_mode(mode) {
             self.events.push_back(VehicleEvent::ModeChanged(mode));
             tracing::info!(
                 sysid = self.cfg.system_id,
@@ -531,10 +514,7 @@ impl Vehicle {
     }
 
     fn arm(&mut self, t: SimTime) {
-        if !self.armed {
-            self.armed = true;
-            self.armed_at = t;
-            self.took_off = !self.landed;
+        if self.modes.arm(t) {
             self.controller.reset();
             self.navigator.pos_ctrl_active = false;
             self.events.push_back(VehicleEvent::Armed);
@@ -543,9 +523,7 @@ impl Vehicle {
     }
 
     fn disarm(&mut self, why: &'static str) {
-        if self.armed {
-            self.armed = false;
-            self.failsafe = false;
+        if self.modes.disarm() {
             self.controller.reset();
             self.events.push_back(VehicleEvent::Disarmed(why));
             tracing::info!(sysid = self.cfg.system_id, reason = why, "disarmed");
@@ -555,35 +533,25 @@ impl Vehicle {
     fn update_landed(&mut self, t: SimTime) {
         let on_ground =
             self.frame.on_ground(&self.state, &self.env) && self.state.vel_ned_mps.norm() < 0.5;
-        if on_ground != self.landed {
-            self.landed = on_ground;
-            self.landed_since = on_ground.then_some(t);
-            if !on_ground {
-                self.took_off = true;
-            }
-        }
+        self.modes.observe_ground(on_ground, t);
         if self.is_ardupilot() {
             self.ap_landed_disarm(t);
             return;
         }
-        if !self.armed {
-            return;
-        }
-        if self.landed && self.took_off {
-            let after = self.tuning.disarm_land_s;
-            if after >= 0.0
-                && self
-                    .landed_since
-                    .is_some_and(|since| t.saturating_since(since) >= tuning::seconds(after))
-            {
-                self.disarm("landed");
+        // COM_DISARM_LAND: negative never disarms; COM_DISARM_PRFLT: zero or less never.
+        let after_landing =
+            (self.tuning.disarm_land_s >= 0.0).then(|| tuning::seconds(self.tuning.disarm_land_s));
+        let before_takeoff = (self.tuning.disarm_preflight_s > 0.0)
+            .then(|| tuning::seconds(self.tuning.disarm_preflight_s));
+        if let Some(why) = self
+            .modes
+            .ground_disarm_due(t, after_landing, before_takeoff)
+        {
+            let flew = self.modes.took_off();
+            self.disarm(why);
+            if flew {
                 // PX4 goes back to Hold after a landing disarm.
                 self.enter_mode(FlightMode::Hold);
-            }
-        } else if self.landed && !self.took_off {
-            let after = self.tuning.disarm_preflight_s;
-            if after > 0.0 && t.saturating_since(self.armed_at) >= tuning::seconds(after) {
-                self.disarm("no takeoff after arming");
             }
         }
     }
@@ -604,7 +572,7 @@ impl Vehicle {
         let thrust: f64 = self.state.motor_thrust_n.sum();
         let hover = p.mass_kg * GRAVITY_MPS2;
         let hover_current_a = 7.5 * p.mass_kg;
-        self.battery.current_a = if self.armed {
+        self.battery.current_a = if self.modes.armed() {
             // (thrust / hover)^1.5, without powf at 1 kHz.
             let r = (thrust / hover).max(0.0);
             0.5 + hover_current_a * r * r.sqrt()

@@ -76,7 +76,7 @@ impl Vehicle {
 
     /// SETUP_SIGNING, already admitted; `signed` says whether its frame was signed.
     pub(super) fn on_setup_signing(&mut self, m: &SETUP_SIGNING_DATA, signed: bool) {
-        if self.armed {
+        if self.modes.armed() {
             let text = if self.is_ardupilot() {
                 "ERROR: Won't setup signing when armed"
             } else {

@@ -15,7 +15,7 @@ impl Vehicle {
     /// What the attitude controller tracks this step; `None` spins the motors down
     /// (disarmed).
     pub(super) fn attitude_command(&mut self, t: SimTime, dt: f64) -> Option<AttitudeCommand> {
-        if !self.armed || !self.motors_started(t) {
+        if !self.modes.armed() || !self.motors_started(t) {
             self.navigator.pos_ctrl_active = false;
             return None;
         }
@@ -25,7 +25,7 @@ impl Vehicle {
             setpoint: AttitudeSetpoint::idle(v.yaw_rad()),
             yawspeed_ff_rps: f64::NAN,
         };
-        let trajectory = if self.mode == FlightMode::Offboard {
+        let trajectory = if self.modes.mode == FlightMode::Offboard {
             match self.offboard {
                 Some(OffboardTarget::Attitude {
                     attitude,
@@ -47,7 +47,7 @@ impl Vehicle {
                     yawspeed_ff_rps,
                 }) => {
                     self.navigator.pos_ctrl_active = false;
-                    if self.landed && climb_up_mps <= 0.0 {
+                    if self.modes.landed() && climb_up_mps <= 0.0 {
                         self.climb_integral_mps2 = 0.0;
                         return Some(idle(self));
                     }
@@ -73,15 +73,15 @@ impl Vehicle {
                     let wants_up = sp.pos_ned_m.z < self.state.pos_ned_m.z - 0.1
                         || sp.vel_ned_mps.z < -0.1
                         || sp.acc_ned_mps2.z < -0.1;
-                    (!self.landed || wants_up).then_some(sp)
+                    (!self.modes.landed() || wants_up).then_some(sp)
                 }
                 None => None,
             }
         } else {
             match self.nav_setpoint(t, dt) {
-                Some(sp) => (!self.landed || self.nav_wants_climb()).then_some(sp),
+                Some(sp) => (!self.modes.landed() || self.nav_wants_climb()).then_some(sp),
                 // Never idle in the air: a mode with nothing to fly holds where it is.
-                None if !self.landed => Some(TrajectorySetpoint::hold(
+                None if !self.modes.landed() => Some(TrajectorySetpoint::hold(
                     self.state.pos_ned_m,
                     self.navigator.yaw_rad,
                 )),
@@ -139,7 +139,7 @@ impl Vehicle {
 
     pub(super) fn check_offboard_loss(&mut self, t: SimTime) {
         // PX4's failsafes act on armed vehicles only.
-        if !self.armed || self.mode != FlightMode::Offboard || self.failsafe {
+        if !self.modes.armed() || self.modes.mode != FlightMode::Offboard || self.modes.failsafe {
             return;
         }
         let timeout = self.tuning.offboard_loss;
@@ -147,7 +147,7 @@ impl Vehicle {
         if t.saturating_since(last) <= timeout {
             return;
         }
-        self.failsafe = true;
+        self.modes.failsafe = true;
         self.events.push_back(VehicleEvent::OffboardLost {
             at: t,
             last_setpoint: last,

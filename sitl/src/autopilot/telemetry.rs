@@ -302,16 +302,16 @@ impl Vehicle {
 
     fn heartbeat(&self) -> MavMessage {
         let mut base_mode = MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED;
-        if self.armed {
+        if self.modes.armed() {
             base_mode |= MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED;
         }
-        let system_status = match (self.failsafe, self.armed) {
+        let system_status = match (self.modes.failsafe, self.modes.armed()) {
             (true, _) => MavState::MAV_STATE_CRITICAL,
             (false, true) => MavState::MAV_STATE_ACTIVE,
             (false, false) => MavState::MAV_STATE_STANDBY,
         };
         MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-            custom_mode: self.mode.custom_mode(),
+            custom_mode: self.modes.mode.custom_mode(),
             mavtype: MavType::MAV_TYPE_QUADROTOR,
             autopilot: MavAutopilot::MAV_AUTOPILOT_PX4,
             base_mode,
@@ -321,7 +321,7 @@ impl Vehicle {
     }
 
     fn landed_state(&self) -> MavLandedState {
-        match (self.landed, self.mode) {
+        match (self.modes.landed(), self.modes.mode) {
             (true, _) => MavLandedState::MAV_LANDED_STATE_ON_GROUND,
             (false, FlightMode::Takeoff) => MavLandedState::MAV_LANDED_STATE_TAKEOFF,
             (false, FlightMode::Land) => MavLandedState::MAV_LANDED_STATE_LANDING,
