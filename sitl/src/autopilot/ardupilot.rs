@@ -273,7 +273,7 @@ impl Vehicle {
     /// below where it is.
     pub(super) fn ap_takeoff(&mut self, cmd: &ReceivedCommand) -> MavResult {
         let guided = self.ap.is_some_and(|s| s.mode_number == ap::GUIDED);
-        let height = self.env.ground_z_ned_m - self.state.pos_ned_m.z;
+        let height = self.plant.env.ground_z_ned_m - self.plant.state.pos_ned_m.z;
         let Some(alt) = cmd.params[6].filter(|a| *a > height) else {
             return MavResult::MAV_RESULT_FAILED;
         };
@@ -281,8 +281,8 @@ impl Vehicle {
             return MavResult::MAV_RESULT_FAILED;
         }
         self.enter_mode(FlightMode::Takeoff);
-        let here = self.state.pos_ned_m;
-        let target = nalgebra::Vector3::new(here.x, here.y, self.env.ground_z_ned_m - alt);
+        let here = self.plant.state.pos_ned_m;
+        let target = nalgebra::Vector3::new(here.x, here.y, self.plant.env.ground_z_ned_m - alt);
         if let super::flight::Nav::Takeoff { approach, .. } = &mut self.navigator.nav {
             approach.retarget(target);
         }
@@ -465,7 +465,7 @@ impl Vehicle {
         }
         let delay = self.params.value("DISARM_DELAY");
         let weight_n = self.cfg.profile.mass_kg * crate::profile::GRAVITY_MPS2;
-        let idle = self.state.motor_thrust_n.sum() < 0.05 * weight_n;
+        let idle = self.plant.state.motor_thrust_n.sum() < 0.05 * weight_n;
         let Some(s) = &mut self.ap else { return };
         if !idle {
             s.idle_since = None;

@@ -232,8 +232,9 @@ impl Vehicle {
         self.enter_mode(FlightMode::Takeoff);
         if let Some(alt_amsl) = cmd.params[6].filter(|a| a.is_finite()) {
             let frame = self.global_frame();
-            let here = self.state.pos_ned_m;
-            let target_z = (frame.home_alt_amsl_m - alt_amsl + self.env.ground_z_ned_m).min(here.z);
+            let here = self.plant.state.pos_ned_m;
+            let target_z =
+                (frame.home_alt_amsl_m - alt_amsl + self.plant.env.ground_z_ned_m).min(here.z);
             if let Nav::Takeoff { approach, .. } = &mut self.navigator.nav {
                 approach.retarget(Vector3::new(here.x, here.y, target_z));
             }
@@ -261,7 +262,7 @@ impl Vehicle {
         if !self.modes.armed() || self.modes.landed() {
             return MavResult::MAV_RESULT_ACCEPTED;
         }
-        let here = self.state.pos_ned_m;
+        let here = self.plant.state.pos_ned_m;
         let speed = cmd.params[0]
             .filter(|s| *s > 0.0)
             .unwrap_or(self.tuning.auto.speed_xy_mps);
@@ -272,7 +273,7 @@ impl Vehicle {
                 a.retarget(target);
                 a
             }
-            _ => Approach::new(here, self.state.vel_ned_mps, target),
+            _ => Approach::new(here, self.plant.state.vel_ned_mps, target),
         };
         self.navigator.nav = Nav::Hold {
             approach,
@@ -292,7 +293,7 @@ impl Vehicle {
         }
         let here = self
             .world
-            .to_geodetic(&(self.cfg.start.pos_world_ned_m + self.state.pos_ned_m));
+            .to_geodetic(&(self.cfg.start.pos_world_ned_m + self.plant.state.pos_ned_m));
         Some(self.global_frame().to_local(
             lat.unwrap_or(here.lat_deg),
             lon.unwrap_or(here.lon_deg),
@@ -321,7 +322,7 @@ impl Vehicle {
         let (true, Some(centre)) = (usable, self.target_of(cmd)) else {
             return MavResult::MAV_RESULT_DENIED;
         };
-        let here = self.state.pos_ned_m;
+        let here = self.plant.state.pos_ned_m;
         // The centripetal acceleration v²/r stays within MPC_ACC_HOR.
         let speed = speed.min((self.tuning.auto.acc_xy_mps2 * radius.abs()).sqrt());
         let out = here.xy() - centre.xy();
@@ -342,7 +343,7 @@ impl Vehicle {
             angle_rad: None,
             approach: Approach::new(
                 here,
-                self.state.vel_ned_mps,
+                self.plant.state.vel_ned_mps,
                 Vector3::new(entry.x, entry.y, centre.z),
             ),
         });

@@ -136,13 +136,13 @@ pub(super) fn stop_point(pos: Vector3<f64>, vel: Vector3<f64>, limits: &Limits) 
 impl Vehicle {
     /// The height above the ground (m).
     pub(super) fn height_m(&self) -> f64 {
-        self.env.ground_z_ned_m - self.state.pos_ned_m.z
+        self.plant.env.ground_z_ned_m - self.plant.state.pos_ned_m.z
     }
 
     /// The navigator state a mode starts with, from where the vehicle is now.
     pub(super) fn nav_for(&self, mode: FlightMode) -> Nav {
-        let here = self.state.pos_ned_m;
-        let vel = self.state.vel_ned_mps;
+        let here = self.plant.state.pos_ned_m;
+        let vel = self.plant.state.vel_ned_mps;
         let yaw = self.yaw_rad();
         let t = &self.tuning;
         match mode {
@@ -162,7 +162,7 @@ impl Vehicle {
             FlightMode::Takeoff => {
                 // MIS_TAKEOFF_ALT above the ground, never below where it is ("already
                 // higher than takeoff altitude").
-                let target_z = (self.env.ground_z_ned_m - t.takeoff_alt_m).min(here.z);
+                let target_z = (self.plant.env.ground_z_ned_m - t.takeoff_alt_m).min(here.z);
                 Nav::Takeoff {
                     approach: Approach::new(here, vel, Vector3::new(here.x, here.y, target_z)),
                     yaw_rad: yaw,
@@ -191,15 +191,15 @@ impl Vehicle {
     /// the current altitude.
     fn return_z(&self) -> f64 {
         let t = &self.tuning;
-        let home_z = self.env.ground_z_ned_m;
-        let d = self.state.pos_ned_m.xy().norm();
+        let home_z = self.plant.env.ground_z_ned_m;
+        let d = self.plant.state.pos_ned_m.xy().norm();
         let height = if d <= t.acceptance_radius_m {
             2.0 * d
         } else {
             t.rtl_return_alt_m.max(2.0 * t.acceptance_radius_m)
         };
         let height = height.min(t.rtl_return_alt_m);
-        (home_z - height).min(self.state.pos_ned_m.z)
+        (home_z - height).min(self.plant.state.pos_ned_m.z)
     }
 
     /// Whether the current mode wants to leave the ground.
@@ -228,8 +228,8 @@ impl Vehicle {
                 (Some(sp), *yaw_rad, None)
             }
             Nav::Brake { z_m, lock } => {
-                let here = self.state.pos_ned_m;
-                if lock.is_none() && self.state.vel_ned_mps.xy().norm() < BRAKE_LOCK_MPS {
+                let here = self.plant.state.pos_ned_m;
+                if lock.is_none() && self.plant.state.vel_ned_mps.xy().norm() < BRAKE_LOCK_MPS {
                     *lock = Some(here);
                 }
                 let sp = match lock {
@@ -261,7 +261,7 @@ impl Vehicle {
                 };
                 let sp = approach.step(&limits, dt_s);
                 let target_z = approach.target().z;
-                let done = self.state.pos_ned_m.z - target_z < tuning.altitude_radius_m;
+                let done = self.plant.state.pos_ned_m.z - target_z < tuning.altitude_radius_m;
                 (Some(sp), *yaw_rad, done.then_some(FlightMode::Hold))
             }
             Nav::Land { xy_m } => (
@@ -338,7 +338,7 @@ impl Vehicle {
         dt_s: f64,
     ) -> TrajectorySetpoint {
         let tuning = self.tuning;
-        let pos = self.state.pos_ned_m;
+        let pos = self.plant.state.pos_ned_m;
         let home = Vector2::zeros();
         let close = |target: Vector3<f64>| (pos - target).norm() < tuning.altitude_radius_m;
         match *stage {
@@ -354,7 +354,7 @@ impl Vehicle {
                     *stage = ReturnStage::Land;
                 } else {
                     *stage = ReturnStage::Descend;
-                    let descend_z = self.env.ground_z_ned_m - tuning.rtl_descend_alt_m;
+                    let descend_z = self.plant.env.ground_z_ned_m - tuning.rtl_descend_alt_m;
                     approach.retarget(Vector3::new(home.x, home.y, descend_z.max(pos.z)));
                 }
             }
@@ -384,7 +384,7 @@ impl Vehicle {
     /// One orbit step: the approach to the circle, then the point running around it with
     /// its velocity and centripetal acceleration as feed-forward.
     fn orbit_step(&self, orbit: &mut Orbit, dt_s: f64) -> (TrajectorySetpoint, f64) {
-        let here = self.state.pos_ned_m;
+        let here = self.plant.state.pos_ned_m;
         let r = orbit.radius_m.abs();
         let direction = orbit.radius_m.signum();
         let sp = match orbit.angle_rad {

@@ -189,7 +189,7 @@ impl Vehicle {
             yaw_rad: f64::from(m.yaw),
             yaw_rate_rps: f64::from(m.yaw_rate),
         };
-        let target = offboard::local_ned(&t, &self.state.attitude);
+        let target = offboard::local_ned(&t, &self.plant.state.attitude);
         self.take_offboard(now, target)
     }
 

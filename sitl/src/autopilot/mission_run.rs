@@ -100,7 +100,7 @@ impl MissionRun {
 impl Vehicle {
     /// The local NED point of a positional item (NaN coordinates keep `here`'s).
     fn item_point(&self, item: &MissionItem) -> Vector3<f64> {
-        let here = self.state.pos_ned_m;
+        let here = self.plant.state.pos_ned_m;
         let frame = self.global_frame();
         let (lat, lon) = item.lat_lon_deg();
         let alt = f64::from(item.z);
@@ -169,7 +169,7 @@ impl Vehicle {
     }
 
     fn begin_item(&mut self, t: SimTime, run: &mut MissionRun, item: &MissionItem) -> ItemStart {
-        let here = self.state.pos_ned_m;
+        let here = self.plant.state.pos_ned_m;
         match item.command {
             cmd::DO_CHANGE_SPEED => {
                 let speed = f64::from(item.params[1]);
@@ -180,7 +180,7 @@ impl Vehicle {
             cmd::NAV_DELAY => {
                 let delay = f64::from(item.params[0]).max(0.0);
                 let point = run.approach.map_or(here, |a| a.target());
-                run.approach = Some(Approach::new(here, self.state.vel_ned_mps, point));
+                run.approach = Some(Approach::new(here, self.plant.state.vel_ned_mps, point));
                 run.stage = Stage::Wait(Some(t + seconds(delay)));
                 ItemStart::Flying
             }
@@ -192,7 +192,7 @@ impl Vehicle {
                         a.retarget(target);
                         a
                     })
-                    .unwrap_or_else(|| Approach::new(here, self.state.vel_ned_mps, target));
+                    .unwrap_or_else(|| Approach::new(here, self.plant.state.vel_ned_mps, target));
                 run.approach = Some(approach);
                 let yaw = f64::from(item.params[3]);
                 run.yaw_rad = yaw.is_finite().then(|| yaw.to_radians());
@@ -219,7 +219,7 @@ impl Vehicle {
         dt_s: f64,
     ) -> (Option<TrajectorySetpoint>, f64, Option<FlightMode>) {
         let tuning = self.tuning;
-        let here = self.state.pos_ned_m;
+        let here = self.plant.state.pos_ned_m;
         let Some(mut approach) = run.approach else {
             return (None, self.navigator.yaw_rad, None);
         };

@@ -42,6 +42,7 @@ mod mode;
 mod mode_machine;
 mod navigator;
 pub mod offboard;
+mod plant;
 mod signing;
 mod steer;
 mod streams;
@@ -52,9 +53,6 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use nalgebra::{Vector3, Vector4};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
 
 pub use config::{BatteryConfig, Personality, StartState, VehicleConfig, WindConfig};
 pub use geofence::Geofence;
@@ -65,7 +63,7 @@ pub use mode::FlightMode;
 use crate::codec::Encoder;
 use crate::control::AttitudeController;
 use crate::params::ParamTable;
-use crate::physics::{Airframe, BodyState, Environment};
+use crate::physics::{Airframe, BodyState};
 use crate::profile::GRAVITY_MPS2;
 use crate::time::SimTime;
 use crate::world::World;
@@ -176,21 +174,13 @@ struct Link {
     wired: bool,
 }
 
-/// The battery model.
-#[derive(Debug, Clone, Copy)]
-struct Battery {
-    consumed_mah: f64,
-    current_a: f64,
-}
-
 /// One emulated vehicle.
 #[derive(Debug, Clone)]
 pub struct Vehicle {
     cfg: VehicleConfig,
     world: World,
-    frame: Airframe,
-    state: BodyState,
-    env: Environment,
+    /// The airframe, its state, the wind and ground, the battery.
+    plant: plant::Plant,
     controller: AttitudeController,
     params: ParamTable,
     tuning: Tuning,
@@ -206,9 +196,6 @@ pub struct Vehicle {
     mission_transfer: mission_transfer::MissionTransfer,
     geofence: Geofence,
     datalink: datalink::DataLink,
-    battery: Battery,
-    gust_ned_mps: Vector3<f64>,
-    rng: ChaCha8Rng,
     estimator: estimator::Estimator,
     /// The origin shift last reported in GPS_GLOBAL_ORIGIN (m, NED).
     origin_shift_sent_ned_m: Vector3<f64>,
@@ -251,10 +238,6 @@ impl Vehicle {
         } else {
             state.pos_ned_m.z = ground_local_z;
         }
-        let env = Environment {
-            wind_ned_mps: cfg.wind.steady_ned_mps,
-            ground_z_ned_m: ground_local_z,
-        };
         let ap = match cfg.personality {
             Personality::Px4 => None,
             Personality::ArduPilot { ekf_settle } => {
@@ -281,7 +264,6 @@ impl Vehicle {
             last_heard: None,
             wired: true,
         });
-        let rng = ChaCha8Rng::seed_from_u64(cfg.seed);
         let nav = if in_air {
             Nav::Velocity {
                 vel_ned_mps: start.vel_ned_mps,
@@ -291,8 +273,14 @@ impl Vehicle {
         };
         Ok(Self {
             world,
-            frame,
-            env,
+            plant: plant::Plant::new(
+                frame,
+                state,
+                ground_local_z,
+                cfg.wind,
+                cfg.battery.sag,
+                cfg.seed,
+            ),
             controller: AttitudeController::default(),
             params,
             tuning,
@@ -303,12 +291,6 @@ impl Vehicle {
             mission_transfer: mission_transfer::MissionTransfer::new(cfg.system_id, ap.is_some()),
             geofence: Geofence::default(),
             datalink: datalink::DataLink::default(),
-            battery: Battery {
-                consumed_mah: 0.0,
-                current_a: 0.0,
-            },
-            gust_ned_mps: Vector3::zeros(),
-            rng,
             estimator: estimator::Estimator::new(cfg.estimator.clone(), cfg.seed),
             origin_shift_sent_ned_m: Vector3::zeros(),
             io: MavlinkIo {
@@ -328,7 +310,6 @@ impl Vehicle {
             counters: Counters::default(),
             ap,
             climb_integral_mps2: 0.0,
-            state,
             cfg,
         })
     }
@@ -414,9 +395,9 @@ impl Vehicle {
             armed: self.modes.armed(),
             failsafe: self.modes.failsafe,
             landed: self.modes.landed(),
-            height_m: self.env.ground_z_ned_m - self.state.pos_ned_m.z,
-            pos_world_ned_m: self.cfg.start.pos_world_ned_m + self.state.pos_ned_m,
-            vel_ned_mps: self.state.vel_ned_mps,
+            height_m: self.plant.height_m(),
+            pos_world_ned_m: self.cfg.start.pos_world_ned_m + self.plant.state.pos_ned_m,
+            vel_ned_mps: self.plant.state.vel_ned_mps,
             battery_pct: self.battery_remaining_pct(),
             last_heard: [self.io.links[0].last_heard, self.io.links[1].last_heard],
             counters: self.counters,
@@ -425,7 +406,7 @@ impl Vehicle {
 
     /// The mechanical state (local NED).
     pub fn body(&self) -> &BodyState {
-        &self.state
+        &self.plant.state
     }
 
     /// The stored fence and its breach state.
@@ -453,29 +434,30 @@ impl Vehicle {
         self.mission_timers(t);
         self.check_geofence(t);
         let dt = Self::dt_s();
-        let sag = self.thrust_available();
+        let available = self
+            .plant
+            .thrust_available(self.tuning.battery_capacity_mah);
         let motors = match self.attitude_command(t, dt) {
-            Some(command) => self
-                .controller
-                .update_command(&self.frame, &self.state, &command, dt),
+            Some(command) => {
+                self.controller
+                    .update_command(&self.plant.frame, &self.plant.state, &command, dt)
+            }
             None => {
                 self.controller.reset();
                 Vector4::zeros()
             }
         };
-        self.update_wind(dt);
-        // A sagging battery: every motor gives that much less than it was asked for.
-        let motors = motors * sag;
-        self.frame.advance(&mut self.state, &motors, &self.env, dt);
+        self.plant
+            .advance(&motors, available, self.modes.armed(), dt);
+        let state = &self.plant.state;
         self.estimator
-            .step(t, dt, self.state.pos_ned_m, self.state.vel_ned_mps);
-        self.update_battery(dt);
+            .step(t, dt, state.pos_ned_m, state.vel_ned_mps);
         self.update_landed(t);
     }
 
     /// The heading (rad).
     fn yaw_rad(&self) -> f64 {
-        self.state.attitude.euler_angles().2
+        self.plant.state.attitude.euler_angles().2
     }
 
     /// The vehicle's geodetic frame: its origin (start point) in the world, home on the
@@ -485,7 +467,7 @@ impl Vehicle {
         let home = self.world.to_geodetic(&Vector3::new(
             origin.x,
             origin.y,
-            origin.z + self.env.ground_z_ned_m,
+            origin.z + self.plant.env.ground_z_ned_m,
         ));
         GlobalFrame {
             world: self.world,
@@ -531,9 +513,7 @@ impl Vehicle {
     }
 
     fn update_landed(&mut self, t: SimTime) {
-        let on_ground =
-            self.frame.on_ground(&self.state, &self.env) && self.state.vel_ned_mps.norm() < 0.5;
-        self.modes.observe_ground(on_ground, t);
+        self.modes.observe_ground(self.plant.on_ground(), t);
         if self.is_ardupilot() {
             self.ap_landed_disarm(t);
             return;
@@ -556,41 +536,9 @@ impl Vehicle {
         }
     }
 
-    fn update_wind(&mut self, dt: f64) {
-        let w = self.cfg.wind;
-        if w.gust_std_mps > 0.0 {
-            let a = (-dt / w.gust_tau_s).exp();
-            let b = w.gust_std_mps * (1.0 - a * a).sqrt();
-            let noise = Vector3::from_fn(|_, _| self.rng.sample::<f64, _>(StandardNormal));
-            self.gust_ned_mps = self.gust_ned_mps * a + noise * b;
-        }
-        self.env.wind_ned_mps = w.steady_ned_mps + self.gust_ned_mps;
-    }
-
-    fn update_battery(&mut self, dt: f64) {
-        let p = &self.cfg.profile;
-        let thrust: f64 = self.state.motor_thrust_n.sum();
-        let hover = p.mass_kg * GRAVITY_MPS2;
-        let hover_current_a = 7.5 * p.mass_kg;
-        self.battery.current_a = if self.modes.armed() {
-            // (thrust / hover)^1.5, without powf at 1 kHz.
-            let r = (thrust / hover).max(0.0);
-            0.5 + hover_current_a * r * r.sqrt()
-        } else {
-            0.3
-        };
-        self.battery.consumed_mah += self.battery.current_a * dt / 3.6;
-    }
-
-    /// The fraction of its thrust the battery's voltage still gives the motors.
-    fn thrust_available(&self) -> f64 {
-        let used = (self.battery.consumed_mah / self.tuning.battery_capacity_mah).clamp(0.0, 1.0);
-        1.0 - self.cfg.battery.sag * used
-    }
-
     fn battery_remaining_pct(&self) -> f64 {
-        let capacity = self.tuning.battery_capacity_mah;
-        (100.0 * (1.0 - self.battery.consumed_mah / capacity)).clamp(0.0, 100.0)
+        self.plant
+            .battery_remaining_pct(self.tuning.battery_capacity_mah)
     }
 }
 

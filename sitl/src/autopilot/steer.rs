@@ -70,7 +70,7 @@ impl Vehicle {
                     });
                 }
                 Some(OffboardTarget::Trajectory(sp)) => {
-                    let wants_up = sp.pos_ned_m.z < self.state.pos_ned_m.z - 0.1
+                    let wants_up = sp.pos_ned_m.z < self.plant.state.pos_ned_m.z - 0.1
                         || sp.vel_ned_mps.z < -0.1
                         || sp.acc_ned_mps2.z < -0.1;
                     (!self.modes.landed() || wants_up).then_some(sp)
@@ -82,7 +82,7 @@ impl Vehicle {
                 Some(sp) => (!self.modes.landed() || self.nav_wants_climb()).then_some(sp),
                 // Never idle in the air: a mode with nothing to fly holds where it is.
                 None if !self.modes.landed() => Some(TrajectorySetpoint::hold(
-                    self.state.pos_ned_m,
+                    self.plant.state.pos_ned_m,
                     self.navigator.yaw_rad,
                 )),
                 None => None,
@@ -97,8 +97,8 @@ impl Vehicle {
             self.navigator.pos_ctrl_active = true;
         }
         let kin = Kinematics {
-            pos_ned_m: self.state.pos_ned_m,
-            vel_ned_mps: self.state.vel_ned_mps,
+            pos_ned_m: self.plant.state.pos_ned_m,
+            vel_ned_mps: self.plant.state.vel_ned_mps,
             yaw_rad: self.yaw_rad(),
         };
         let mut mpc = self.tuning.mpc;
@@ -129,7 +129,7 @@ impl Vehicle {
     ) -> f64 {
         let p = self.tuning.mpc;
         let g = crate::profile::GRAVITY_MPS2;
-        let error = climb_up_mps - (-self.state.vel_ned_mps.z);
+        let error = climb_up_mps - (-self.plant.state.vel_ned_mps.z);
         self.climb_integral_mps2 =
             (self.climb_integral_mps2 + p.z_vel_pid[1] * error * dt).clamp(-0.5 * g, 0.5 * g);
         let accel_up = p.z_vel_pid[0] * error + self.climb_integral_mps2;

@@ -253,8 +253,8 @@ impl Vehicle {
                 })
             }
             ATTITUDE => {
-                let (roll, pitch, yaw) = self.state.attitude.euler_angles();
-                let w = self.state.rate_frd_rps;
+                let (roll, pitch, yaw) = self.plant.state.attitude.euler_angles();
+                let w = self.plant.state.rate_frd_rps;
                 MavMessage::ATTITUDE(ATTITUDE_DATA {
                     time_boot_ms: self.boot_ms(now),
                     roll: roll as f32,
@@ -266,8 +266,8 @@ impl Vehicle {
                 })
             }
             ATTITUDE_QUATERNION => {
-                let q = self.state.attitude;
-                let w = self.state.rate_frd_rps;
+                let q = self.plant.state.attitude;
+                let w = self.plant.state.rate_frd_rps;
                 MavMessage::ATTITUDE_QUATERNION(ATTITUDE_QUATERNION_DATA {
                     time_boot_ms: self.boot_ms(now),
                     q1: q.w as f32,
@@ -281,9 +281,11 @@ impl Vehicle {
                 })
             }
             LOCAL_POSITION_NED => {
-                let (p, v) =
-                    self.estimator
-                        .report(now, self.state.pos_ned_m, self.state.vel_ned_mps)?;
+                let (p, v) = self.estimator.report(
+                    now,
+                    self.plant.state.pos_ned_m,
+                    self.plant.state.vel_ned_mps,
+                )?;
                 MavMessage::LOCAL_POSITION_NED(LOCAL_POSITION_NED_DATA {
                     time_boot_ms: self.boot_ms(now),
                     x: p.x as f32,
@@ -331,7 +333,7 @@ impl Vehicle {
 
     fn battery_voltage_v(&self) -> f64 {
         let remaining = self.battery_remaining_pct() / 100.0;
-        4.0 * (3.5 + 0.7 * remaining) - 0.01 * self.battery.current_a
+        4.0 * (3.5 + 0.7 * remaining) - 0.01 * self.plant.battery.current_a
     }
 
     fn sys_status(&self, now: SimTime) -> MavMessage {
@@ -368,7 +370,7 @@ impl Vehicle {
             onboard_control_sensors_health: health,
             load: 250,
             voltage_battery: (self.battery_voltage_v() * 1000.0) as u16,
-            current_battery: (self.battery.current_a * 100.0) as i16,
+            current_battery: (self.plant.battery.current_a * 100.0) as i16,
             drop_rate_comm: 0,
             errors_comm: 0,
             errors_count1: 0,
@@ -387,11 +389,11 @@ impl Vehicle {
         let mut voltages = [u16::MAX; 10];
         voltages[..4].fill(cell_mv);
         MavMessage::BATTERY_STATUS(BATTERY_STATUS_DATA {
-            current_consumed: self.battery.consumed_mah as i32,
+            current_consumed: self.plant.battery.consumed_mah as i32,
             energy_consumed: -1,
             temperature: i16::MAX,
             voltages,
-            current_battery: (self.battery.current_a * 100.0) as i16,
+            current_battery: (self.plant.battery.current_a * 100.0) as i16,
             id: 0,
             battery_function: MavBatteryFunction::MAV_BATTERY_FUNCTION_ALL,
             mavtype: MavBatteryType::MAV_BATTERY_TYPE_LIPO,
@@ -405,14 +407,14 @@ impl Vehicle {
     }
 
     pub(super) fn world_position(&self) -> Vector3<f64> {
-        self.cfg.start.pos_world_ned_m + self.state.pos_ned_m
+        self.cfg.start.pos_world_ned_m + self.plant.state.pos_ned_m
     }
 
     fn global_position_int(&self, now: SimTime) -> MavMessage {
         let geo = self.world.to_geodetic(&self.world_position());
         let home_amsl = self.world.reference.alt_amsl_m - self.world.ground_down_m;
-        let v = self.state.vel_ned_mps;
-        let (_, _, yaw) = self.state.attitude.euler_angles();
+        let v = self.plant.state.vel_ned_mps;
+        let (_, _, yaw) = self.plant.state.attitude.euler_angles();
         MavMessage::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
             time_boot_ms: self.boot_ms(now),
             lat: geo.lat_e7(),
@@ -428,7 +430,7 @@ impl Vehicle {
 
     fn gps_raw_int(&self, now: SimTime) -> MavMessage {
         let geo = self.world.to_geodetic(&self.world_position());
-        let v = self.state.vel_ned_mps;
+        let v = self.plant.state.vel_ned_mps;
         MavMessage::GPS_RAW_INT(GPS_RAW_INT_DATA {
             time_usec: now.as_micros(),
             lat: geo.lat_e7(),
@@ -451,7 +453,7 @@ impl Vehicle {
 
     /// Home: the start point projected on the ground, in local coordinates.
     pub(super) fn home_local_ned_m(&self) -> Vector3<f64> {
-        Vector3::new(0.0, 0.0, self.env.ground_z_ned_m)
+        Vector3::new(0.0, 0.0, self.plant.env.ground_z_ned_m)
     }
 
     /// Home as latitude, longitude and altitude.
