@@ -103,6 +103,8 @@ def main():
     rows.append(("  of which define no type of their own", len(only_impl)))
     sitl_impl = [f for f, t in files.items() if f.startswith('sitl/') and re.search(r'^impl Vehicle \{', t, re.M)]
     rows.append(("sitl files with an `impl Vehicle` block", len(sitl_impl)))
+    vehicle_fields = struct_fields(files.get('sitl/src/autopilot/mod.rs', ''), 'Vehicle')
+    rows.append(("fields of the emulator's Vehicle", len(vehicle_fields)))
     shard = sum(len(re.findall(r'is_remote\(|is_local\(|\bpeers\b', l))
                 for f, t in core.items() if f.startswith('core/src/swarm/')
                 for l in t.split('\n') if not l.strip().startswith('//'))
