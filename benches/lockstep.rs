@@ -15,7 +15,7 @@ use ringswarm::driver::Observer;
 use ringswarm::driver::lockstep::{Lockstep, PhaseTimes};
 use ringswarm::record::rows::Row;
 use ringswarm::record::{Recorder, RowText};
-use ringswarm::swarm::{Swarm, SwarmSetup};
+use ringswarm::swarm::{Swarm, SwarmSetup, VehicleIndex};
 use ringswarm_sitl::control::{AttitudeCommand, AttitudeController, AttitudeSetpoint};
 use ringswarm_sitl::physics::{Airframe, BodyState, Environment};
 use ringswarm_sitl::profile::{GRAVITY_MPS2, Profile};
@@ -71,7 +71,7 @@ fn fly(case: &Case, how: How) -> Run {
             Recorder::create(&dir, run.swarm(), 0, RowText::Writer).expect("temp dir");
         struct Rec<'a>(&'a mut Recorder);
         impl Observer for Rec<'_> {
-            fn datagram(&mut self, now: SimTime, _: usize, _: bool, bytes: &[u8]) {
+            fn datagram(&mut self, now: SimTime, _: VehicleIndex, _: bool, bytes: &[u8]) {
                 self.0.datagram(now, bytes);
             }
             fn swarm(&mut self, swarm: &Swarm, now: SimTime) {
@@ -171,7 +171,7 @@ fn write_ns(bytes: u64) -> f64 {
 fn traffic(case: &Case) -> Vec<Vec<u8>> {
     struct Capture(Vec<Vec<u8>>);
     impl Observer for Capture {
-        fn datagram(&mut self, _: SimTime, _: usize, _: bool, bytes: &[u8]) {
+        fn datagram(&mut self, _: SimTime, _: VehicleIndex, _: bool, bytes: &[u8]) {
             self.0.push(bytes.to_vec());
         }
     }

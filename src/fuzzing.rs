@@ -24,7 +24,7 @@ use ringswarm_wire::signing::{PX4_UNSIGNED_ALLOWED, Signing, SigningKey};
 use ringswarm_wire::time::SimTime;
 
 use crate::config::Config;
-use crate::swarm::{Swarm, SwarmSetup};
+use crate::swarm::{Swarm, SwarmSetup, VehicleIndex};
 
 /// The key of the signed targets.
 const KEY: [u8; 32] = [0x42; 32];
@@ -246,7 +246,7 @@ pub fn coordinator_inbound(bytes: &[u8]) -> Vec<crate::vehicle::Phase> {
                 swarm.handle_timeout(now);
             }
             Some(Step::Deliver(datagram)) => {
-                swarm.handle_datagram(now, link, &datagram);
+                swarm.handle_datagram(now, VehicleIndex(link), &datagram);
             }
             None => {}
         }

@@ -36,7 +36,9 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
-pub use ringswarm_core::{consensus, control, distributed, frame, link, safety, swarm, vehicle};
+pub use ringswarm_core::{
+    consensus, control, distributed, frame, index, link, safety, swarm, vehicle,
+};
 
 pub mod cli;
 pub mod cmd;

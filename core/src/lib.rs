@@ -36,6 +36,7 @@ pub mod control;
 pub mod distributed;
 pub mod error;
 pub mod frame;
+pub mod index;
 pub mod link;
 pub mod safety;
 pub mod swarm;

@@ -14,7 +14,8 @@
 //! - [`profile`]: vehicle profiles (`ideal`, `x500`, `arducopter`) with documented numbers.
 //! - [`codec`], [`time`]: MAVLink framing and simulated time, from `ringswarm-wire`.
 //! - [`autopilot`]: the sans-IO vehicle machine with PX4's wire behaviour, or per vehicle
-//!   ArduCopter's (`autopilot/ardupilot.rs`).
+//!   ArduCopter's (`autopilot/ardupilot.rs`), around the types it owns: its plant (airframe,
+//!   wind, battery), its mode machine, its mission transfer and its links' stream tables.
 //! - [`params`], [`world`]: parameter table, geodetic world.
 //! - [`config_file`]: the TOML configuration of `ringswarm sitl --config`.
 //! - [`udp`]: where vehicles sit on UDP (PX4 SITL's ports, MAVLink networks, whom a link

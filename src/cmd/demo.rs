@@ -16,7 +16,7 @@ use crate::driver::Observer;
 use crate::driver::lockstep::Lockstep;
 use crate::record::metrics::Summary;
 use crate::record::{Recorder, RowText};
-use crate::swarm::{Swarm, SwarmPhase};
+use crate::swarm::{Swarm, SwarmPhase, VehicleIndex};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// A built-in scenario: name, one line, the config file's text.
@@ -197,7 +197,7 @@ impl DemoObserver {
 }
 
 impl Observer for DemoObserver {
-    fn datagram(&mut self, now: SimTime, _vehicle: usize, _to_vehicle: bool, bytes: &[u8]) {
+    fn datagram(&mut self, now: SimTime, _vehicle: VehicleIndex, _to_vehicle: bool, bytes: &[u8]) {
         self.recorder.datagram(now, bytes);
     }
 

@@ -10,6 +10,7 @@ use ringswarm_wire::time::SimTime;
 
 use crate::cli::SignSetupArgs;
 use crate::config::Config;
+use crate::index::VehicleIndex;
 use crate::link::provision::{Provision, ProvisionState};
 use crate::link::router::Router;
 use crate::security::FlightSigning;
@@ -66,7 +67,7 @@ pub fn run(args: &SignSetupArgs) -> anyhow::Result<()> {
         .any(|(_, p)| p.state() == &ProvisionState::Pending)
     {
         let now = SimTime::from_micros(start.elapsed().as_micros() as u64);
-        for (i, (_, p)) in links.iter_mut().enumerate() {
+        for (i, (_, p)) in VehicleIndex::all(links.len()).zip(links.iter_mut()) {
             p.handle_timeout(now);
             while let Some(bytes) = p.poll_transmit() {
                 // A network vehicle not heard from yet has no address: its turn comes
@@ -88,20 +89,20 @@ pub fn run(args: &SignSetupArgs) -> anyhow::Result<()> {
                     // a flight, on a trusted network). A datagram without one moves
                     // nothing: the key is never sent to whoever spoke first.
                     let piece = &buf[range];
-                    let system_id = links[i].0;
+                    let system_id = links[i.get()].0;
                     if crate::link::raw_frames(piece)
                         .any(|f| crate::link::frame_system_id(f) == Some(system_id))
                     {
                         router.vouched(i, from, now);
                     }
-                    links[i].1.handle_datagram(piece);
+                    links[i.get()].1.handle_datagram(piece);
                 }
             }
         }
         std::thread::sleep(Duration::from_millis(5));
     }
     let mut failed = Vec::new();
-    for (i, (system_id, p)) in links.iter().enumerate() {
+    for (i, (system_id, p)) in VehicleIndex::all(links.len()).zip(&links) {
         let peer = router
             .destination(i)
             .map_or("address never known".to_owned(), |(_, a)| a.to_string());

@@ -8,6 +8,7 @@ use ringswarm_wire::px4;
 
 use super::Config;
 use super::validate::Problems;
+use crate::index::SystemId;
 use crate::link::router::{Endpoint, SERIAL_PEER, SocketLayout, TransportLayout, VehicleRoute};
 
 /// Whether two bind/listen addresses take the same port on a common interface
@@ -100,7 +101,7 @@ impl Config {
                     VehicleRoute {
                         socket,
                         address: v.address,
-                        system_id: v.system_id,
+                        system_id: SystemId(v.system_id),
                     }
                 }
                 None => {
@@ -118,7 +119,7 @@ impl Config {
                     VehicleRoute {
                         socket: sockets.len() - 1,
                         address: Some(peer),
-                        system_id: v.system_id,
+                        system_id: SystemId(v.system_id),
                     }
                 }
             };
@@ -266,7 +267,7 @@ fn serial_route(
     VehicleRoute {
         socket: sockets.len() - 1,
         address: Some(SERIAL_PEER),
-        system_id: v.system_id,
+        system_id: SystemId(v.system_id),
     }
 }
 

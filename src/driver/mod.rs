@@ -32,7 +32,7 @@ use std::ops::Range;
 use ringswarm_wire::time::SimTime;
 
 use crate::link::router::Router;
-use crate::swarm::Swarm;
+use crate::swarm::{Swarm, VehicleIndex};
 
 /// The way in for a received datagram, the same in every driver that routes: the router
 /// splits it, each piece goes to its vehicle's link, and a frame a link takes may teach
@@ -41,7 +41,7 @@ pub(crate) struct Intake<'a> {
     pub(crate) swarm: &'a mut Swarm,
     pub(crate) router: &'a mut Router,
     /// Reused: the pieces of one datagram (no allocation per datagram).
-    pub(crate) pieces: &'a mut Vec<(usize, Range<usize>)>,
+    pub(crate) pieces: &'a mut Vec<(VehicleIndex, Range<usize>)>,
 }
 
 impl Intake<'_> {
@@ -62,7 +62,7 @@ impl Intake<'_> {
                 && let Some(learned) = self.router.vouched(i, from, t)
             {
                 tracing::info!(
-                    vehicle = i,
+                    vehicle = i.get(),
                     before = ?learned.before,
                     address = %learned.now,
                     "vehicle address learned from its frames"
@@ -77,7 +77,14 @@ impl Intake<'_> {
 /// an observer of the swarm only.
 pub trait Observer {
     /// A datagram to (`to_vehicle`) or from vehicle `vehicle` at `now`.
-    fn datagram(&mut self, _now: SimTime, _vehicle: usize, _to_vehicle: bool, _bytes: &[u8]) {}
+    fn datagram(
+        &mut self,
+        _now: SimTime,
+        _vehicle: VehicleIndex,
+        _to_vehicle: bool,
+        _bytes: &[u8],
+    ) {
+    }
     /// The swarm after the driver handed it something.
     fn swarm(&mut self, _swarm: &Swarm, _now: SimTime) {}
 }

@@ -374,14 +374,14 @@ async fn send_round<O: Observer>(
             Some((socket, to)) => match running.get_mut(socket) {
                 Some(Running::Udp(socket)) => {
                     if let Err(err) = socket.send_to(&bytes, to).await {
-                        tracing::warn!(vehicle = i, error = %err, "send failed");
+                        tracing::warn!(vehicle = i.get(), error = %err, "send failed");
                     }
                 }
                 Some(Running::Serial(line)) => line.send(&bytes),
-                None => unsent[i] += 1,
+                None => unsent[i.get()] += 1,
             },
             // A network vehicle not heard from yet: nowhere to send.
-            None => unsent[i] += 1,
+            None => unsent[i.get()] += 1,
         }
         swarm.recycle(i, bytes);
     }

@@ -9,7 +9,7 @@ use crate::driver::Observer;
 use crate::driver::mirror::Mirrors;
 use crate::record::Recorder;
 use crate::security::FlightSigning;
-use crate::swarm::{StopReason, Swarm, SwarmPhase};
+use crate::swarm::{StopReason, Swarm, SwarmPhase, VehicleIndex};
 use crate::vehicle::Phase;
 use crate::view::LiveFeed;
 
@@ -41,7 +41,7 @@ impl FlyObserver {
 }
 
 impl Observer for FlyObserver {
-    fn datagram(&mut self, now: SimTime, _vehicle: usize, _to_vehicle: bool, bytes: &[u8]) {
+    fn datagram(&mut self, now: SimTime, _vehicle: VehicleIndex, _to_vehicle: bool, bytes: &[u8]) {
         self.recorder.datagram(now, bytes);
         self.mirrors.forward(bytes);
     }

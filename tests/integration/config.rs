@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use ringswarm::config::Config;
+use ringswarm::index::SystemId;
 
 fn load(name: &str) -> Config {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -432,7 +433,7 @@ fn a_thousand_vehicles_fit_on_four_networks_with_repeated_ids() {
     let plan = config.transport_layout().unwrap();
     assert_eq!(plan.sockets.len(), 4, "one socket per network");
     assert_eq!(plan.routes[999].socket, 3);
-    assert_eq!(plan.routes[999].system_id, 250);
+    assert_eq!(plan.routes[999].system_id, SystemId(250));
     assert!(plan.routes.iter().all(|r| r.address.is_none()));
 }
 
@@ -479,7 +480,7 @@ fn the_shipped_500_vehicle_ring_validates_on_two_networks() {
     // Vehicle 251 is system id 1 again, on the second network.
     assert_eq!(
         (plan.routes[250].socket, plan.routes[250].system_id),
-        (1, 1)
+        (1, SystemId(1))
     );
     // Its files are told apart by network: vehicle-n0-1.csv and vehicle-n1-1.csv.
     assert_eq!(setup.links[0].file_label(), "n0-1");

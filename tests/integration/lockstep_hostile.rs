@@ -21,6 +21,7 @@ use mavlink::dialects::common::{
 };
 use ringswarm::driver::Observer;
 use ringswarm::driver::lockstep::Lockstep;
+use ringswarm::swarm::VehicleIndex;
 use ringswarm_sitl::autopilot::FlightMode;
 use ringswarm_wire::codec::Encoder;
 use ringswarm_wire::signing::{Signing, SigningKey};
@@ -41,7 +42,8 @@ struct Capture {
 }
 
 impl Observer for Capture {
-    fn datagram(&mut self, _now: SimTime, vehicle: usize, to_vehicle: bool, bytes: &[u8]) {
+    fn datagram(&mut self, _now: SimTime, vehicle: VehicleIndex, to_vehicle: bool, bytes: &[u8]) {
+        let vehicle = vehicle.get();
         let store = if to_vehicle {
             &mut self.to_vehicle
         } else {

@@ -25,7 +25,7 @@ struct Census {
 }
 
 impl Observer for Census {
-    fn datagram(&mut self, _now: SimTime, _vehicle: usize, _to_vehicle: bool, bytes: &[u8]) {
+    fn datagram(&mut self, _now: SimTime, _vehicle: VehicleIndex, _to_vehicle: bool, bytes: &[u8]) {
         for frame in decode_datagram_with(bytes, self.key.as_ref())
             .into_iter()
             .flatten()

@@ -8,6 +8,7 @@ use ringswarm::consensus::{CouplingGains, RingDigraph};
 use ringswarm::control::{AltitudeGains, Envelope, SaturationMode, VehicleModel};
 use ringswarm::driver::udp::{DriverCommand, Port, run_swarm};
 use ringswarm::frame::{CommonFrame, Geodetic};
+use ringswarm::index::SystemId;
 use ringswarm::link::router::{Endpoint, Router, SocketLayout, TransportLayout, VehicleRoute};
 use ringswarm::swarm::{EndAction, LossPolicy, Swarm, SwarmSetup};
 use ringswarm::vehicle::{LinkConfig, Phase};
@@ -54,7 +55,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         plan.routes.push(VehicleRoute {
             socket: network,
             address: quiet.then(|| socket.local_addr().unwrap()),
-            system_id,
+            system_id: SystemId(system_id),
         });
         let default_peer = if quiet {
             nowhere.local_addr().unwrap()

@@ -353,7 +353,7 @@ struct Recording<'a> {
 }
 
 impl Observer for Recording<'_> {
-    fn datagram(&mut self, now: SimTime, _: usize, _: bool, bytes: &[u8]) {
+    fn datagram(&mut self, now: SimTime, _: VehicleIndex, _: bool, bytes: &[u8]) {
         self.recorder.datagram(now, bytes);
     }
 

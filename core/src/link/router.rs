@@ -27,6 +27,8 @@ use std::time::Duration;
 use ringswarm_wire::codec::{frame_system_id, raw_frames};
 use ringswarm_wire::time::SimTime;
 
+use crate::index::{SystemId, VehicleIndex};
+
 /// How long a learned address must stay silent before another takes its place.
 pub const RELEARN_AFTER: Duration = Duration::from_secs(2);
 
@@ -69,7 +71,7 @@ impl SocketLayout {
     }
 }
 
-/// How vehicle `i` is reached.
+/// How a vehicle is reached.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct VehicleRoute {
     /// Index of its socket in [`TransportLayout::sockets`].
@@ -77,7 +79,7 @@ pub struct VehicleRoute {
     /// Its address: fixed on an own socket, the first to try on a network.
     pub address: Option<SocketAddr>,
     /// Its system id (what a network socket demultiplexes on).
-    pub system_id: u8,
+    pub system_id: SystemId,
 }
 
 /// The coordinator's sockets and each vehicle's route, in ring order.
@@ -92,8 +94,8 @@ pub struct TransportLayout {
 /// A vehicle's address changed (first learned, or replaced after silence).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct AddressLearned {
-    /// The vehicle (ring index).
-    pub vehicle: usize,
+    /// The vehicle.
+    pub vehicle: VehicleIndex,
     /// The address before, if any.
     pub before: Option<SocketAddr>,
     /// The address now.
@@ -103,9 +105,9 @@ pub struct AddressLearned {
 #[derive(Debug, Clone)]
 enum Demux {
     /// An own socket: its one vehicle.
-    Own(usize),
+    Own(VehicleIndex),
     /// A network socket: system id → vehicle.
-    Network(HashMap<u8, usize>),
+    Network(HashMap<SystemId, VehicleIndex>),
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -134,11 +136,11 @@ impl Router {
             .iter()
             .map(|s| match s.network {
                 Some(_) => Demux::Network(HashMap::new()),
-                None => Demux::Own(usize::MAX),
+                None => Demux::Own(VehicleIndex(usize::MAX)),
             })
             .collect();
         let mut routes = Vec::with_capacity(plan.routes.len());
-        for (i, r) in plan.routes.iter().enumerate() {
+        for (i, r) in VehicleIndex::all(plan.routes.len()).zip(&plan.routes) {
             let learns = match demux.get_mut(r.socket) {
                 Some(Demux::Network(by_id)) => {
                     by_id.insert(r.system_id, i);
@@ -174,11 +176,11 @@ impl Router {
         socket: usize,
         _from: SocketAddr,
         bytes: &[u8],
-        out: &mut Vec<(usize, Range<usize>)>,
+        out: &mut Vec<(VehicleIndex, Range<usize>)>,
     ) {
         out.clear();
         match self.demux.get(socket) {
-            Some(Demux::Own(vehicle)) => match self.routes.get(*vehicle) {
+            Some(Demux::Own(vehicle)) => match self.routes.get(vehicle.get()) {
                 Some(_) => out.push((*vehicle, 0..bytes.len())),
                 None => self.unroutable[socket] += 1,
             },
@@ -186,7 +188,7 @@ impl Router {
                 let base = bytes.as_ptr() as usize;
                 for frame in raw_frames(bytes) {
                     let start = frame.as_ptr() as usize - base;
-                    match frame_system_id(frame).and_then(|id| by_id.get(&id)) {
+                    match frame_system_id(frame).and_then(|id| by_id.get(&SystemId(id))) {
                         Some(&vehicle) => out.push((vehicle, start..start + frame.len())),
                         None => self.unroutable[socket] += 1,
                     }
@@ -200,11 +202,11 @@ impl Router {
     /// that may set its address.
     pub fn vouched(
         &mut self,
-        vehicle: usize,
+        vehicle: VehicleIndex,
         from: SocketAddr,
         now: SimTime,
     ) -> Option<AddressLearned> {
-        let route = self.routes.get_mut(vehicle)?;
+        let route = self.routes.get_mut(vehicle.get())?;
         if !route.learns {
             return None;
         }
@@ -232,8 +234,8 @@ impl Router {
     /// Where a datagram for `vehicle` goes: its socket and address, or `None` while a
     /// network vehicle's address is unknown (nothing has come from it and none was
     /// configured).
-    pub fn destination(&self, vehicle: usize) -> Option<(usize, SocketAddr)> {
-        let route = self.routes.get(vehicle)?;
+    pub fn destination(&self, vehicle: VehicleIndex) -> Option<(usize, SocketAddr)> {
+        let route = self.routes.get(vehicle.get())?;
         Some((route.socket, route.address?))
     }
 
@@ -276,27 +278,27 @@ mod tests {
                 VehicleRoute {
                     socket: 0,
                     address: None,
-                    system_id: 1,
+                    system_id: SystemId(1),
                 },
                 VehicleRoute {
                     socket: 0,
                     address: Some(addr(30002)),
-                    system_id: 2,
+                    system_id: SystemId(2),
                 },
                 VehicleRoute {
                     socket: 1,
                     address: None,
-                    system_id: 1,
+                    system_id: SystemId(1),
                 },
                 VehicleRoute {
                     socket: 1,
                     address: None,
-                    system_id: 2,
+                    system_id: SystemId(2),
                 },
                 VehicleRoute {
                     socket: 2,
                     address: Some(addr(14580)),
-                    system_id: 1,
+                    system_id: SystemId(1),
                 },
             ],
         }
@@ -308,9 +310,9 @@ mod tests {
         let mut out = Vec::new();
         let hb = heartbeat(1);
         router.route_inbound(0, addr(30001), &hb, &mut out);
-        assert_eq!(out, vec![(0, 0..hb.len())]);
+        assert_eq!(out, vec![(VehicleIndex(0), 0..hb.len())]);
         router.route_inbound(1, addr(31001), &hb, &mut out);
-        assert_eq!(out, vec![(2, 0..hb.len())]);
+        assert_eq!(out, vec![(VehicleIndex(2), 0..hb.len())]);
         // An unknown system id on a network is nobody's.
         router.route_inbound(1, addr(31009), &heartbeat(9), &mut out);
         assert!(out.is_empty());
@@ -324,7 +326,13 @@ mod tests {
         let both = [one.clone(), two.clone()].concat();
         let mut out = Vec::new();
         router.route_inbound(0, addr(30001), &both, &mut out);
-        assert_eq!(out, vec![(0, 0..one.len()), (1, one.len()..both.len())]);
+        assert_eq!(
+            out,
+            vec![
+                (VehicleIndex(0), 0..one.len()),
+                (VehicleIndex(1), one.len()..both.len())
+            ]
+        );
         assert_eq!(&both[out[1].1.clone()], two.as_slice());
     }
 
@@ -335,36 +343,36 @@ mod tests {
         let mut out = Vec::new();
         let t = |s: f64| SimTime::from_secs_f64(s);
         // PX4's port is contacted first.
-        assert_eq!(router.destination(4), Some((2, addr(14580))));
+        assert_eq!(router.destination(VehicleIndex(4)), Some((2, addr(14580))));
         router.route_inbound(2, addr(14580), &hb, &mut out);
-        assert_eq!(out, vec![(4, 0..hb.len())]);
+        assert_eq!(out, vec![(VehicleIndex(4), 0..hb.len())]);
         // From anywhere, the datagram goes to the link, which judges its frames.
         router.route_inbound(2, addr(45123), &hb, &mut out);
-        assert_eq!(out, vec![(4, 0..hb.len())]);
+        assert_eq!(out, vec![(VehicleIndex(4), 0..hb.len())]);
         assert_eq!(router.unroutable(2), 0);
         // Frames the link took from an ephemeral port (ArduPilot SITL's udpclient) move
         // the address there, since PX4's port never answered.
         assert_eq!(
-            router.vouched(4, addr(45123), t(1.0)),
+            router.vouched(VehicleIndex(4), addr(45123), t(1.0)),
             Some(AddressLearned {
-                vehicle: 4,
+                vehicle: VehicleIndex(4),
                 before: Some(addr(14580)),
                 now: addr(45123)
             })
         );
-        assert_eq!(router.destination(4), Some((2, addr(45123))));
+        assert_eq!(router.destination(VehicleIndex(4)), Some((2, addr(45123))));
         // Another sender while it speaks moves nothing.
-        assert_eq!(router.vouched(4, addr(14580), t(1.5)), None);
-        assert_eq!(router.destination(4), Some((2, addr(45123))));
+        assert_eq!(router.vouched(VehicleIndex(4), addr(14580), t(1.5)), None);
+        assert_eq!(router.destination(VehicleIndex(4)), Some((2, addr(45123))));
     }
 
     #[test]
     fn an_own_socket_keeps_a_configured_address_that_answers() {
         let mut router = Router::new(&plan());
         let t = |s: f64| SimTime::from_secs_f64(s);
-        assert_eq!(router.vouched(4, addr(14580), t(1.0)), None);
-        assert_eq!(router.vouched(4, addr(45123), t(1.5)), None);
-        assert_eq!(router.destination(4), Some((2, addr(14580))));
+        assert_eq!(router.vouched(VehicleIndex(4), addr(14580), t(1.0)), None);
+        assert_eq!(router.vouched(VehicleIndex(4), addr(45123), t(1.5)), None);
+        assert_eq!(router.destination(VehicleIndex(4)), Some((2, addr(14580))));
     }
 
     #[test]
@@ -372,36 +380,36 @@ mod tests {
         let mut router = Router::new(&plan());
         let t = |s: f64| SimTime::from_secs_f64(s);
         // Unknown until the vehicle is heard; a configured one is contacted first.
-        assert_eq!(router.destination(0), None);
-        assert_eq!(router.destination(1), Some((0, addr(30002))));
-        let learned = router.vouched(0, addr(30001), t(1.0));
+        assert_eq!(router.destination(VehicleIndex(0)), None);
+        assert_eq!(router.destination(VehicleIndex(1)), Some((0, addr(30002))));
+        let learned = router.vouched(VehicleIndex(0), addr(30001), t(1.0));
         assert_eq!(
             learned,
             Some(AddressLearned {
-                vehicle: 0,
+                vehicle: VehicleIndex(0),
                 before: None,
                 now: addr(30001)
             })
         );
-        assert_eq!(router.destination(0), Some((0, addr(30001))));
+        assert_eq!(router.destination(VehicleIndex(0)), Some((0, addr(30001))));
         // Another sender while the first is alive moves nothing.
-        assert_eq!(router.vouched(0, addr(40000), t(1.5)), None);
-        assert_eq!(router.vouched(0, addr(30001), t(2.0)), None);
-        assert_eq!(router.vouched(0, addr(40000), t(3.9)), None);
-        assert_eq!(router.destination(0), Some((0, addr(30001))));
+        assert_eq!(router.vouched(VehicleIndex(0), addr(40000), t(1.5)), None);
+        assert_eq!(router.vouched(VehicleIndex(0), addr(30001), t(2.0)), None);
+        assert_eq!(router.vouched(VehicleIndex(0), addr(40000), t(3.9)), None);
+        assert_eq!(router.destination(VehicleIndex(0)), Some((0, addr(30001))));
         // Silent for RELEARN_AFTER: the new one takes over.
         assert_eq!(
-            router.vouched(0, addr(40000), t(4.0)),
+            router.vouched(VehicleIndex(0), addr(40000), t(4.0)),
             Some(AddressLearned {
-                vehicle: 0,
+                vehicle: VehicleIndex(0),
                 before: Some(addr(30001)),
                 now: addr(40000)
             })
         );
         // A configured address that answers keeps its place; another one replaces it
         // only when it never answered.
-        assert_eq!(router.vouched(1, addr(30002), t(1.0)), None);
-        assert_eq!(router.vouched(1, addr(30003), t(1.5)), None);
-        assert_eq!(router.destination(1), Some((0, addr(30002))));
+        assert_eq!(router.vouched(VehicleIndex(1), addr(30002), t(1.0)), None);
+        assert_eq!(router.vouched(VehicleIndex(1), addr(30003), t(1.5)), None);
+        assert_eq!(router.destination(VehicleIndex(1)), Some((0, addr(30002))));
     }
 }

@@ -29,14 +29,12 @@ impl Swarm {
     /// of it as the vehicle's (see [`VehicleLink::handle_datagram`]).
     ///
     /// Costs the link's work only: nothing here visits the other links.
-    /// (The datagram interface numbers vehicles as the drivers' routers do: `i` is
-    /// [`VehicleIndex::get`].)
-    pub fn handle_datagram(&mut self, now: SimTime, i: usize, bytes: &[u8]) -> bool {
-        let Some(link) = self.slots.get_mut(i).and_then(VehicleSlot::link_mut) else {
+    pub fn handle_datagram(&mut self, now: SimTime, i: VehicleIndex, bytes: &[u8]) -> bool {
+        let Some(link) = self.slots.get_mut(i.get()).and_then(VehicleSlot::link_mut) else {
             return false;
         };
         let taken = link.handle_datagram(now, bytes);
-        self.after_link(now, VehicleIndex(i));
+        self.after_link(now, i);
         taken
     }
 
@@ -56,14 +54,14 @@ impl Swarm {
 
     /// Gives a sent datagram's buffer back to link `i` (any link will do: the buffer is
     /// only memory) so that the next frame reuses it.
-    pub fn recycle(&mut self, i: usize, bytes: Vec<u8>) {
-        if let Some(link) = self.slots.get_mut(i).and_then(VehicleSlot::link_mut) {
+    pub fn recycle(&mut self, i: VehicleIndex, bytes: Vec<u8>) {
+        if let Some(link) = self.slots.get_mut(i.get()).and_then(VehicleSlot::link_mut) {
             link.recycle(bytes);
         }
     }
 
     /// The next datagram and the vehicle it is for (round robin over the links).
-    pub fn poll_transmit(&mut self) -> Option<(usize, Vec<u8>)> {
+    pub fn poll_transmit(&mut self) -> Option<(VehicleIndex, Vec<u8>)> {
         loop {
             let i = self.scheduler.next_output()?;
             let Some(link) = self.slots[i].link_mut() else {
@@ -75,7 +73,7 @@ impl Swarm {
             if link.has_output() {
                 self.scheduler.has_output(i);
             }
-            return Some((i.get(), bytes));
+            return Some((i, bytes));
         }
     }
 

@@ -40,7 +40,7 @@ mod events;
 mod fence;
 mod guard;
 mod horizon;
-mod index;
+
 mod io;
 mod laws;
 mod model;
@@ -64,11 +64,11 @@ use std::time::Duration;
 
 use crate::consensus::HorizontalState;
 use crate::control::{AttitudeThrust, VehicleModel, attitude_thrust_from_acceleration};
+pub use crate::index::VehicleIndex;
 use crate::vehicle::{Phase, Setpoint, VehicleLink};
 use events::EventLog;
 pub use events::{MAX_KEPT_EVENTS, REPEAT_WINDOW, SwarmEvent};
 pub use guard::{DivergenceGuard, GuardLimits, GuardTrip};
-pub use index::VehicleIndex;
 pub use io::{LISTEN_LAG_FLOOR, MAX_TICK_DEFER};
 use model::FlownModel;
 pub use safety::SafetyStats;

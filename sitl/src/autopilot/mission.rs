@@ -169,7 +169,7 @@ impl Vehicle {
     fn do_transfer_steps(&mut self) {
         while let Some(step) = self.mission_transfer.poll_step() {
             match step {
-                TransferStep::Send(link, msg) => self.send(link, &msg),
+                TransferStep::Send(link, msg) => self.send(link, msg.as_ref()),
                 TransferStep::Store {
                     mission_type: MavMissionType::MAV_MISSION_TYPE_FENCE,
                     items,

@@ -77,8 +77,9 @@ impl StoredPlans<'_> {
 /// What the transfer asks of the vehicle, in order.
 #[derive(Debug, Clone, PartialEq)]
 pub(super) enum TransferStep {
-    /// Send a request, a count or an item.
-    Send(LinkId, MavMessage),
+    /// Send a request, a count or an item (boxed: a message is large, and a transfer's
+    /// steps are few).
+    Send(LinkId, Box<MavMessage>),
     /// Replace the stored plan of a type (`Store` of no items clears it); `current` is
     /// the mission's new current item, if the plan named one.
     Store {
@@ -198,7 +199,8 @@ impl MissionTransfer {
         } else {
             MavMessage::MISSION_REQUEST_INT(data)
         };
-        self.steps.push_back(TransferStep::Send(link, msg));
+        self.steps
+            .push_back(TransferStep::Send(link, Box::new(msg)));
     }
 
     fn send_count(
@@ -215,7 +217,8 @@ impl MissionTransfer {
             mission_type,
             opaque_id: plans.crc(mission_type),
         });
-        self.steps.push_back(TransferStep::Send(link, msg));
+        self.steps
+            .push_back(TransferStep::Send(link, Box::new(msg)));
     }
 
     /// MISSION_COUNT: starts an upload (or clears with 0).
@@ -473,7 +476,8 @@ impl MissionTransfer {
             MavMessage::MISSION_ITEM(d) => d.mission_type = kind,
             _ => {}
         }
-        self.steps.push_back(TransferStep::Send(link, msg));
+        self.steps
+            .push_back(TransferStep::Send(link, Box::new(msg)));
     }
 
     /// MISSION_ACK from the client: a download is over.

@@ -69,8 +69,11 @@ fn requests(steps: &[TransferStep]) -> Vec<(u16, bool)> {
     steps
         .iter()
         .filter_map(|s| match s {
-            TransferStep::Send(_, MavMessage::MISSION_REQUEST_INT(r)) => Some((r.seq, false)),
-            TransferStep::Send(_, MavMessage::MISSION_REQUEST(r)) => Some((r.seq, true)),
+            TransferStep::Send(_, m) => match m.as_ref() {
+                MavMessage::MISSION_REQUEST_INT(r) => Some((r.seq, false)),
+                MavMessage::MISSION_REQUEST(r) => Some((r.seq, true)),
+                _ => None,
+            },
             _ => None,
         })
         .collect()
@@ -188,8 +191,11 @@ fn a_download_sends_the_count_with_the_checksum_then_items_until_the_ack() {
     let mut t = MissionTransfer::new(1, false);
     t.on_request_list(at_ms(0), LinkId::Offboard, GCS, MISSION, &plans);
     let sent = steps(&mut t);
-    let [TransferStep::Send(LinkId::Offboard, MavMessage::MISSION_COUNT(c))] = &sent[..] else {
+    let [TransferStep::Send(LinkId::Offboard, msg)] = &sent[..] else {
         panic!("one count: {sent:?}");
+    };
+    let MavMessage::MISSION_COUNT(c) = msg.as_ref() else {
+        panic!("a count: {msg:?}");
     };
     assert_eq!((c.count, c.opaque_id), (1, 0xdead_beef));
     // The count is repeated until the first request.
@@ -197,8 +203,11 @@ fn a_download_sends_the_count_with_the_checksum_then_items_until_the_ack() {
     assert_eq!(steps(&mut t).len(), 1);
     t.on_request(at_ms(300), LinkId::Offboard, GCS, 0, false, &plans);
     let sent = steps(&mut t);
-    let [TransferStep::Send(_, MavMessage::MISSION_ITEM_INT(item))] = &sent[..] else {
+    let [TransferStep::Send(_, msg)] = &sent[..] else {
         panic!("one item: {sent:?}");
+    };
+    let MavMessage::MISSION_ITEM_INT(item) = msg.as_ref() else {
+        panic!("an item: {msg:?}");
     };
     assert_eq!((item.seq, item.current, item.z), (0, 1, 12.0));
     t.handle_timeout(at_ms(600), &plans);

@@ -28,7 +28,7 @@ use ringswarm_wire::time::SimTime;
 use super::{Intake, Observer};
 use crate::distributed::ShardPlan;
 use crate::link::router::TransportLayout;
-use crate::swarm::Swarm;
+use crate::swarm::{Swarm, VehicleIndex};
 pub use bus::BusCounts;
 use bus::ShardBus;
 use phase_times::PhaseClock;
@@ -393,11 +393,11 @@ impl Lockstep {
         }
     }
 
-    /// The vehicle a datagram for link `i` reaches.
-    fn vehicle_reached_by(&self, i: usize) -> Option<usize> {
+    /// The emulated vehicle a datagram for link `i` reaches.
+    fn vehicle_reached_by(&self, i: VehicleIndex) -> Option<usize> {
         match &self.routing {
             Some(r) => r.vehicle_reached_by(i),
-            None => Some(i),
+            None => Some(i.get()),
         }
     }
 
@@ -411,8 +411,9 @@ impl Lockstep {
     ) {
         let swarm = &mut self.coordinators[self.owner[j]];
         let Some(r) = self.routing.as_mut() else {
-            observer.datagram(now, j, false, bytes);
-            swarm.handle_datagram(now, j, bytes);
+            // Without a router, emulated vehicle j is link j.
+            observer.datagram(now, VehicleIndex(j), false, bytes);
+            swarm.handle_datagram(now, VehicleIndex(j), bytes);
             return;
         };
         let (socket, from) = (r.socket_of[j], r.addresses[j]);
@@ -459,7 +460,8 @@ impl Lockstep {
     /// Gives a delivered (or lost) datagram's buffer back to its sender.
     fn recycle(&mut self, to_vehicle: bool, index: usize, bytes: Vec<u8>) {
         if to_vehicle {
-            self.coordinators[self.owner[index]].recycle(index, bytes);
+            // Any link of its coordinator takes the buffer back (it is only memory).
+            self.coordinators[self.owner[index]].recycle(VehicleIndex(index), bytes);
         } else if let Some(v) = self.vehicles.get_mut(index) {
             v.recycle(bytes);
         }

@@ -7,6 +7,7 @@ use std::net::{IpAddr, SocketAddr};
 use std::ops::Range;
 
 use crate::link::router::{Router, TransportLayout};
+use crate::swarm::VehicleIndex;
 
 /// The router and the vehicles' virtual addresses.
 #[derive(Debug)]
@@ -19,7 +20,7 @@ pub(super) struct Routing {
     /// The coordinator socket vehicle `j` sends to.
     pub(super) socket_of: Vec<usize>,
     /// Reused: the pieces of one datagram.
-    pub(super) pieces: Vec<(usize, Range<usize>)>,
+    pub(super) pieces: Vec<(VehicleIndex, Range<usize>)>,
 }
 
 impl Routing {
@@ -46,7 +47,7 @@ impl Routing {
     }
 
     /// The vehicle a datagram for link `i` reaches, if the router has an address for it.
-    pub(super) fn vehicle_reached_by(&self, i: usize) -> Option<usize> {
+    pub(super) fn vehicle_reached_by(&self, i: VehicleIndex) -> Option<usize> {
         let (_, to) = self.router.destination(i)?;
         self.vehicle_at.get(&to).copied()
     }

@@ -1,6 +1,9 @@
-//! [`VehicleIndex`]: a vehicle's place in the swarm, the one index every per-vehicle
-//! array of the swarm machine is kept in (ring order, the `[[vehicle]]` order). Its own
-//! type, so that a system id, a shard or a socket number is never taken for it.
+//! The two numbers a vehicle goes by, each its own type so that one is never taken for
+//! the other (or for a shard or a socket number):
+//! - [`VehicleIndex`]: its place in the swarm, the one index every per-vehicle array of
+//!   the swarm machine and the router is kept in (ring order, the `[[vehicle]]` order);
+//! - [`SystemId`]: its MAVLink system id, what its frames carry and what a network socket
+//!   tells vehicles apart by (unique within a network, not across networks).
 
 use std::fmt;
 use std::ops::{Index, IndexMut};
@@ -30,6 +33,23 @@ impl fmt::Display for VehicleIndex {
 impl From<usize> for VehicleIndex {
     fn from(i: usize) -> Self {
         Self(i)
+    }
+}
+
+/// A vehicle's MAVLink system id (1–255; 0 is the broadcast and never a vehicle's).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct SystemId(pub u8);
+
+impl SystemId {
+    /// The id as carried in a frame's header.
+    pub fn get(self) -> u8 {
+        self.0
+    }
+}
+
+impl fmt::Display for SystemId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.0)
     }
 }
 
