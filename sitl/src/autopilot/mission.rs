@@ -9,8 +9,9 @@ use mavlink::dialects::common::{
     MavMissionResult, MavMissionType, MissionState,
 };
 
+use super::mission_item::item_int_from_float;
 use super::mission_item::{MissionItem, crc_of};
-use super::mission_transfer::{StoredPlans, TransferStep, item_int_from_float};
+use super::mission_transfer::{StoredPlans, TransferStep};
 use super::{LinkId, Vehicle};
 use crate::time::SimTime;
 

@@ -24,13 +24,15 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use mavlink::dialects::common::{
-    MISSION_COUNT_DATA, MISSION_ITEM_INT_DATA, MISSION_REQUEST_INT_DATA, MavFrame, MavMessage,
+    MISSION_COUNT_DATA, MISSION_ITEM_INT_DATA, MISSION_REQUEST_INT_DATA, MavMessage,
     MavMissionResult, MavMissionType,
 };
 
 use super::LinkId;
 use super::geofence::{MAX_FENCE_ITEMS, check_fence_item};
-use super::mission_item::{MissionItem, check_item, item_from_int, mav_cmd};
+use super::mission_item::{
+    MissionItem, check_item, item_from_int, item_message_float, item_message_int,
+};
 use crate::time::SimTime;
 
 /// How often a request (or the count of a download) is repeated.
@@ -568,99 +570,6 @@ fn check_uploaded(
         check_fence_item(item, legacy)
     } else {
         check_item(item)
-    }
-}
-
-/// A stored item as MISSION_ITEM_INT; PX4 answers with the _INT frames (5, 6),
-/// deprecated in the XML but what flies.
-#[allow(deprecated)]
-fn item_message_int(item: &MissionItem, seq: u16, to: (u8, u8), current: u8) -> MavMessage {
-    let frame = match item.frame {
-        0 | 5 => MavFrame::MAV_FRAME_GLOBAL_INT,
-        3 | 6 => MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-        _ => MavFrame::MAV_FRAME_MISSION,
-    };
-    MavMessage::MISSION_ITEM_INT(MISSION_ITEM_INT_DATA {
-        param1: item.params[0],
-        param2: item.params[1],
-        param3: item.params[2],
-        param4: item.params[3],
-        x: item.x,
-        y: item.y,
-        z: item.z,
-        seq,
-        command: mav_cmd(item.command),
-        target_system: to.0,
-        target_component: to.1,
-        frame,
-        current,
-        autocontinue: item.autocontinue,
-        mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
-    })
-}
-
-/// A stored item as the legacy MISSION_ITEM (degrees as floats), for a client that asked
-/// with MISSION_REQUEST.
-#[allow(deprecated)]
-fn item_message_float(item: &MissionItem, seq: u16, to: (u8, u8), current: u8) -> MavMessage {
-    let (frame, scale) = match item.frame {
-        0 | 5 => (MavFrame::MAV_FRAME_GLOBAL, 1e-7),
-        3 | 6 => (MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT, 1e-7),
-        _ => (MavFrame::MAV_FRAME_MISSION, 1.0),
-    };
-    MavMessage::MISSION_ITEM(mavlink::dialects::common::MISSION_ITEM_DATA {
-        param1: item.params[0],
-        param2: item.params[1],
-        param3: item.params[2],
-        param4: item.params[3],
-        x: (f64::from(item.x) * scale) as f32,
-        y: (f64::from(item.y) * scale) as f32,
-        z: item.z,
-        seq,
-        command: mav_cmd(item.command),
-        target_system: to.0,
-        target_component: to.1,
-        frame,
-        current,
-        autocontinue: item.autocontinue,
-        mission_type: MavMissionType::MAV_MISSION_TYPE_MISSION,
-    })
-}
-
-/// A legacy MISSION_ITEM (degrees as floats) as the MISSION_ITEM_INT it stands for.
-#[allow(deprecated)]
-pub(super) fn item_int_from_float(
-    m: &mavlink::dialects::common::MISSION_ITEM_DATA,
-) -> MISSION_ITEM_INT_DATA {
-    let global = matches!(
-        m.frame,
-        MavFrame::MAV_FRAME_GLOBAL | MavFrame::MAV_FRAME_GLOBAL_RELATIVE_ALT
-    );
-    let e7 = |v: f32| {
-        if global {
-            (f64::from(v) * 1e7)
-                .round()
-                .clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
-        } else {
-            v as i32
-        }
-    };
-    MISSION_ITEM_INT_DATA {
-        param1: m.param1,
-        param2: m.param2,
-        param3: m.param3,
-        param4: m.param4,
-        x: e7(m.x),
-        y: e7(m.y),
-        z: m.z,
-        seq: m.seq,
-        command: m.command,
-        target_system: m.target_system,
-        target_component: m.target_component,
-        frame: m.frame,
-        current: m.current,
-        autocontinue: m.autocontinue,
-        mission_type: m.mission_type,
     }
 }
 

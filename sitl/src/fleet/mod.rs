@@ -28,15 +28,16 @@ use mio::{Events, Interest, Poll, Token};
 use tokio::sync::{mpsc, watch};
 use tokio::time::MissedTickBehavior;
 
-use crate::autopilot::{LinkId, Vehicle, VehicleConfig, VehicleEvent, VehicleStatus};
+use crate::autopilot::{LinkId, Vehicle, VehicleConfig, VehicleStatus};
 use crate::faulty_line::FaultyLine;
 use crate::key_writer::{KeyStore, KeyWriter};
-use crate::keystore::StoredKey;
 use crate::link_faults::LinkFaults;
-use crate::pty::PtyLink;
 use crate::time::SimTime;
 use crate::udp::{LinkPort, LinkSocket, Partner, Placement, SimClock};
 use crate::world::World;
+
+mod slot;
+use slot::{Port, Slot};
 
 /// What a test (or an operator) can do to a running vehicle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -111,47 +112,6 @@ pub async fn bind_fleet(
     Ok((fleet, statuses))
 }
 
-/// A datagram held back by the latency fault.
-struct Delayed {
-    link: usize,
-    /// The sender of an inbound datagram; `None` for an outbound one.
-    from: Option<SocketAddr>,
-    bytes: Vec<u8>,
-}
-
-/// One link's socket or serial line, registered with the worker's poller.
-enum Port {
-    Udp(mio::net::UdpSocket),
-    Pty(PtyLink),
-}
-
-/// A vehicle while the worker runs.
-struct Slot {
-    vehicle: Vehicle,
-    sockets: Vec<Port>,
-    ids: Vec<LinkId>,
-    default_peers: Vec<SocketAddr>,
-    partners: Vec<Partner>,
-    faults: Vec<LinkFaults>,
-    /// The links' fault draws and the datagrams they hold back.
-    delayed: FaultyLine<Delayed>,
-    /// Buffers of delivered delayed datagrams, for the next ones.
-    spare: Vec<Vec<u8>>,
-    key_file: Option<PathBuf>,
-    /// Where changed keys go to be written, off the worker's thread.
-    keys: KeyStore,
-    status: watch::Sender<VehicleStatus>,
-    alive: bool,
-    /// Datagrams the socket could not take at once.
-    dropped_sends: u64,
-    /// Frames read from a serial line, reused from read to read.
-    serial_frames: Vec<Vec<u8>>,
-    /// How long before the worker's start the vehicle booted: vehicles started together
-    /// would send every stream in the same millisecond (a thousand datagrams at once);
-    /// PX4 instances boot apart, and so do these.
-    boot_offset: std::time::Duration,
-}
-
 /// Largest datagram read.
 const MAX_DATAGRAM: usize = 2048;
 
@@ -179,42 +139,7 @@ async fn run_fleet(
             return;
         }
     };
-    let mut slots: Vec<Slot> = Vec::with_capacity(vehicles.len());
-    for (boot_offset, v) in vehicles {
-        let ids: Vec<LinkId> = v.links.iter().map(|l| l.id).collect();
-        let defaults: Vec<SocketAddr> = v.links.iter().map(|l| l.default_peer).collect();
-        let faults: Vec<LinkFaults> = v.links.iter().map(|l| l.faults).collect();
-        let mut vehicle = v.vehicle;
-        let sysid = vehicle.system_id();
-        let sockets = match polled_sockets(&poll, slots.len(), v.links.into_iter().map(|l| l.port))
-        {
-            Ok(sockets) => sockets,
-            Err(e) => {
-                tracing::error!(sysid, error = %e, "its sockets cannot be polled: the vehicle does not run");
-                continue;
-            }
-        };
-        for link in [LinkId::Offboard, LinkId::Gcs] {
-            vehicle.set_link_wired(link, ids.contains(&link));
-        }
-        slots.push(Slot {
-            vehicle,
-            sockets,
-            ids,
-            partners: defaults.iter().copied().map(Partner::new).collect(),
-            default_peers: defaults,
-            faults,
-            delayed: FaultyLine::new(DELAYED_PER_VEHICLE, v.seed),
-            spare: Vec::new(),
-            key_file: v.key_file,
-            keys: keys.clone(),
-            status: v.status,
-            alive: true,
-            dropped_sends: 0,
-            serial_frames: Vec::new(),
-            boot_offset,
-        });
-    }
+    let mut slots = slots_polled_by(&poll, vehicles, &keys);
     let mut buf = vec![0u8; MAX_DATAGRAM];
     // Sockets to read this tick, and those the read cap or an error left with something
     // to read: read again at the next tick (the poller reports a socket again only when a
@@ -242,42 +167,73 @@ async fn run_fleet(
                 if publish {
                     last_status = now;
                 }
-                for slot in &mut slots {
-                    let now = slot.time(now);
-                    // The step first, then what arrived during it (taken at the next step,
-                    // as the physics would anyway): a vehicle's first frames go out
-                    // before anything it hears can choose whom it answers.
-                    if slot.alive {
-                        slot.vehicle.handle_timeout(now);
-                        slot.deliver_delayed(now);
-                        slot.flush(now);
-                        if publish {
-                            slot.status.send_replace(slot.vehicle.status());
-                        }
-                    }
-                }
+                step_all(&mut slots, now, publish);
                 ready.append(&mut retry);
                 receive_ready(&mut poll, &mut events, &mut slots, &mut ready, &mut retry, now, &mut buf);
             }
         }
     }
     for slot in &slots {
-        if slot.alive {
-            slot.store_key();
+        slot.close();
+    }
+}
+
+/// The worker's vehicles as slots, their sockets registered with `poll` (a vehicle whose
+/// sockets cannot be is logged and left out).
+fn slots_polled_by(
+    poll: &Poll,
+    vehicles: Vec<(std::time::Duration, FleetVehicle)>,
+    keys: &KeyStore,
+) -> Vec<Slot> {
+    let mut slots: Vec<Slot> = Vec::with_capacity(vehicles.len());
+    for (boot_offset, v) in vehicles {
+        let ids: Vec<LinkId> = v.links.iter().map(|l| l.id).collect();
+        let defaults: Vec<SocketAddr> = v.links.iter().map(|l| l.default_peer).collect();
+        let faults: Vec<LinkFaults> = v.links.iter().map(|l| l.faults).collect();
+        let mut vehicle = v.vehicle;
+        let sysid = vehicle.system_id();
+        let sockets = match polled_sockets(poll, slots.len(), v.links.into_iter().map(|l| l.port)) {
+            Ok(sockets) => sockets,
+            Err(e) => {
+                tracing::error!(sysid, error = %e, "its sockets cannot be polled: the vehicle does not run");
+                continue;
+            }
+        };
+        for link in [LinkId::Offboard, LinkId::Gcs] {
+            vehicle.set_link_wired(link, ids.contains(&link));
         }
-        if slot.delayed.refused() > 0 {
-            tracing::info!(
-                sysid = slot.vehicle.system_id(),
-                dropped = slot.delayed.refused(),
-                "datagrams dropped: the latency fault's line was full"
-            );
-        }
-        if slot.dropped_sends > 0 {
-            tracing::info!(
-                sysid = slot.vehicle.system_id(),
-                dropped = slot.dropped_sends,
-                "datagrams dropped: the socket's send buffer was full"
-            );
+        slots.push(Slot {
+            vehicle,
+            sockets,
+            ids,
+            partners: defaults.iter().copied().map(Partner::new).collect(),
+            default_peers: defaults,
+            faults,
+            delayed: FaultyLine::new(DELAYED_PER_VEHICLE, v.seed),
+            spare: Vec::new(),
+            key_file: v.key_file,
+            keys: keys.clone(),
+            status: v.status,
+            alive: true,
+            dropped_sends: 0,
+            serial_frames: Vec::new(),
+            boot_offset,
+        });
+    }
+    slots
+}
+
+/// One tick of every live vehicle: the step first, then what arrived during it (taken
+/// at the next step, as the physics would anyway): a vehicle's first frames go out before
+/// anything it hears can choose whom it answers. `publish`: its status goes out too.
+fn step_all(slots: &mut [Slot], now: SimTime, publish: bool) {
+    for slot in slots.iter_mut().filter(|s| s.alive) {
+        let now = slot.time(now);
+        slot.vehicle.handle_timeout(now);
+        slot.deliver_delayed(now);
+        slot.flush(now);
+        if publish {
+            slot.status.send_replace(slot.vehicle.status());
         }
     }
 }
@@ -451,202 +407,6 @@ pub fn spawn_workers(
 fn spread(i: usize) -> std::time::Duration {
     let golden = 0.618_033_988_749_894_9;
     std::time::Duration::from_micros(((i as f64 * golden).fract() * 1e6) as u64)
-}
-
-impl Slot {
-    /// The vehicle's time when the worker's clock says `now`.
-    fn time(&self, now: SimTime) -> SimTime {
-        now + self.boot_offset
-    }
-
-    fn control(&mut self, request: VehicleControl, now: SimTime) {
-        let sysid = self.vehicle.system_id();
-        match request {
-            VehicleControl::Kill => {
-                self.alive = false;
-                self.store_key();
-                let spare = &mut self.spare;
-                spare.extend(self.delayed.drain().map(|d| d.bytes));
-                while self.vehicle.poll_transmit().is_some() {}
-                tracing::info!(sysid, "vehicle killed");
-            }
-            VehicleControl::Restart => {
-                self.alive = true;
-                self.partners = self
-                    .default_peers
-                    .iter()
-                    .copied()
-                    .map(Partner::new)
-                    .collect();
-                self.vehicle.reboot(now);
-                tracing::info!(sysid, "vehicle restarted");
-            }
-        }
-    }
-
-    /// Reads what has arrived on link `link`'s socket, up to [`READS_PER_TICK`]
-    /// datagrams, and hands it to the vehicle; a powered-off vehicle's datagrams are read
-    /// and dropped. [`Read::More`] when the cap or a socket error (logged) left some
-    /// unread: one vehicle's socket never stops the worker.
-    fn receive(&mut self, now: SimTime, link: usize, buf: &mut [u8]) -> Read {
-        if link >= self.sockets.len() {
-            return Read::Drained(0);
-        }
-        if let Port::Pty(_) = self.sockets[link] {
-            return self.receive_serial(now, link, buf);
-        }
-        let mut taken = 0;
-        while taken < READS_PER_TICK {
-            let Port::Udp(socket) = &mut self.sockets[link] else {
-                return Read::Drained(taken);
-            };
-            let (n, from) = match socket.recv_from(buf) {
-                Ok(got) => got,
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => return Read::Drained(taken),
-                // ICMP port unreachable from an earlier send (nobody listening at the
-                // default peer yet) surfaces here on some systems.
-                Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => continue,
-                Err(e) => {
-                    tracing::warn!(sysid = self.vehicle.system_id(), error = %e, "receive failed");
-                    return Read::More(taken);
-                }
-            };
-            taken += 1;
-            self.inbound(now, link, from, &buf[..n]);
-            self.flush(now);
-        }
-        Read::More(taken)
-    }
-
-    /// Reads a serial line: what is waiting, up to [`READS_PER_TICK`] reads, each whole
-    /// frame handed to the vehicle as a datagram from the line's one peer.
-    fn receive_serial(&mut self, now: SimTime, link: usize, buf: &mut [u8]) -> Read {
-        let Some(Port::Pty(pty)) = self.sockets.get_mut(link) else {
-            return Read::Drained(0);
-        };
-        let mut frames = std::mem::take(&mut self.serial_frames);
-        frames.clear();
-        let result = pty.receive(buf, READS_PER_TICK, |frame| frames.push(frame.to_vec()));
-        let peer = self.default_peers[link];
-        let taken = frames.len();
-        for frame in frames.drain(..) {
-            self.inbound(now, link, peer, &frame);
-            self.flush(now);
-        }
-        self.serial_frames = frames;
-        match result {
-            Ok(false) => Read::Drained(taken),
-            Ok(true) => Read::More(taken),
-            Err(e) => {
-                tracing::warn!(sysid = self.vehicle.system_id(), error = %e, "serial read failed");
-                Read::More(taken)
-            }
-        }
-    }
-
-    /// Hands a datagram to the vehicle (or holds its copies back, under a latency
-    /// fault); one the vehicle admits latches the link's partner.
-    fn inbound(&mut self, now: SimTime, link: usize, from: SocketAddr, bytes: &[u8]) {
-        if !self.alive || link >= self.sockets.len() {
-            return;
-        }
-        for delay in self.delayed.draw(&self.faults[link]) {
-            if delay.is_zero() {
-                if self.vehicle.handle_datagram(now, self.ids[link], bytes) {
-                    self.partners[link].on_datagram(from);
-                }
-            } else {
-                let copy = self.copy_of(bytes);
-                self.hold(now + delay, link, Some(from), copy);
-            }
-        }
-    }
-
-    /// `bytes` in a spare buffer.
-    fn copy_of(&mut self, bytes: &[u8]) -> Vec<u8> {
-        let mut copy = self.spare.pop().unwrap_or_default();
-        copy.clear();
-        copy.extend_from_slice(bytes);
-        copy
-    }
-
-    /// Holds a datagram back until `due`; a full line drops it.
-    fn hold(&mut self, due: SimTime, link: usize, from: Option<SocketAddr>, bytes: Vec<u8>) {
-        if let Err(dropped) = self.delayed.hold(due, Delayed { link, from, bytes }) {
-            self.spare.push(dropped.bytes);
-        }
-    }
-
-    fn deliver_delayed(&mut self, now: SimTime) {
-        while let Some(d) = self.delayed.pop_due(now) {
-            match d.from {
-                Some(from) => {
-                    if self
-                        .vehicle
-                        .handle_datagram(now, self.ids[d.link], &d.bytes)
-                    {
-                        self.partners[d.link].on_datagram(from);
-                    }
-                }
-                None => self.send(d.link, &d.bytes),
-            }
-            self.spare.push(d.bytes);
-        }
-    }
-
-    /// Stores a changed key, then sends (or holds back) everything the vehicle queued.
-    fn flush(&mut self, now: SimTime) {
-        while let Some(event) = self.vehicle.poll_event() {
-            if let VehicleEvent::SigningChanged(stored) = event {
-                self.save_key(stored);
-            }
-        }
-        while let Some(tx) = self.vehicle.poll_transmit() {
-            // A link this vehicle does not serve sends nothing.
-            if let Some(link) = self.ids.iter().position(|id| *id == tx.link) {
-                for copy in self.delayed.draw(&self.faults[link]) {
-                    if copy.is_zero() {
-                        self.send(link, &tx.bytes);
-                    } else {
-                        let held = self.copy_of(&tx.bytes);
-                        self.hold(now + copy, link, None, held);
-                    }
-                }
-            }
-            self.vehicle.recycle(tx.bytes);
-        }
-    }
-
-    /// Stores the vehicle's key with its clock as it is now, so that a restart goes on
-    /// with newer timestamps (PX4 stores the clock only when a key is set).
-    fn store_key(&self) {
-        if let Some(stored) = self.vehicle.signing_key() {
-            self.save_key(Some(stored));
-        }
-    }
-
-    /// Hands a key (or "no key") to the writer, when the vehicle keeps one in a file.
-    fn save_key(&self, stored: Option<StoredKey>) {
-        if let Some(path) = &self.key_file {
-            self.keys
-                .save(path.clone(), self.vehicle.system_id(), stored);
-        }
-    }
-
-    fn send(&mut self, link: usize, bytes: &[u8]) {
-        let to = self.partners[link].addr();
-        let sent = match &mut self.sockets[link] {
-            Port::Udp(socket) => socket.send_to(bytes, to).map(|_| ()),
-            Port::Pty(pty) => pty.send(bytes),
-        };
-        match sent {
-            Ok(_) => {}
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock => self.dropped_sends += 1,
-            Err(e) => {
-                tracing::debug!(sysid = self.vehicle.system_id(), %to, error = %e, "send failed")
-            }
-        }
-    }
 }
 
 #[cfg(test)]

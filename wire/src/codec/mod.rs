@@ -12,7 +12,13 @@ use mavlink::dialects::common::MavMessage;
 use mavlink::error::ParserError;
 use mavlink::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message};
 
-use crate::signing::{FrameStamp, Signing, SigningKey, Trailer};
+use crate::signing::{FrameStamp, SigningKey, Trailer};
+
+mod encode;
+mod raw;
+pub use encode::{Encoder, FramePool};
+pub use raw::{RawFrames, frame_checksum_ok, frame_system_id, raw_frames};
+pub(crate) use raw::{frame_len, is_start_byte};
 
 /// MAVLink 1 start byte.
 const STX_V1: u8 = 0xFE;
@@ -186,100 +192,6 @@ impl Iterator for Frames<'_> {
     }
 }
 
-/// The complete frames of a datagram as raw bytes (what a `.tlog` records), skipping
-/// bytes outside frames and a truncated tail. Checksums are not checked. Allocates
-/// nothing.
-pub fn raw_frames(bytes: &[u8]) -> RawFrames<'_> {
-    RawFrames { bytes, at: 0 }
-}
-
-/// The iterator of [`raw_frames`].
-#[derive(Debug, Clone)]
-pub struct RawFrames<'a> {
-    bytes: &'a [u8],
-    at: usize,
-}
-
-impl<'a> Iterator for RawFrames<'a> {
-    type Item = &'a [u8];
-
-    fn next(&mut self) -> Option<&'a [u8]> {
-        let bytes = self.bytes;
-        let skip = bytes[self.at..]
-            .iter()
-            .position(|b| *b == STX_V1 || *b == STX_V2)?;
-        self.at += skip;
-        match frame_len(&bytes[self.at..]) {
-            Some(n) if n <= bytes.len() - self.at => {
-                let frame = &bytes[self.at..self.at + n];
-                self.at += n;
-                Some(frame)
-            }
-            _ => {
-                self.at = bytes.len();
-                None
-            }
-        }
-    }
-}
-
-/// The sender's system id of a frame [`raw_frames`] returned (`None` for anything
-/// shorter than a header).
-pub fn frame_system_id(frame: &[u8]) -> Option<u8> {
-    match *frame.first()? {
-        STX_V2 => frame.get(5).copied(),
-        STX_V1 => frame.get(3).copied(),
-        _ => None,
-    }
-}
-
-/// Whether a complete raw frame (as [`raw_frames`] or a stream framer cuts it) holds
-/// together: its checksum matches for a known message. `None` for a message this dialect
-/// does not know (its checksum cannot be checked), `Some(false)` for a bad checksum.
-pub fn frame_checksum_ok(frame: &[u8]) -> Option<bool> {
-    let (v2, header_len) = match frame.first() {
-        Some(&STX_V2) => (true, V2_HEADER_LEN),
-        Some(&STX_V1) => (false, 6),
-        _ => return Some(false),
-    };
-    let total = frame_len(frame)?;
-    if frame.len() < total {
-        return Some(false);
-    }
-    let msgid = if v2 {
-        u32::from_le_bytes([frame[7], frame[8], frame[9], 0])
-    } else {
-        u32::from(frame[5])
-    };
-    let crc_at = header_len + usize::from(frame[1]);
-    let received = u16::from_le_bytes([frame[crc_at], frame[crc_at + 1]]);
-    if checksum(&frame[1..crc_at], MavMessage::extra_crc(msgid)) == received {
-        Some(true)
-    } else if MavMessage::default_message_from_id(msgid).is_some() {
-        Some(false)
-    } else {
-        None
-    }
-}
-
-/// Whether `byte` starts a MAVLink 1 or 2 frame.
-pub(crate) fn is_start_byte(byte: u8) -> bool {
-    byte == STX_V1 || byte == STX_V2
-}
-
-/// Header length and total length of the frame starting at `bytes[0]` (an STX), once
-/// the header is there.
-pub(crate) fn frame_len(bytes: &[u8]) -> Option<usize> {
-    let v2 = bytes[0] == STX_V2;
-    let header_len = if v2 { 10 } else { 6 };
-    if bytes.len() < header_len {
-        return None;
-    }
-    let payload_len = usize::from(bytes[1]);
-    let signed = v2 && bytes[2] & INCOMPAT_SIGNED != 0;
-    Some(header_len + payload_len + 2 + if signed { SIGNATURE_LEN } else { 0 })
-}
-
 /// Decodes one frame at the start of `bytes`; returns its length when it is known.
 fn decode_frame(
     bytes: &[u8],
@@ -361,157 +273,10 @@ fn trailer(frame: &[u8], key: Option<&SigningKey>) -> Trailer {
     }
 }
 
-/// Buffers of sent frames kept for the next ones: whoever encodes takes a buffer here and
-/// its driver gives it back once sent, so that steady traffic allocates nothing. At most
-/// [`FramePool::KEPT`] are kept.
-#[derive(Debug, Clone, Default)]
-pub struct FramePool {
-    spare: Vec<Vec<u8>>,
-}
-
-impl FramePool {
-    /// Buffers kept (more than a step's or a tick's worth of frames).
-    pub const KEPT: usize = 32;
-
-    /// An empty buffer that takes any frame without growing.
-    pub fn take(&mut self) -> Vec<u8> {
-        let mut buf = self
-            .spare
-            .pop()
-            .unwrap_or_else(|| Vec::with_capacity(MAX_FRAME_LEN));
-        buf.clear();
-        buf
-    }
-
-    /// A buffer back for reuse.
-    pub fn give(&mut self, buf: Vec<u8>) {
-        if self.spare.len() < Self::KEPT {
-            self.spare.push(buf);
-        }
-    }
-}
-
-/// Encodes messages from one system and component as MAVLink 2, counting sequence numbers.
-#[derive(Debug, Clone)]
-pub struct Encoder {
-    system_id: u8,
-    component_id: u8,
-    sequence: u8,
-}
-
-impl Encoder {
-    /// An encoder for `system_id`/`component_id`, starting at sequence 0.
-    pub fn new(system_id: u8, component_id: u8) -> Self {
-        Self {
-            system_id,
-            component_id,
-            sequence: 0,
-        }
-    }
-
-    /// One unsigned MAVLink 2 frame.
-    pub fn encode(&mut self, msg: &MavMessage) -> Vec<u8> {
-        let mut out = Vec::new();
-        self.encode_into(msg, None, &mut out);
-        out
-    }
-
-    /// One MAVLink 2 frame signed with `signing`'s key and next timestamp, from link
-    /// `link_id`.
-    pub fn encode_signed(
-        &mut self,
-        msg: &MavMessage,
-        signing: &mut Signing,
-        link_id: u8,
-    ) -> Vec<u8> {
-        let mut out = Vec::new();
-        self.encode_into(msg, Some((signing, link_id)), &mut out);
-        out
-    }
-
-    /// One frame, signed when `signing` is given, appended to `out` (a buffer kept for
-    /// reuse allocates nothing).
-    pub fn encode_into(
-        &mut self,
-        msg: &MavMessage,
-        signing: Option<(&mut Signing, u8)>,
-        out: &mut Vec<u8>,
-    ) {
-        let header = self.next_header();
-        let Some((signing, link_id)) = signing else {
-            encode_unsigned(header, msg, out);
-            return;
-        };
-        let mut raw = MAVLinkV2MessageRaw::new();
-        raw.serialize_message_for_signing(header, msg);
-        *raw.signature_link_id_mut() = link_id;
-        let timestamp = signing.take_timestamp().to_le_bytes();
-        raw.signature_timestamp_bytes_mut()
-            .copy_from_slice(&timestamp[..6]);
-        let mut value = [0u8; 6];
-        raw.calculate_signature(signing.key().bytes(), &mut value);
-        raw.signature_value_mut().copy_from_slice(&value);
-        out.extend_from_slice(raw.raw_bytes());
-    }
-
-    fn next_header(&mut self) -> MavHeader {
-        let header = MavHeader {
-            system_id: u32::from(self.system_id),
-            component_id: self.component_id,
-            sequence: self.sequence,
-        };
-        self.sequence = self.sequence.wrapping_add(1);
-        header
-    }
-}
-
-/// Appends an unsigned MAVLink 2 frame: the payload serialised in place after the header
-/// (trailing zeros cut, as MAVLink 2 requires), then the checksum.
-fn encode_unsigned(header: MavHeader, msg: &MavMessage, out: &mut Vec<u8>) {
-    let start = out.len();
-    out.resize(start + V2_HEADER_LEN + MAX_PAYLOAD_LEN, 0);
-    let payload_len = msg.ser(MavlinkVersion::V2, &mut out[start + V2_HEADER_LEN..]);
-    let msgid = msg.message_id();
-    let id = msgid.to_le_bytes();
-    out[start..start + V2_HEADER_LEN].copy_from_slice(&[
-        STX_V2,
-        // A payload is at most 255 bytes: the generated serialisers write into 255.
-        payload_len as u8,
-        0, // incompatibility flags: not signed
-        0, // compatibility flags
-        header.sequence,
-        // The encoder's system id is a u8.
-        header.system_id as u8,
-        header.component_id,
-        id[0],
-        id[1],
-        id[2],
-    ]);
-    out.truncate(start + V2_HEADER_LEN + payload_len);
-    let crc = checksum(&out[start + 1..], MavMessage::extra_crc(msgid));
-    out.extend_from_slice(&crc.to_le_bytes());
-}
-
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
 
-    #[test]
-    fn the_frame_pool_hands_out_empty_buffers_that_fit_any_frame_and_keeps_a_few() {
-        let mut pool = FramePool::default();
-        let mut buf = pool.take();
-        assert!(buf.is_empty() && buf.capacity() >= MAX_FRAME_LEN);
-        buf.extend_from_slice(b"a sent frame");
-        let at = buf.as_ptr();
-        pool.give(buf);
-        let again = pool.take();
-        assert!(again.is_empty());
-        assert_eq!(again.as_ptr(), at, "the same buffer came back");
-        for _ in 0..FramePool::KEPT + 5 {
-            pool.give(Vec::new());
-        }
-        assert_eq!(pool.spare.len(), FramePool::KEPT);
-    }
     use mavlink::dialects::common::{
         COMMAND_LONG_DATA, HEARTBEAT_DATA, MavAutopilot, MavCmd, MavModeFlag, MavState, MavType,
     };
