@@ -13,7 +13,7 @@ use ringswarm_sitl::world::World;
 use ringswarm_wire::px4;
 use ringswarm_wire::time::SimTime;
 
-use super::validate::Problems;
+use super::problems::Problems;
 use super::{Config, FaultKindName, LockstepFaults};
 use crate::control::enu_to_ned;
 use crate::link::router::Endpoint;

@@ -9,7 +9,9 @@
 
 #[cfg(feature = "emulator")]
 mod emulator;
+mod formation_checks;
 mod gate;
+mod problems;
 mod safety_checks;
 mod shards;
 mod transport;
@@ -25,10 +27,10 @@ use crate::swarm::{EndAction, LossPolicy, SetpointKind};
 #[cfg(feature = "emulator")]
 pub use emulator::EMULATOR_FAULT_NAMES;
 pub use gate::warn_if_too_fast;
+pub(crate) use problems::show;
 pub use shards::{
     DistributedSection, ShardLayout, ShardSection, ShardVehicle, WatchName, endpoint_problem,
 };
-pub(crate) use validate::show;
 pub use validate::{MAX_DISTANCE_M, MAX_DURATION_S, MAX_GAIN, MAX_SPEED_MPS};
 
 /// The whole file.

@@ -2,7 +2,8 @@
 //! reported.
 
 use super::Config;
-use super::validate::{MAX_DISTANCE_M, Problems};
+use super::problems::Problems;
+use super::validate::MAX_DISTANCE_M;
 use crate::swarm::{GuardLimits, MAX_SPEED_MPS};
 
 impl Config {

@@ -7,7 +7,7 @@ use std::net::SocketAddr;
 use ringswarm_wire::px4;
 
 use super::Config;
-use super::validate::Problems;
+use super::problems::Problems;
 use crate::index::SystemId;
 use crate::link::router::{Endpoint, SERIAL_PEER, SocketLayout, TransportLayout, VehicleRoute};
 

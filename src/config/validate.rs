@@ -3,17 +3,15 @@
 //! at once, one per line, naming the key and the value. Nothing non-finite or absurd gets
 //! past this point into a setpoint.
 
-use std::f64::consts::PI;
 use std::time::Duration;
 
-use nalgebra::Vector2;
-
 use super::Config;
+use super::problems::Problems;
 use crate::consensus::{CouplingGains, RingDigraph, analyze};
 use crate::control::{AltitudeGains, Envelope, VehicleModel};
 use crate::frame::{CommonFrame, Geodetic};
 use crate::swarm::SetpointKind;
-use crate::swarm::{SwarmSetup, TargetVelocity};
+use crate::swarm::SwarmSetup;
 use crate::vehicle::{Autopilot, AutopilotChoice, LinkConfig};
 
 /// Longest flight (s): about eleven days. `Duration` cannot hold 1e20 s, and no battery
@@ -26,64 +24,6 @@ pub const MAX_DISTANCE_M: f64 = 1.0e4;
 pub use crate::swarm::MAX_SPEED_MPS;
 /// Largest gain any coupling (`k`, `alpha`, `beta`, `k_pz`, `k_vz`) may have.
 pub const MAX_GAIN: f64 = 1.0e4;
-
-/// Collects problems, one line each.
-#[derive(Debug, Default)]
-pub(super) struct Problems(pub(super) Vec<String>);
-
-impl Problems {
-    /// Requires `lo <= value <= hi` (so also finite); `unit` is printed after the range.
-    pub(super) fn within(&mut self, key: &str, value: f64, lo: f64, hi: f64, unit: &str) -> bool {
-        let good = value.is_finite() && value >= lo && value <= hi;
-        if !good {
-            self.0.push(format!(
-                "{key} must be a finite number in [{lo}, {hi}]{unit}, got {}",
-                show(value)
-            ));
-        }
-        good
-    }
-
-    /// Requires `0 < value <= hi`.
-    pub(super) fn positive(&mut self, key: &str, value: f64, hi: f64, unit: &str) -> bool {
-        let good = value.is_finite() && value > 0.0 && value <= hi;
-        if !good {
-            self.0.push(format!(
-                "{key} must be a finite number in (0, {hi}]{unit}, got {}",
-                show(value)
-            ));
-        }
-        good
-    }
-
-    /// Requires every element finite with magnitude at most `hi`.
-    pub(super) fn vector(&mut self, key: &str, values: &[f64], hi: f64, unit: &str) -> bool {
-        let bad = values
-            .iter()
-            .position(|v| !(v.is_finite() && v.abs() <= hi));
-        if let Some(j) = bad {
-            self.0.push(format!(
-                "{key}[{j}] must be a finite number in [-{hi}, {hi}]{unit}, got {}",
-                show(values[j])
-            ));
-        }
-        bad.is_none()
-    }
-
-    pub(super) fn push(&mut self, problem: String) {
-        self.0.push(problem);
-    }
-}
-
-/// A value as a person would write it: `1e20`, not twenty-one digits.
-pub(crate) fn show(value: f64) -> String {
-    let a = value.abs();
-    if value.is_finite() && (a >= 1e7 || (a > 0.0 && a < 1e-4)) {
-        format!("{value:e}")
-    } else {
-        value.to_string()
-    }
-}
 
 impl Config {
     /// Checks everything and builds the swarm's setup; every problem is reported, one per
@@ -405,33 +345,6 @@ impl Config {
         })
     }
 
-    /// `[target]`, if any.
-    fn target(&self, p: &mut Problems) -> Option<TargetVelocity> {
-        let t = self.target.as_ref()?;
-        let mut ok = p.vector(
-            "target.velocity_enu_mps",
-            &t.velocity_enu_mps,
-            MAX_SPEED_MPS,
-            " m/s",
-        );
-        ok &= p.within("target.k_margin", t.k_margin, 0.0, MAX_GAIN, "");
-        ok &= p.positive("target.k_max", t.k_max, MAX_GAIN, "");
-        ok &= p.positive("target.tolerance_mps", t.tolerance_mps, 10.0, " m/s");
-        ok &= p.positive("target.timeout_s", t.timeout_s, 3600.0, " s");
-        if let Some(max) = t.max_speed_mps {
-            ok &= p.positive("target.max_speed_mps", max, MAX_SPEED_MPS, " m/s");
-        }
-        ok.then(|| TargetVelocity {
-            velocity_mps: Vector2::from(t.velocity_enu_mps),
-            k_margin: t.k_margin,
-            k_max: t.k_max,
-            max_speed_mps: t.max_speed_mps,
-            tolerance_mps: t.tolerance_mps,
-            timeout: Duration::from_secs_f64(t.timeout_s),
-            wait_for_altitude: t.wait_for_altitude,
-        })
-    }
-
     /// `[[vehicle]]`: models and start states (ids: `transport`).
     fn models(&self, envelope: Option<&Envelope>, p: &mut Problems) -> Vec<VehicleModel> {
         let mut models = Vec::new();
@@ -465,70 +378,6 @@ impl Config {
             );
         }
         models
-    }
-
-    /// The formation offsets `dᵢ` (ENU, m).
-    fn offsets(&self, n: usize, p: &mut Problems) -> Option<Vec<Vector2<f64>>> {
-        let f = &self.formation;
-        match f.kind.as_str() {
-            "polygon" => {
-                let Some(r) = f.radius_m else {
-                    p.push("formation.radius_m is required for kind = \"polygon\"".to_owned());
-                    return None;
-                };
-                p.positive("formation.radius_m", r, MAX_DISTANCE_M, " m")
-                    .then(|| {
-                        (0..n)
-                            .map(|l| {
-                                let angle = 2.0 * PI * l as f64 / n as f64;
-                                Vector2::new(angle.cos(), angle.sin()) * r
-                            })
-                            .collect()
-                    })
-            }
-            "line" => {
-                let Some(d) = f.spacing_m else {
-                    p.push("formation.spacing_m is required for kind = \"line\"".to_owned());
-                    return None;
-                };
-                p.positive(
-                    "formation.spacing_m",
-                    d,
-                    MAX_DISTANCE_M / n.max(1) as f64,
-                    " m",
-                )
-                .then(|| (0..n).map(|i| Vector2::new(d * i as f64, 0.0)).collect())
-            }
-            "offsets" => {
-                let Some(list) = f.offsets_m.as_ref() else {
-                    p.push("formation.offsets_m is required for kind = \"offsets\"".to_owned());
-                    return None;
-                };
-                if list.len() != n {
-                    p.push(format!(
-                        "formation.offsets_m has {} entries for {n} vehicles",
-                        list.len()
-                    ));
-                    return None;
-                }
-                let mut ok = true;
-                for (j, o) in list.iter().enumerate() {
-                    ok &= p.vector(
-                        &format!("formation.offsets_m[{j}]"),
-                        o,
-                        MAX_DISTANCE_M,
-                        " m",
-                    );
-                }
-                ok.then(|| list.iter().map(|o| Vector2::new(o[0], o[1])).collect())
-            }
-            other => {
-                p.push(format!(
-                    "formation.kind \"{other}\" is not one of polygon, line, offsets"
-                ));
-                None
-            }
-        }
     }
 }
 
