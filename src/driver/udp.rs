@@ -202,17 +202,7 @@ pub async fn run_swarm<O: Observer>(
     let mut listening = Listening::new(running.len());
     drop(tx);
     loop {
-        // Timers to the next whole millisecond (as the lockstep driver steps): a thousand
-        // links with deadlines scattered over a control period wake the swarm at most
-        // once per millisecond, not once per link.
-        let due_us = swarm.poll_timeout().as_micros().div_ceil(1000) * 1000;
-        // Output left over from the last round goes on at once (after a tick that fell
-        // due meanwhile).
-        let deadline = if swarm.has_output() {
-            Instant::now()
-        } else {
-            start + std::time::Duration::from_micros(due_us)
-        };
+        let deadline = next_wake(&swarm, start);
         let mut late = std::time::Duration::ZERO;
         tokio::select! {
             // The control schedule first: a burst of datagrams (a thousand vehicles'
@@ -248,39 +238,15 @@ pub async fn run_swarm<O: Observer>(
             },
             received = rx.recv() => match received {
                 Some(first) => {
-                    // What has arrived, then one round of sends; no further than the next
-                    // deadline, which the loop then serves before the rest.
-                    let t = now();
-                    let mut next = Some(first);
-                    while let Some(batch) = next.take() {
-                        let mut intake = Intake { swarm: &mut swarm, router: &mut router, pieces: &mut pieces };
-                        for (from, datagram) in &batch.datagrams {
-                            let bytes = &batch.bytes[datagram.clone()];
-                            intake.deliver(batch.socket, *from, bytes, t, &mut observer);
-                        }
-                        listening.batch(batch.socket, batch.full);
-                        if Instant::now() >= deadline {
-                            break;
-                        }
-                        next = rx.try_recv().ok();
-                    }
+                    let mut intake = Intake { swarm: &mut swarm, router: &mut router, pieces: &mut pieces };
+                    take_batches(first, &mut rx, &mut intake, &mut listening, deadline, now(), &mut observer);
                 }
                 None => break,
             },
         }
         // How far behind its sockets the loop is: silence is judged up to there.
         let t = now();
-        let sockets_waiting = late > STALL
-            && running
-                .iter()
-                .any(|s| matches!(s, Running::Udp(s) if has_waiting(s)));
-        if let Some(ended) = listening.settle(t, rx.is_empty(), sockets_waiting) {
-            tracing::warn!(
-                behind_ms = ended.max_lag.as_millis() as u64,
-                "the coordinator fell behind its sockets (its host stalled or was overloaded); \
-                 vehicles' silence during it was not counted against them"
-            );
-        }
+        settle_listening(&mut listening, t, rx.is_empty(), late, &running);
         swarm.set_listen_lag(t, listening.lag(t));
         send_round(
             &mut swarm,
@@ -292,12 +258,7 @@ pub async fn run_swarm<O: Observer>(
         )
         .await;
         if let Some(s) = shards.as_mut() {
-            while let Some(message) = swarm.poll_shard_message() {
-                s.publish(&message);
-            }
-            if let Some(tiles) = swarm.shard_tiles() {
-                s.follow(tiles);
-            }
+            publish_to_shards(&mut swarm, &mut **s);
         }
         observer.swarm(&swarm, now());
         if swarm.is_finished() {
@@ -352,6 +313,76 @@ fn start_receivers(
         });
     }
     Ok(running)
+}
+/// When the loop must next wake: at once while output is left over from the last round
+/// (after a tick that fell due meanwhile), else at the swarm's timers rounded up to the
+/// next whole millisecond (as the lockstep driver steps): a thousand links with deadlines
+/// scattered over a control period wake the swarm at most once per millisecond, not once
+/// per link.
+fn next_wake(swarm: &Swarm, start: Instant) -> Instant {
+    if swarm.has_output() {
+        return Instant::now();
+    }
+    let due_us = swarm.poll_timeout().as_micros().div_ceil(1000) * 1000;
+    start + std::time::Duration::from_micros(due_us)
+}
+
+/// What has arrived, from `first` on, into the swarm at `t`; no further than `deadline`,
+/// which the loop then serves before the rest.
+fn take_batches<O: Observer>(
+    first: Batch,
+    rx: &mut mpsc::Receiver<Batch>,
+    intake: &mut Intake<'_>,
+    listening: &mut Listening,
+    deadline: Instant,
+    t: SimTime,
+    observer: &mut O,
+) {
+    let mut next = Some(first);
+    while let Some(batch) = next.take() {
+        for (from, datagram) in &batch.datagrams {
+            let bytes = &batch.bytes[datagram.clone()];
+            intake.deliver(batch.socket, *from, bytes, t, observer);
+        }
+        listening.batch(batch.socket, batch.full);
+        if Instant::now() >= deadline {
+            break;
+        }
+        next = rx.try_recv().ok();
+    }
+}
+
+/// Whether the loop has caught up with its sockets at `t` (nothing queued, and after a
+/// wake-up more than [`STALL`] late, nothing waiting in a socket); the end of a stall is
+/// logged.
+fn settle_listening(
+    listening: &mut Listening,
+    t: SimTime,
+    queue_empty: bool,
+    late: std::time::Duration,
+    running: &[Running],
+) {
+    let sockets_waiting = late > STALL
+        && running
+            .iter()
+            .any(|s| matches!(s, Running::Udp(s) if has_waiting(s)));
+    if let Some(ended) = listening.settle(t, queue_empty, sockets_waiting) {
+        tracing::warn!(
+            behind_ms = ended.max_lag.as_millis() as u64,
+            "the coordinator fell behind its sockets (its host stalled or was overloaded); \
+             vehicles' silence during it was not counted against them"
+        );
+    }
+}
+
+/// The swarm's messages for the other shards, and which tiles of them it follows.
+fn publish_to_shards(swarm: &mut Swarm, shards: &mut (dyn ShardTransport + Send + 'static)) {
+    while let Some(message) = swarm.poll_shard_message() {
+        shards.publish(&message);
+    }
+    if let Some(tiles) = swarm.shard_tiles() {
+        shards.follow(tiles);
+    }
 }
 
 /// One round of sends, at most [`SEND_BUDGET`] datagrams: a thousand vehicles discovered

@@ -299,7 +299,7 @@ fn start_session(
     alive: Option<String>,
 ) -> Result<Session, String> {
     let (in_tx, inbound) = mpsc::channel::<Vec<u8>>(INBOUND_QUEUE);
-    let (outbound, mut out_rx) = mpsc::channel::<Order>(OUTBOUND_QUEUE);
+    let (outbound, out_rx) = mpsc::channel::<Order>(OUTBOUND_QUEUE);
     let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
     let stats = Arc::new(BusStats::default());
     let thread_stats = Arc::clone(&stats);
@@ -317,93 +317,15 @@ fn start_session(
                     return;
                 }
             };
-            runtime.block_on(async move {
-                let session = match zenoh::open(config).await {
-                    Ok(s) => s,
-                    Err(e) => {
-                        let _ = ready_tx.send(Err(format!("open the Zenoh session: {e}")));
-                        return;
-                    }
-                };
-                let newest: Newest = Arc::default();
-                let mut subscribers = Vec::new();
-                for key in &subscriptions {
-                    match subscribe(&session, key, &in_tx, &thread_stats, &newest).await {
-                        Ok(s) => subscribers.push(s),
-                        Err(e) => {
-                            let _ = ready_tx.send(Err(e));
-                            return;
-                        }
-                    }
-                }
-                let token = match &alive {
-                    Some(alive) => match session.liveliness().declare_token(alive.as_str()).await {
-                        Ok(t) => Some(t),
-                        Err(e) => {
-                            let _ = ready_tx.send(Err(format!("declare {alive}: {e}")));
-                            return;
-                        }
-                    },
-                    None => None,
-                };
-                let _ = ready_tx.send(Ok(()));
-                let mut publishers: HashMap<usize, (String, zenoh::pubsub::Publisher<'static>)> =
-                    HashMap::new();
-                let mut followed: HashMap<String, zenoh::pubsub::Subscriber<()>> = HashMap::new();
-                while let Some(order) = out_rx.recv().await {
-                    match order {
-                        Order::Publish { slot, key, bytes } => {
-                            if publishers.get(&slot).is_none_or(|(k, _)| *k != key) {
-                                if let Some((_, old)) = publishers.remove(&slot) {
-                                    let _ = old.undeclare().await;
-                                }
-                                match session.declare_publisher(key.clone()).await {
-                                    Ok(p) => {
-                                        publishers.insert(slot, (key.clone(), p));
-                                    }
-                                    Err(e) => {
-                                        tracing::warn!(key, error = %e, "zenoh publisher refused");
-                                        continue;
-                                    }
-                                }
-                            }
-                            if let Some((_, publisher)) = publishers.get(&slot) {
-                                let n = bytes.len() as u64;
-                                if publisher.put(bytes).await.is_ok() {
-                                    thread_stats.published.fetch_add(1, Ordering::Relaxed);
-                                    thread_stats.published_bytes.fetch_add(n, Ordering::Relaxed);
-                                }
-                            }
-                        }
-                        Order::Follow(keys) => {
-                            followed.retain(|k, _| keys.contains(k));
-                            for key in keys {
-                                if followed.contains_key(&key) {
-                                    continue;
-                                }
-                                match subscribe(&session, &key, &in_tx, &thread_stats, &newest)
-                                    .await
-                                {
-                                    Ok(s) => {
-                                        thread_stats.subscribed.fetch_add(1, Ordering::Relaxed);
-                                        followed.insert(key, s);
-                                    }
-                                    Err(e) => {
-                                        tracing::warn!(error = %e, "zenoh subscription refused")
-                                    }
-                                }
-                            }
-                        }
-                    }
-                }
-                drop(followed);
-                drop(token);
-                drop(subscribers);
-                for (_, (_, p)) in publishers {
-                    let _ = p.undeclare().await;
-                }
-                let _ = session.close().await;
-            });
+            runtime.block_on(serve_session(
+                config,
+                subscriptions,
+                alive,
+                in_tx,
+                out_rx,
+                ready_tx,
+                thread_stats,
+            ));
         })
         .map_err(|e| format!("start the Zenoh thread: {e}"))?;
     match ready_rx.recv() {
@@ -415,6 +337,126 @@ fn start_session(
         Err(_) => return Err("the Zenoh thread stopped before its session opened".into()),
     }
     Ok((thread, inbound, outbound, stats))
+}
+/// The Zenoh thread's work: opens the session, subscribes and declares the liveliness
+/// token (`ready` hears whether that worked), then carries out orders until the sender
+/// is dropped, and closes everything.
+async fn serve_session(
+    config: zenoh::Config,
+    subscriptions: Vec<String>,
+    alive: Option<String>,
+    in_tx: mpsc::Sender<Vec<u8>>,
+    mut orders: mpsc::Receiver<Order>,
+    ready: std::sync::mpsc::Sender<Result<(), String>>,
+    stats: Arc<BusStats>,
+) {
+    let session = match zenoh::open(config).await {
+        Ok(s) => s,
+        Err(e) => {
+            let _ = ready.send(Err(format!("open the Zenoh session: {e}")));
+            return;
+        }
+    };
+    let newest: Newest = Arc::default();
+    let mut subscribers = Vec::new();
+    for key in &subscriptions {
+        match subscribe(&session, key, &in_tx, &stats, &newest).await {
+            Ok(s) => subscribers.push(s),
+            Err(e) => {
+                let _ = ready.send(Err(e));
+                return;
+            }
+        }
+    }
+    let token = match &alive {
+        Some(alive) => match session.liveliness().declare_token(alive.as_str()).await {
+            Ok(t) => Some(t),
+            Err(e) => {
+                let _ = ready.send(Err(format!("declare {alive}: {e}")));
+                return;
+            }
+        },
+        None => None,
+    };
+    let _ = ready.send(Ok(()));
+    let mut served = Served {
+        session: &session,
+        in_tx: &in_tx,
+        stats: &stats,
+        newest: &newest,
+        publishers: HashMap::new(),
+        followed: HashMap::new(),
+    };
+    while let Some(order) = orders.recv().await {
+        match order {
+            Order::Publish { slot, key, bytes } => served.publish(slot, key, bytes).await,
+            Order::Follow(keys) => served.follow(keys).await,
+        }
+    }
+    let publishers = std::mem::take(&mut served.publishers);
+    drop(served);
+    drop(token);
+    drop(subscribers);
+    for (_, (_, p)) in publishers {
+        let _ = p.undeclare().await;
+    }
+    let _ = session.close().await;
+}
+
+/// The publishers and the followed subscriptions of an open session.
+struct Served<'a> {
+    session: &'a zenoh::Session,
+    in_tx: &'a mpsc::Sender<Vec<u8>>,
+    stats: &'a Arc<BusStats>,
+    newest: &'a Newest,
+    /// Slot → its key and publisher.
+    publishers: HashMap<usize, (String, zenoh::pubsub::Publisher<'static>)>,
+    followed: HashMap<String, zenoh::pubsub::Subscriber<()>>,
+}
+
+impl Served<'_> {
+    /// Puts `bytes` under `key` through slot `slot`'s publisher, declared again when the
+    /// slot's key moved.
+    async fn publish(&mut self, slot: usize, key: String, bytes: Vec<u8>) {
+        if self.publishers.get(&slot).is_none_or(|(k, _)| *k != key) {
+            if let Some((_, old)) = self.publishers.remove(&slot) {
+                let _ = old.undeclare().await;
+            }
+            match self.session.declare_publisher(key.clone()).await {
+                Ok(p) => {
+                    self.publishers.insert(slot, (key.clone(), p));
+                }
+                Err(e) => {
+                    tracing::warn!(key, error = %e, "zenoh publisher refused");
+                    return;
+                }
+            }
+        }
+        if let Some((_, publisher)) = self.publishers.get(&slot) {
+            let n = bytes.len() as u64;
+            if publisher.put(bytes).await.is_ok() {
+                self.stats.published.fetch_add(1, Ordering::Relaxed);
+                self.stats.published_bytes.fetch_add(n, Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// Follows exactly `keys`: subscriptions no longer named are dropped, new ones made.
+    async fn follow(&mut self, keys: Vec<String>) {
+        self.followed.retain(|k, _| keys.contains(k));
+        for key in keys {
+            if self.followed.contains_key(&key) {
+                continue;
+            }
+            match subscribe(self.session, &key, self.in_tx, self.stats, self.newest).await {
+                Ok(s) => {
+                    self.stats.subscribed.fetch_add(1, Ordering::Relaxed);
+                    self.followed.insert(key, s);
+                }
+                Err(e) => tracing::warn!(error = %e, "zenoh subscription refused"),
+            }
+        }
+    }
 }
 
 /// The newest Zenoh timestamp taken under each ordering key ([`ordering_key`]), shared
