@@ -31,6 +31,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod assignment;
 pub mod consensus;
 pub mod control;
 pub mod distributed;
