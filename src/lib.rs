@@ -37,7 +37,7 @@
 #![warn(missing_docs)]
 
 pub use ringswarm_core::{
-    consensus, control, distributed, frame, index, link, safety, swarm, vehicle,
+    assignment, consensus, control, distributed, frame, index, link, safety, swarm, vehicle,
 };
 
 pub mod cli;

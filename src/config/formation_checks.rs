@@ -39,6 +39,22 @@ impl Config {
         })
     }
 
+    /// Whether the formation's places are assigned (`[formation] assign`).
+    pub(super) fn assign_places(&self, p: &mut Problems) -> bool {
+        let f = &self.formation;
+        match f.assign.as_deref() {
+            None => f.kind != "line",
+            Some("optimal") => true,
+            Some("fixed") => false,
+            Some(other) => {
+                p.push(format!(
+                    "formation.assign \"{other}\" is not one of optimal, fixed"
+                ));
+                false
+            }
+        }
+    }
+
     /// The formation offsets `dᵢ` (ENU, m).
     pub(super) fn offsets(&self, n: usize, p: &mut Problems) -> Option<Vec<Vector2<f64>>> {
         let f = &self.formation;

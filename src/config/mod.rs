@@ -386,6 +386,10 @@ pub struct FormationSection {
     pub offsets_m: Option<Vec<[f64; 2]>>,
     /// Commanded altitude in the common frame (m, z up).
     pub altitude_m: f64,
+    /// `optimal`: the places are interchangeable, and at each start of consensus every
+    /// vehicle is given the place of minimum total squared distance; `fixed`: vehicle `i`
+    /// keeps place `i`. Default `optimal` for `polygon` and `offsets`, `fixed` for `line`.
+    pub assign: Option<String>,
 }
 
 /// `[envelope]`.

@@ -40,6 +40,7 @@ impl Config {
         let autopilots = self.autopilots(&mut p);
         let law = self.law_gains(n, &mut p);
         let offsets = self.offsets(n, &mut p);
+        let assign_places = self.assign_places(&mut p);
         p.within(
             "formation.altitude_m",
             self.formation.altitude_m,
@@ -94,6 +95,7 @@ impl Config {
             altitude_gains,
             altitude_m: self.formation.altitude_m,
             offsets_m: offsets,
+            assign_places,
             models,
             drag_per_s: self.vehicle.iter().map(|v| v.drag_per_s).collect(),
             envelope,

@@ -79,6 +79,8 @@ pub struct RunTracker {
     latest: Option<Snapshot>,
     pos: Vec<Vector3<f64>>,
     xy: Vec<Vector2<f64>>,
+    /// Each vehicle's formation place (as configured, or assigned).
+    places: Vec<Vector2<f64>>,
     z: Vec<f64>,
     /// A copy of the positions for the separation sweep, which reorders it.
     sweep: Vec<Vector3<f64>>,
@@ -93,6 +95,7 @@ impl RunTracker {
             latest: None,
             pos: Vec::with_capacity(n),
             xy: Vec::with_capacity(n),
+            places: Vec::with_capacity(n),
             z: Vec::with_capacity(n),
             sweep: Vec::with_capacity(n),
         }
@@ -123,10 +126,12 @@ impl RunTracker {
             let min = min_separation_in_place(&mut self.sweep);
             self.min_separation_m = self.min_separation_m.min(min);
         }
+        self.places.clear();
+        self.places.extend(swarm.places_m());
         let snapshot = Snapshot {
             t_s: now.as_secs_f64(),
             mean_velocity_mps: [vel.x, vel.y],
-            formation_error_m: formation_error_m(&self.xy, &setup.offsets_m),
+            formation_error_m: formation_error_m(&self.xy, &self.places),
             altitude_error_m: altitude_error_m(&self.z, setup.altitude_m),
         };
         self.latest = Some(snapshot);

@@ -175,7 +175,8 @@ impl ViewState {
         let states: Vec<_> = swarm.indices().map(|i| swarm.common_state(i)).collect();
         let xy: Vec<_> = states.iter().map(|s| s.map(|s| s.pos_enu_m.xy())).collect();
         let w: Vec<f64> = (0..n).map(|i| setup.ring.w(i)).collect();
-        let targets = formation_targets(&xy, &setup.offsets_m, &w);
+        let places: Vec<_> = swarm.places_m().collect();
+        let targets = formation_targets(&xy, &places, &w);
         let predicted = swarm.predicted_final_velocity();
         let active = swarm.safety_active_rows();
         let vehicles = swarm

@@ -836,3 +836,28 @@ fn each_vehicle_s_autopilot_is_read_by_name_and_ardupilot_flies_attitude_setpoin
         "{err}"
     );
 }
+
+#[test]
+fn formation_assign_is_checked_by_name_and_defaults_by_kind() {
+    let err = Config::from_toml(&with("assign = \"fixed\"", "assign = \"nearest\""))
+        .unwrap()
+        .validate()
+        .unwrap_err();
+    assert!(
+        err.contains("formation.assign \"nearest\" is not one of optimal, fixed"),
+        "{err}"
+    );
+    // paper-sim1 keeps the paper's places; without the key a polygon is assigned.
+    let fixed = Config::from_toml(&with("[formation]", "[formation]")).unwrap();
+    assert!(!fixed.validate().unwrap().assign_places);
+    let default = Config::from_toml(&with("assign = \"fixed\"", "")).unwrap();
+    assert!(default.validate().unwrap().assign_places);
+    let line = Config::from_toml(&with(
+        "kind = \"polygon\"\nradius_m = 20.0",
+        "kind = \"line\"\nspacing_m = 5.0",
+    ))
+    .unwrap();
+    let mut line = line;
+    line.formation.assign = None;
+    assert!(!line.validate().unwrap().assign_places);
+}

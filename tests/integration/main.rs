@@ -11,6 +11,7 @@ mod cli;
 mod config;
 mod config_random;
 mod fuzz_smoke;
+mod lockstep_dense;
 mod lockstep_failsafe;
 mod lockstep_fence;
 mod lockstep_hostile;

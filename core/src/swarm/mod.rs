@@ -46,6 +46,7 @@ mod laws;
 mod model;
 mod peers;
 mod phases;
+mod places;
 mod plan;
 mod readings;
 mod safety;
@@ -205,7 +206,8 @@ impl Swarm {
             .collect::<Vec<_>>();
         let slots = links
             .zip(flown)
-            .map(|(link, flown)| VehicleSlot::new(Member::Local(link), flown))
+            .zip(&setup.offsets_m)
+            .map(|((link, flown), place)| VehicleSlot::new(Member::Local(link), flown, *place))
             .collect();
         let flown_models = setup.models.clone();
         let setup_interval = setup.control_interval;

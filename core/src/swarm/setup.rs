@@ -22,6 +22,10 @@ pub struct SwarmSetup {
     pub altitude_m: f64,
     /// Formation offsets `dᵢ` (m, ENU), one per vehicle.
     pub offsets_m: Vec<Vector2<f64>>,
+    /// Whether the places are interchangeable: at each start of consensus every vehicle
+    /// is given the place of minimum total squared distance (`crate::assignment`);
+    /// otherwise vehicle `i` flies to `offsets_m[i]`.
+    pub assign_places: bool,
     /// Vehicle models, one per vehicle.
     pub models: Vec<VehicleModel>,
     /// Linear drag of each vehicle (1/s), fed forward.

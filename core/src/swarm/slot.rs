@@ -65,11 +65,14 @@ pub(super) struct VehicleSlot {
     pub(super) keep_point: Option<Vector2<f64>>,
     /// Whether it was seen on the ground before it first flew.
     pub(super) started_on_ground: bool,
+    /// The formation place it flies to (m, ENU, from the formation's centre): its offset
+    /// `dᵢ` as configured, or the place assigned it at the start of consensus.
+    pub(super) place_m: Vector2<f64>,
 }
 
 impl VehicleSlot {
-    /// A vehicle as `member`, flown with `flown`.
-    pub(super) fn new(member: Member, flown: FlownModel) -> Self {
+    /// A vehicle as `member`, flown with `flown`, flying to `place_m`.
+    pub(super) fn new(member: Member, flown: FlownModel, place_m: Vector2<f64>) -> Self {
         Self {
             member,
             origin_offset: None,
@@ -82,6 +85,7 @@ impl VehicleSlot {
             hold_point: None,
             keep_point: None,
             started_on_ground: false,
+            place_m,
         }
     }
 

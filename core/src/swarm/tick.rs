@@ -91,7 +91,7 @@ impl Swarm {
             self.law.horizontal[i] = HorizontalState {
                 pos_m: s.pos_enu_m.xy(),
                 vel_mps: s.vel_enu_mps.xy(),
-                offset_m: self.setup.offsets_m[i],
+                offset_m: self.slots[i].place_m,
             };
         }
     }
