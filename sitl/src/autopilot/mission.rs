@@ -107,13 +107,7 @@ impl Vehicle {
             self.counters.foreign_target += 1;
             return false;
         }
-        let plans = StoredPlans {
-            mission: self.navigator.mission.items(),
-            mission_crc: self.navigator.mission.crc,
-            current_seq: self.navigator.mission.current_seq(),
-            fence: self.geofence.items(),
-            fence_crc: self.geofence.crc,
-        };
+        let plans = stored_plans(&self.navigator.mission, &self.geofence);
         let transfer = &mut self.mission_transfer;
         #[allow(deprecated)]
         match msg {
@@ -151,13 +145,7 @@ impl Vehicle {
 
     /// The transfer's retries and timeouts, and the 1 Hz MISSION_CURRENT.
     pub(super) fn mission_timers(&mut self, now: SimTime) {
-        let plans = StoredPlans {
-            mission: self.navigator.mission.items(),
-            mission_crc: self.navigator.mission.crc,
-            current_seq: self.navigator.mission.current_seq(),
-            fence: self.geofence.items(),
-            fence_crc: self.geofence.crc,
-        };
+        let plans = stored_plans(&self.navigator.mission, &self.geofence);
         self.mission_transfer.handle_timeout(now, &plans);
         self.do_transfer_steps();
         if now >= self.navigator.mission.next_report {
@@ -296,4 +284,15 @@ fn mission_target(msg: &MavMessage) -> Option<(u8, u8)> {
         MavMessage::MISSION_SET_CURRENT(m) => (m.target_system, m.target_component),
         _ => return None,
     })
+}
+
+/// The plans the transfer reads: the stored mission and fence.
+fn stored_plans<'a>(mission: &'a MissionStore, fence: &'a super::Geofence) -> StoredPlans<'a> {
+    StoredPlans {
+        mission: mission.items(),
+        mission_crc: mission.crc,
+        current_seq: mission.current_seq(),
+        fence: fence.items(),
+        fence_crc: fence.crc,
+    }
 }
