@@ -146,6 +146,17 @@ pub struct SafetySection {
     /// 95 % of the separation, or a fallback) while it flies its law: `hold` (default),
     /// `land` or `continue`.
     pub action: crate::swarm::BreachAction,
+    /// Break jams (default false): vehicles the filter has held for `jam_hold_s` without
+    /// closing on their places are turned past each other, every held pair about its
+    /// midpoint in the same sense, at `jam_turn_mps2`; the turn keeps `Σ wᵢuᵢ`. Off by
+    /// default: the watch cannot yet tell a jam from a ring that converges slowly while
+    /// its filter binds (docs/dense.md).
+    pub resolve_jams: bool,
+    /// How long a vehicle is held without progress before it counts as jammed (s,
+    /// default 5).
+    pub jam_hold_s: f64,
+    /// The turning acceleration of a jammed pair of equal weights, each (m/s², default 1).
+    pub jam_turn_mps2: f64,
 }
 
 impl Default for SafetySection {
@@ -156,6 +167,9 @@ impl Default for SafetySection {
             vertical_m: 9.0,
             braking_share: 0.5,
             action: crate::swarm::BreachAction::Hold,
+            resolve_jams: false,
+            jam_hold_s: 5.0,
+            jam_turn_mps2: 1.0,
         }
     }
 }

@@ -24,6 +24,8 @@ impl Config {
             " m (at least safety.horizontal_m)",
         );
         ok &= p.positive("safety.braking_share", s.braking_share, 1.0, "");
+        ok &= p.positive("safety.jam_hold_s", s.jam_hold_s, 600.0, " s");
+        ok &= p.positive("safety.jam_turn_mps2", s.jam_turn_mps2, 20.0, " m/s²");
         if !(ok && s.enabled) {
             return None;
         }
@@ -48,6 +50,11 @@ impl Config {
             },
             braking_share: s.braking_share,
             action: s.action,
+            jams: s.resolve_jams.then(|| crate::safety::jam::JamSettings {
+                hold_s: s.jam_hold_s,
+                bias_mps2: s.jam_turn_mps2,
+                ..crate::safety::jam::JamSettings::default()
+            }),
         })
     }
 

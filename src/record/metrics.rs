@@ -287,6 +287,11 @@ pub struct SafetyReport {
     /// Times a pair the filter could not keep apart made the swarm hold or land
     /// (`safety.action`).
     pub separation_actions: u64,
+    /// Jams found: vehicles the filter held without progress, turned past each other
+    /// (each time some vehicle was jammed while none was).
+    pub jams: u64,
+    /// Consensus ticks with a jammed vehicle.
+    pub jam_ticks: u64,
 }
 
 impl SafetyReport {
@@ -309,6 +314,8 @@ impl SafetyReport {
             fallbacks: s.fallbacks,
             fence_actions: s.fence_actions,
             separation_actions: s.separation_actions,
+            jams: s.jams,
+            jam_ticks: s.jam_ticks,
         })
     }
 }

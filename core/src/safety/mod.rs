@@ -28,6 +28,7 @@
 
 pub mod barrier;
 pub mod fence;
+pub mod jam;
 pub mod neighbours;
 
 use clarabel::algebra::CscMatrix;

@@ -191,6 +191,14 @@ impl DivergenceGuard {
         self.lowest_formation = None;
     }
 
+    /// Forgets the lowest formation error: the formation watch starts again from the next
+    /// tick. While the safety filter's jams are being broken, vehicles are turned past
+    /// each other on purpose and the formation error grows meanwhile; the velocity watch
+    /// goes on (the turn keeps `Σ wᵢuᵢ`).
+    pub fn restart_formation(&mut self) {
+        self.lowest_formation = None;
+    }
+
     /// One consensus tick: the w-weighted mean velocity and the prediction (m/s, ENU), the
     /// formation error (m) and the velocity spread (the largest distance of a velocity
     /// from the mean, m/s). Returns why it trips, if it does. A non-finite mean velocity

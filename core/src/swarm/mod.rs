@@ -42,6 +42,7 @@ mod guard;
 mod horizon;
 
 mod io;
+mod jams;
 mod laws;
 mod model;
 mod peers;

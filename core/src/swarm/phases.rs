@@ -340,9 +340,13 @@ impl Swarm {
         let Some(mean) = self.weighted_mean_velocity() else {
             return;
         };
+        let breaking_jams = self.safety.jams.watch.any();
         let Some(guard) = self.guard.as_mut() else {
             return;
         };
+        if breaking_jams {
+            guard.restart_formation();
+        }
         // Over the vehicles known here (every one in one process).
         let peers = self.peers.as_deref();
         let known = |i: usize| peers.is_none_or(|p| p.plan.is_local(i) || p.plan.is_watched(i));

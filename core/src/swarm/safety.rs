@@ -37,6 +37,11 @@ pub struct SafetyStats {
     pub fence_actions: u64,
     /// Times a pair the filter could not keep apart made the swarm hold or land.
     pub separation_actions: u64,
+    /// Jams found (vehicles the filter held without progress, turned past each other):
+    /// each time some vehicle was jammed while none was.
+    pub jams: u64,
+    /// Consensus ticks with a jammed vehicle.
+    pub jam_ticks: u64,
     /// `safety.action = "continue"` was reported (once a flight).
     continue_reported: bool,
     /// The smallest ellipsoidal distance between two vehicles with a usable state, seen
@@ -65,6 +70,20 @@ pub(super) struct SafetyWork {
     pub(super) xy: Vec<Vector2<f64>>,
     pub(super) stats: SafetyStats,
     pub(super) closest_pair: Option<(usize, usize, f64)>,
+    /// The jam watch and its buffers.
+    pub(super) jams: JamWork,
+}
+
+/// The jam watch and what it reads each tick.
+#[derive(Debug, Clone, Default)]
+pub(super) struct JamWork {
+    pub(super) watch: crate::safety::jam::JamWatch,
+    /// Each vehicle's distance to its place (m).
+    pub(super) errors: Vec<Option<f64>>,
+    /// Horizontal positions (m, ENU).
+    pub(super) positions: Vec<Option<Vector2<f64>>>,
+    /// Horizontal commands (m/s², ENU).
+    pub(super) commands: Vec<Vector2<f64>>,
 }
 
 impl SafetyWork {
@@ -75,6 +94,7 @@ impl SafetyWork {
             xy: Vec::with_capacity(n),
             stats: SafetyStats::new(),
             closest_pair: None,
+            jams: JamWork::default(),
         }
     }
 }

@@ -94,6 +94,9 @@ pub struct SafetySetup {
     pub braking_share: f64,
     /// What the swarm does when the filter cannot keep a pair apart.
     pub action: BreachAction,
+    /// Breaking jams (`None`: off): vehicles the filter holds without progress are
+    /// turned past each other (`crate::safety::jam`).
+    pub jams: Option<crate::safety::jam::JamSettings>,
 }
 
 /// The barrier's class-K gain `γ` in `ḣ ≥ −γh³` (s/m²): a pair 1 m/s from its braking

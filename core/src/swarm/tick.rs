@@ -47,6 +47,7 @@ impl Swarm {
         self.compose_commands();
         self.isolate_non_finite(now, "the law's command");
         self.law.law_commands.copy_from_slice(&self.law.commands);
+        self.break_jams(now);
         self.saturate(saturation);
         // On the saturated commands, inside the same envelope: the saturation after it
         // would change nothing.
