@@ -344,6 +344,8 @@ mod tests {
             top_speed_mps: 10.0,
             planned: false,
             plan_velocities: None,
+            places_assigned: false,
+            start_positions: None,
         })
     }
 

@@ -603,3 +603,63 @@ fn three_shards_plan_re_target_and_reach_the_target_as_one_process_does() {
     let formation = formation_error_m(flight.vehicles(), &offsets);
     assert!(formation < 0.5, "{formation}");
 }
+
+/// The 4 × 4 block assigned to its circle (`config/block-circle.toml`) flown by four
+/// shards over a 20 ms bus: every shard assigns the same places, from every shard's
+/// positions at the adopted start, the same places one process assigns; the block
+/// reaches its circle apart.
+#[test]
+fn shards_agree_on_one_assignment() {
+    let config = load("block-circle");
+    let owner: Vec<usize> = (0..16).map(|i| i / 4).collect();
+    let mut run = build(
+        &config,
+        &owner,
+        (Watch::All, 100.0),
+        bus_ms(20.0, 0.0, 0.0),
+        |_| {},
+    );
+    let sep = ringswarm::safety::Separation {
+        horizontal_m: 3.0,
+        vertical_m: 9.0,
+        gamma: 1.0,
+    };
+    let mut min_sep = f64::INFINITY;
+    let mut tick = 0;
+    run.run_until(SimTime::from_secs_f64(91.0), |r| {
+        if r.shards()[0].control_ticks() == tick {
+            return;
+        }
+        tick = r.shards()[0].control_ticks();
+        let p: Vec<_> = r
+            .vehicles()
+            .iter()
+            .map(|v| ringswarm::control::ned_to_enu(v.status().pos_world_ned_m))
+            .collect();
+        for (i, a) in p.iter().enumerate() {
+            for b in &p[i + 1..] {
+                min_sep = min_sep.min(sep.distance_m(*a, *b));
+            }
+        }
+    });
+    let places = |swarm: &Swarm| swarm.places_m().collect::<Vec<_>>();
+    let first = places(&run.shards()[0]);
+    for s in run.shards() {
+        assert!(
+            matches!(s.phase(), SwarmPhase::Consensus(_)),
+            "{:?}",
+            s.phase()
+        );
+        assert_eq!(places(s), first, "shards disagree on the places");
+    }
+    let configured = config.validate().unwrap().offsets_m;
+    assert_ne!(first, configured, "the places were assigned");
+    // One process assigns the same places.
+    let mut alone = Lockstep::from_config(&config).unwrap();
+    alone.run_until(SimTime::from_secs_f64(2.0), |_| {});
+    assert_eq!(places(alone.swarm()), first);
+    let formation = formation_error_m(run.vehicles(), &first);
+    eprintln!("formation {formation} m, closest {min_sep} m");
+    assert!(formation < 1.0, "{formation}");
+    assert!(min_sep >= 0.95 * 3.0, "{min_sep}");
+}

@@ -16,7 +16,7 @@
 use serde::{Deserialize, Serialize};
 
 /// The version of the payload's form; bumped on any change to the types below.
-pub const PAYLOAD_VERSION: u8 = 2;
+pub const PAYLOAD_VERSION: u8 = 3;
 
 /// Where a vehicle's link is, as another shard needs it: whether it flies on its
 /// shard's commands.
@@ -114,6 +114,22 @@ pub struct ShardReport {
     /// With a `[target]`: its vehicles' velocities at the adopted plan instant, sent until
     /// every other shard reports its plan made (version 2).
     pub plan_velocities: Option<PlanVelocities>,
+    /// With interchangeable places: whether it has assigned the places for the current
+    /// start of consensus (version 3).
+    pub places_assigned: bool,
+    /// With interchangeable places: its vehicles' positions at the adopted start, sent
+    /// until every other shard reports its places assigned: every shard assigns from all
+    /// of them, so every shard makes the same assignment (version 3).
+    pub start_positions: Option<StartPositions>,
+}
+
+/// A shard's vehicles' horizontal positions at the adopted start of consensus.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct StartPositions {
+    /// The adopted start (µs, swarm clock).
+    pub at_us: u64,
+    /// Its vehicles' horizontal positions then (m, ENU, common frame), in ring order.
+    pub pos_m: Vec<[f64; 2]>,
 }
 
 /// A shard's vehicles' velocities at the plan instant: every shard plans from all of
@@ -227,6 +243,8 @@ mod tests {
                 vel_mps: vec![[12.9, 7.48], [-1.0, 0.25]],
                 limit_mps: vec![Some(19.5), None],
             }),
+            places_assigned: false,
+            start_positions: None,
         })
     }
 

@@ -255,6 +255,8 @@ mod tests {
             top_speed_mps: 0.0,
             planned: false,
             plan_velocities: None,
+            places_assigned: false,
+            start_positions: None,
         };
         (sent, r)
     }

@@ -35,6 +35,11 @@ pub(super) struct Peers {
     /// With a `[target]`: the adopted plan instant and this shard's vehicles' velocities
     /// and top speeds then (ring order), once taken.
     pub(super) plan_own: Option<(SimTime, Vec<OwnPlanInput>)>,
+    /// With interchangeable places: the adopted start and this shard's vehicles'
+    /// horizontal positions then (ring order), and whether the places are assigned for
+    /// it.
+    pub(super) places_own: Option<(SimTime, Vec<Vector2<f64>>)>,
+    pub(super) places_assigned: bool,
     pub(super) outbox: VecDeque<ShardMessage>,
     /// Messages refused: from this shard's own index, out of range, or older than the
     /// one kept.
@@ -57,6 +62,8 @@ impl Peers {
             agreement,
             now_sum: WeightedSum::default(),
             plan_own: None,
+            places_own: None,
+            places_assigned: false,
             outbox: VecDeque::new(),
             refused: 0,
             dropped: 0,
@@ -172,6 +179,46 @@ impl Peers {
         Some(inputs)
     }
 
+    /// With interchangeable places: every vehicle's horizontal position at the adopted
+    /// start, in ring order, once every shard's are in (this shard's own from
+    /// `places_own`).
+    pub(super) fn place_inputs(&self) -> Option<Vec<Vector2<f64>>> {
+        let (at, own) = self.places_own.as_ref()?;
+        let at_us = self.to_swarm_us(*at);
+        let mut lists = Vec::with_capacity(self.reports.len());
+        for (s, r) in self.reports.iter().enumerate() {
+            if s == self.plan.this() {
+                lists.push(None);
+                continue;
+            }
+            let p = r.as_ref()?.1.start_positions.as_ref()?;
+            if p.at_us != at_us || p.pos_m.len() != self.plan.vehicles_of(s) {
+                return None;
+            }
+            lists.push(Some(p.pos_m.iter()));
+        }
+        let mut own = own.iter();
+        (0..self.plan.vehicle_count())
+            .map(|i| {
+                let s = self.plan.owner(i)?;
+                if s == self.plan.this() {
+                    own.next().copied()
+                } else {
+                    let [x, y] = *lists.get_mut(s)?.as_mut()?.next()?;
+                    Some(Vector2::new(x, y))
+                }
+            })
+            .collect()
+    }
+
+    /// Whether every other shard reports its places assigned: this shard's start
+    /// positions are needed no more.
+    pub(super) fn others_assigned(&self) -> bool {
+        self.reports.iter().enumerate().all(|(s, r)| {
+            s == self.plan.this() || r.as_ref().is_some_and(|(_, r)| r.places_assigned)
+        })
+    }
+
     /// Whether every other shard reports its plan made: this shard's plan velocities
     /// are needed no more.
     pub(super) fn others_planned(&self) -> bool {
@@ -271,6 +318,8 @@ mod tests {
             top_speed_mps: 0.0,
             planned: false,
             plan_velocities: None,
+            places_assigned: false,
+            start_positions: None,
         }
     }
 

@@ -291,7 +291,7 @@ impl Swarm {
         }
         self.first_consensus.get_or_insert(t0);
         self.first_law.get_or_insert(t0);
-        self.assign_places(now);
+        self.assign_places(now, t0);
         if start.is_some() {
             // From every shard's sum at the start, once all are in (shard.rs).
             self.predicted_final_velocity = None;

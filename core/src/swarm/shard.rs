@@ -519,6 +519,15 @@ impl Swarm {
                         limit_mps: v.iter().map(|(_, l)| *l).collect(),
                     },
                 ),
+                places_assigned: p.places_assigned,
+                start_positions: p
+                    .places_own
+                    .as_ref()
+                    .filter(|_| in_round && !p.others_assigned())
+                    .map(|(at, pos)| crate::distributed::StartPositions {
+                        at_us: p.to_swarm_us(*at),
+                        pos_m: pos.iter().map(|v| [v.x, v.y]).collect(),
+                    }),
             };
         p.push(ShardMessage::Shard(report));
     }

@@ -39,6 +39,7 @@ impl Swarm {
         self.update_horizon(now);
         self.transition(now);
         self.shard_prediction(now);
+        self.assign_places_in_shards(now);
         self.observe_models(now);
         self.fill_law_inputs();
         self.watch_divergence(now);
