@@ -77,6 +77,22 @@ fn build(
     Lockstep::sharded(shards, vehicles(config), LinkConditions::default(), bus).unwrap()
 }
 
+/// The smallest ellipsoidal distance between two of the emulator's vehicles now (truth).
+fn closest_now_m(run: &Lockstep, sep: &ringswarm::safety::Separation) -> f64 {
+    let p: Vec<_> = run
+        .vehicles()
+        .iter()
+        .map(|v| ringswarm::control::ned_to_enu(v.status().pos_world_ned_m))
+        .collect();
+    let mut closest = f64::INFINITY;
+    for (i, a) in p.iter().enumerate() {
+        for b in &p[i + 1..] {
+            closest = closest.min(sep.distance_m(*a, *b));
+        }
+    }
+    closest
+}
+
 fn bus_ms(latency_ms: f64, jitter_ms: f64, loss_pct: f64) -> LinkConditions {
     LinkConditions {
         faults: LinkFaults::from_percent_and_ms(loss_pct, latency_ms, jitter_ms, 0.0, NAMES)
@@ -433,16 +449,7 @@ fn closest_approach_m(mut flight: Lockstep, seconds: u64, config: &Config) -> (f
             return;
         }
         tick = r.shards()[0].control_ticks();
-        let p: Vec<_> = r
-            .vehicles()
-            .iter()
-            .map(|v| ringswarm::control::ned_to_enu(v.status().pos_world_ned_m))
-            .collect();
-        for (i, a) in p.iter().enumerate() {
-            for b in &p[i + 1..] {
-                closest = closest.min(sep.distance_m(*a, *b));
-            }
-        }
+        closest = closest.min(closest_now_m(r, &sep));
     });
     (closest, flight)
 }
@@ -631,16 +638,7 @@ fn shards_agree_on_one_assignment() {
             return;
         }
         tick = r.shards()[0].control_ticks();
-        let p: Vec<_> = r
-            .vehicles()
-            .iter()
-            .map(|v| ringswarm::control::ned_to_enu(v.status().pos_world_ned_m))
-            .collect();
-        for (i, a) in p.iter().enumerate() {
-            for b in &p[i + 1..] {
-                min_sep = min_sep.min(sep.distance_m(*a, *b));
-            }
-        }
+        min_sep = min_sep.min(closest_now_m(r, &sep));
     });
     let places = |swarm: &Swarm| swarm.places_m().collect::<Vec<_>>();
     let first = places(&run.shards()[0]);

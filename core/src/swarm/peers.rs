@@ -139,44 +139,58 @@ impl Peers {
         self.agreement.adopted(self.heard())
     }
 
-    /// With a `[target]`: every vehicle's velocity at the adopted plan instant and its
-    /// top speed for the planner, in ring order, once every shard's are in (this shard's
-    /// own from `plan_own`).
-    pub(super) fn plan_inputs(&self) -> Option<PlanInputs> {
-        let (at, own) = self.plan_own.as_ref()?;
-        let at_us = self.to_swarm_us(*at);
+    /// One item per vehicle in ring order, once every other shard's list is in: this
+    /// shard's vehicles' from `own` (in ring order), another shard's from the list
+    /// `list_of` finds in its report (`None`: not in, or not for this instant).
+    fn in_ring_order<'a, T, I: Iterator<Item = T>>(
+        &'a self,
+        mut own: impl Iterator<Item = T>,
+        list_of: impl Fn(usize, &'a ShardReport) -> Option<I>,
+    ) -> Option<Vec<T>> {
         let mut lists = Vec::with_capacity(self.reports.len());
         for (s, r) in self.reports.iter().enumerate() {
             if s == self.plan.this() {
                 lists.push(None);
                 continue;
             }
-            let v = r.as_ref()?.1.plan_velocities.as_ref()?;
+            lists.push(Some(list_of(s, &r.as_ref()?.1)?));
+        }
+        (0..self.plan.vehicle_count())
+            .map(|i| {
+                let s = self.plan.owner(i)?;
+                if s == self.plan.this() {
+                    own.next()
+                } else {
+                    lists.get_mut(s)?.as_mut()?.next()
+                }
+            })
+            .collect()
+    }
+
+    /// With a `[target]`: every vehicle's velocity at the adopted plan instant and its
+    /// top speed for the planner, in ring order, once every shard's are in (this shard's
+    /// own from `plan_own`).
+    pub(super) fn plan_inputs(&self) -> Option<PlanInputs> {
+        let (at, own) = self.plan_own.as_ref()?;
+        let at_us = self.to_swarm_us(*at);
+        let merged = self.in_ring_order(own.iter().copied(), |s, r| {
+            let v = r.plan_velocities.as_ref()?;
             let count = self.plan.vehicles_of(s);
             if v.at_us != at_us || v.vel_mps.len() != count || v.limit_mps.len() != count {
                 return None;
             }
-            lists.push(Some((v.vel_mps.iter(), v.limit_mps.iter())));
-        }
-        let mut own = own.iter();
-        let n = self.plan.vehicle_count();
-        let mut inputs = PlanInputs {
-            velocities_mps: Vec::with_capacity(n),
-            limits_mps: Vec::with_capacity(n),
-        };
-        for i in 0..n {
-            let s = self.plan.owner(i)?;
-            let (v, limit) = if s == self.plan.this() {
-                *own.next()?
-            } else {
-                let (vel, lim) = lists.get_mut(s)?.as_mut()?;
-                let [x, y] = *vel.next()?;
-                (Vector2::new(x, y), *lim.next()?)
-            };
-            inputs.velocities_mps.push(v);
-            inputs.limits_mps.push(limit);
-        }
-        Some(inputs)
+            Some(
+                v.vel_mps
+                    .iter()
+                    .zip(&v.limit_mps)
+                    .map(|(&[x, y], &limit)| (Vector2::new(x, y), limit)),
+            )
+        })?;
+        let (velocities_mps, limits_mps) = merged.into_iter().unzip();
+        Some(PlanInputs {
+            velocities_mps,
+            limits_mps,
+        })
     }
 
     /// With interchangeable places: every vehicle's horizontal position at the adopted
@@ -185,30 +199,13 @@ impl Peers {
     pub(super) fn place_inputs(&self) -> Option<Vec<Vector2<f64>>> {
         let (at, own) = self.places_own.as_ref()?;
         let at_us = self.to_swarm_us(*at);
-        let mut lists = Vec::with_capacity(self.reports.len());
-        for (s, r) in self.reports.iter().enumerate() {
-            if s == self.plan.this() {
-                lists.push(None);
-                continue;
-            }
-            let p = r.as_ref()?.1.start_positions.as_ref()?;
+        self.in_ring_order(own.iter().copied(), |s, r| {
+            let p = r.start_positions.as_ref()?;
             if p.at_us != at_us || p.pos_m.len() != self.plan.vehicles_of(s) {
                 return None;
             }
-            lists.push(Some(p.pos_m.iter()));
-        }
-        let mut own = own.iter();
-        (0..self.plan.vehicle_count())
-            .map(|i| {
-                let s = self.plan.owner(i)?;
-                if s == self.plan.this() {
-                    own.next().copied()
-                } else {
-                    let [x, y] = *lists.get_mut(s)?.as_mut()?.next()?;
-                    Some(Vector2::new(x, y))
-                }
-            })
-            .collect()
+            Some(p.pos_m.iter().map(|&[x, y]| Vector2::new(x, y)))
+        })
     }
 
     /// Whether every other shard reports its places assigned: this shard's start
