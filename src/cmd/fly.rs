@@ -41,6 +41,10 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         setup.duration = Some(Duration::from_secs_f64(d));
     }
     crate::config::warn_if_too_fast(&setup, config.gains.time_scale);
+    // In real time the filter's time is limited by the clock (`safety.budget_share`).
+    if let Some(safety) = setup.safety.as_mut() {
+        safety.wall_clock_budget = true;
+    }
     let signing = match &config.security.signing_key_file {
         Some(path) => {
             let signing = FlightSigning::open(path).map_err(anyhow::Error::msg)?;

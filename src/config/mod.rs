@@ -157,6 +157,11 @@ pub struct SafetySection {
     pub jam_hold_s: f64,
     /// The turning acceleration of a jammed pair of equal weights, each (m/s², default 1).
     pub jam_turn_mps2: f64,
+    /// The share of the control period the filter may take in a flight in real time
+    /// (default 0.2): past it, the tick goes out with the answer so far, and the vehicles
+    /// of the rows that answer misses brake (counted as `unfinished_ticks`). Lockstep
+    /// flights are limited by sweeps only.
+    pub budget_share: f64,
 }
 
 impl Default for SafetySection {
@@ -170,6 +175,7 @@ impl Default for SafetySection {
             resolve_jams: false,
             jam_hold_s: 5.0,
             jam_turn_mps2: 1.0,
+            budget_share: 0.2,
         }
     }
 }

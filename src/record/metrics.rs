@@ -292,6 +292,18 @@ pub struct SafetyReport {
     pub jams: u64,
     /// Consensus ticks with a jammed vehicle.
     pub jam_ticks: u64,
+    /// Ticks on which the time limit (`budget_share`, in real time) ended a solve before
+    /// its answer: the dual ascent's answer so far went out.
+    pub unfinished_ticks: u64,
+    /// The most a barrier row was missed by on those ticks (m/s²).
+    pub unfinished_missed_mps2: f64,
+    /// The filter's time per control tick (wall clock; the sweep for pairs and the
+    /// solve): median, 99th percentile and longest.
+    pub filter_time: crate::swarm::timing::Quantiles,
+    /// The most vehicles whose commands were solved together in one piece.
+    pub largest_piece: usize,
+    /// The most sweeps of the filter's dual ascent in one tick.
+    pub most_sweeps: usize,
 }
 
 impl SafetyReport {
@@ -316,6 +328,11 @@ impl SafetyReport {
             separation_actions: s.separation_actions,
             jams: s.jams,
             jam_ticks: s.jam_ticks,
+            unfinished_ticks: s.unfinished_ticks,
+            unfinished_missed_mps2: s.unfinished_missed_mps2,
+            filter_time: s.filter_time.quantiles(),
+            largest_piece: s.largest_piece,
+            most_sweeps: s.most_sweeps,
         })
     }
 }

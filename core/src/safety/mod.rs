@@ -27,19 +27,21 @@
 //! Pure and synchronous.
 
 pub mod barrier;
+mod dual;
+mod exact;
 pub mod fence;
 pub mod jam;
 pub mod neighbours;
+pub mod reach;
 
-use clarabel::algebra::CscMatrix;
-use clarabel::solver::{
-    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
-};
+use std::time::{Duration, Instant};
+
 use nalgebra::{Vector2, Vector3};
 
 pub use barrier::{PairRow, Separation, Side, pair_row};
 pub use fence::{Fence, FenceItem, FenceItemKind, FenceShape, fence_row, stop_point_m};
-pub use neighbours::Sweep;
+pub use neighbours::{Found, Sweep};
+pub use reach::ReachBound;
 
 /// How far ahead a pair is looked at (s): pairs that cannot meet within this time at
 /// the swarm's top speed are not considered.
@@ -61,6 +63,16 @@ pub const ACTIVE_SLACK_MPS2: f64 = 1e-6;
 /// Rounds of the piecewise solve (rows an answer breaks join the pieces) before the
 /// whole problem is solved at once.
 pub const PIECE_ROUNDS: usize = 4;
+/// The most sweeps of the dual ascent on one piece ([`dual`]) without a time limit
+/// (lockstep): a piece it does not finish is solved by clarabel, so that a lockstep
+/// flight flies the optimum and does not depend on the machine. With a time limit the
+/// ascent goes on until the limit.
+pub const MAX_SWEEPS: usize = 300;
+/// The most sweeps with a time limit (a bound that the limit always reaches first).
+pub const MAX_SWEEPS_TIMED: usize = 1_000_000;
+/// With a time limit, the largest piece (variables) solved by clarabel when the dual
+/// ascent did not finish it and time is left.
+pub const EXACT_MAX_VARS: usize = 32;
 
 /// One vehicle as the filter sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -98,6 +110,15 @@ pub enum Outcome {
         /// Why (`infeasible`, `not converged`, `solver setup`).
         reason: &'static str,
     },
+    /// The time limit ended a piece's solve before its answer: the ascent's answer so
+    /// far went out. It keeps `Σ wᵢuᵢ` and the discs; its rows are met but for what the
+    /// ascent had still to close (measured: a packed mirror swap of 256 kept 2.93 m with 3 m
+    /// enforced at 20 sweeps a tick, where braking the vehicles of the missed rows
+    /// instead brought a pair to 0.02 m).
+    Unfinished {
+        /// The most a row was missed by (m/s²).
+        missed_mps2: f64,
+    },
 }
 
 /// One tick's report.
@@ -109,8 +130,14 @@ pub struct Report {
     pub rows: usize,
     /// Rows the final commands meet with (almost) no slack.
     pub active: usize,
-    /// The closest pair seen (indices and scaled distance, m).
+    /// The closest pair of all (indices and scaled distance, m).
     pub closest: Option<(usize, usize, f64)>,
+    /// Sweeps of the dual ascent, over every piece.
+    pub sweeps: usize,
+    /// The most vehicles in one piece solved together (0: none needed a solver).
+    pub largest_piece: usize,
+    /// How long the call took (wall clock).
+    pub elapsed: Duration,
 }
 
 /// The filter's settings for one tick.
@@ -122,7 +149,9 @@ pub struct Settings {
     pub age_s: f64,
     /// Hold `Σ wᵢuᵢ` as an equality (consensus).
     pub keep_weighted_sum: bool,
-    /// The solver's time limit (s).
+    /// How long the call may take (s, wall clock; infinite: no limit, only
+    /// [`MAX_SWEEPS`]). Past it, no piece starts a solver and one being solved stops with
+    /// its answer so far ([`Outcome::Unfinished`]).
     pub time_limit_s: f64,
 }
 
@@ -171,9 +200,32 @@ pub struct SafetyFilter {
     /// The rows of the last call the filtered commands meet with less than
     /// `ACTIVE_SLACK_MPS2` to spare, as `(i, j)` (`i == j`: the fence).
     active: Vec<(usize, usize)>,
+    /// Each row's multiplier (parallel to `rows`), warm-started from the last call.
+    lambda: Vec<f64>,
+    /// The last call's non-zero multipliers by pair `(i, j)`, sorted: the warm start.
+    warm: Vec<((usize, usize), f64)>,
+    piece: dual::DualPiece,
+    dual: dual::DualState,
+    /// Each agent's direction away from its rows (the fallback's buffer).
+    away: Vec<Vector2<f64>>,
+    /// When this call must be done (`None`: no wall-clock limit).
+    deadline: Option<Instant>,
+    tally: Tally,
     /// Solve every problem at once, never piece by piece (for comparing the two).
     #[cfg(test)]
     pub(crate) whole_only: bool,
+    /// Solve every piece with clarabel, never by dual ascent (for comparing the two).
+    #[cfg(test)]
+    pub(crate) exact_only: bool,
+}
+
+/// One call's count of the solver's work.
+#[derive(Debug, Clone, Copy, Default)]
+struct Tally {
+    sweeps: usize,
+    largest_piece: usize,
+    unfinished: bool,
+    missed_mps2: f64,
 }
 
 impl SafetyFilter {
@@ -184,6 +236,39 @@ impl SafetyFilter {
     /// With a fence (and its margin, m), every vehicle the filter commands whose margin
     /// is within the look-ahead also gets a row against the fence's horizontal boundary.
     pub fn filter(
+        &mut self,
+        settings: &Settings,
+        agents: &[Agent],
+        commands: &mut [Vector2<f64>],
+        fence: Option<(&Fence, f64)>,
+    ) -> Report {
+        let started = Instant::now();
+        self.deadline = (settings.time_limit_s.is_finite() && settings.time_limit_s >= 0.0)
+            .then(|| started + Duration::from_secs_f64(settings.time_limit_s));
+        self.tally = Tally::default();
+        let mut report = self.filter_rows(settings, agents, commands, fence);
+        self.warm.clear();
+        self.warm.extend(
+            self.rows
+                .iter()
+                .zip(&self.lambda)
+                .filter(|(_, l)| **l > 0.0)
+                .map(|(r, l)| ((r.i, r.j), *l)),
+        );
+        self.warm.sort_unstable_by_key(|w| w.0);
+        if self.tally.unfinished && matches!(report.outcome, Outcome::Filtered { .. }) {
+            report.outcome = Outcome::Unfinished {
+                missed_mps2: self.tally.missed_mps2,
+            };
+        }
+        report.sweeps = self.tally.sweeps;
+        report.largest_piece = self.tally.largest_piece;
+        report.elapsed = started.elapsed();
+        report
+    }
+
+    /// The call's work: the rows, and the answer when one is broken.
+    fn filter_rows(
         &mut self,
         settings: &Settings,
         agents: &[Agent],
@@ -201,22 +286,25 @@ impl SafetyFilter {
             .filter(|v| v.is_finite())
             .fold(0.0, f64::max);
         let radius = look_radius_m(&sep, top_speed, LOOKAHEAD_S);
-        let pairs = self
-            .sweep
-            .pairs_within(&self.positions, sep.vertical_scale(), radius);
+        // Each vehicle looks as far as a row of its pairs can bind, never beyond the
+        // look-ahead radius: what the radius finds that can bind is found.
+        let bound = ReachBound::new(&sep, settings.age_s, &agents[..n]);
+        let reach = |k: usize| match (bound, agents[k].side) {
+            (Some(bound), Some(side)) => bound.reach_m(&sep, side.vel_mps),
+            _ => f64::INFINITY,
+        };
+        let mut sweep = std::mem::take(&mut self.sweep);
+        let found = sweep.sweep(&self.positions, sep.vertical_scale(), reach, radius);
+        let closest = found.closest;
         self.rows.clear();
+        self.lambda.clear();
         self.active.clear();
-        let mut closest: Option<(usize, usize, f64)> = None;
         let mut broken = false;
-        for &(i, j) in pairs {
+        for &(i, j) in found.pairs {
             let (a, b) = (&agents[i], &agents[j]);
             let (Some(si), Some(sj)) = (a.side, b.side) else {
                 continue;
             };
-            let d = sep.distance_m(si.pos_m, sj.pos_m);
-            if closest.is_none_or(|c| d < c.2) {
-                closest = Some((i, j, d));
-            }
             if !(a.controlled || b.controlled) {
                 continue;
             }
@@ -231,8 +319,9 @@ impl SafetyFilter {
             }
             let row = Row { i, j, row };
             broken |= row.lhs(agents, commands) < row.row.b;
-            self.rows.push(row);
+            self.push_row(row);
         }
+        self.sweep = sweep;
         if let Some((fence, margin_m)) = fence {
             for (i, a) in agents[..n].iter().enumerate() {
                 let Some(side) = a.side.filter(|_| a.controlled) else {
@@ -256,7 +345,7 @@ impl SafetyFilter {
                 }
                 let row = Row { i, j: i, row };
                 broken |= row.lhs(agents, commands) < row.row.b;
-                self.rows.push(row);
+                self.push_row(row);
             }
         }
         if !broken {
@@ -265,6 +354,9 @@ impl SafetyFilter {
                 rows: self.rows.len(),
                 active: 0,
                 closest,
+                sweeps: 0,
+                largest_piece: 0,
+                elapsed: Duration::ZERO,
             };
         }
         if let Some(relaxed) = self.solve_in_pieces(settings, agents, &mut commands[..n]) {
@@ -327,6 +419,9 @@ impl SafetyFilter {
             rows: self.rows.len(),
             active,
             closest,
+            sweeps: 0,
+            largest_piece: 0,
+            elapsed: Duration::ZERO,
         }
     }
 
@@ -366,11 +461,31 @@ impl SafetyFilter {
         }
     }
 
-    /// One QP over the variables; writes the commands when solved and says whether a
-    /// row had to be relaxed (its slack used).
+    /// A row, with its multiplier from the last call (0 when it had none).
+    fn push_row(&mut self, row: Row) {
+        let key = (row.i, row.j);
+        let warm = self
+            .warm
+            .binary_search_by_key(&key, |w| w.0)
+            .map_or(0.0, |k| self.warm[k].1);
+        self.rows.push(row);
+        self.lambda.push(warm);
+    }
+
+    /// The wall-clock time left of the call (s; infinite without a limit).
+    fn time_left_s(&self) -> f64 {
+        self.deadline.map_or(f64::INFINITY, |d| {
+            d.saturating_duration_since(Instant::now()).as_secs_f64()
+        })
+    }
+
+    /// One piece's QP over its variables: writes the commands and says whether a row had
+    /// to be relaxed (its slack used). The dual ascent first ([`dual`]); when it stops
+    /// unfinished, clarabel for a small piece with time left, otherwise the answer so far
+    /// with the vehicles of the rows it misses braking ([`Outcome::Unfinished`]).
     #[allow(clippy::too_many_arguments)]
     fn solve(
-        &self,
+        &mut self,
         settings: &Settings,
         agents: &[Agent],
         commands: &mut [Vector2<f64>],
@@ -379,147 +494,135 @@ impl SafetyFilter {
         var_of: &[Option<usize>],
         with_sum: bool,
     ) -> Result<bool, &'static str> {
-        let n_u = 2 * vars.len();
-        let n_rows = rows.len();
-        let nv = n_u + n_rows;
-        let weight = |k: usize| agents[k].weight.max(1e-9);
-        let max_weight = vars.iter().map(|&k| weight(k)).fold(1.0, f64::max);
-        // Objective ½xᵀPx + qᵀx: P = 2W and q = −2Wû on the commands, and ρσ on each row's
-        // slack, linear: an exact penalty, so a row that can be met is met exactly
-        // (ρ = 10⁴·max w is far above any multiplier a row of these sizes needs).
-        let mut p_diag = Vec::with_capacity(nv);
-        let mut q = Vec::with_capacity(nv);
-        for &k in vars {
-            for component in commands[k].iter() {
-                p_diag.push(2.0 * weight(k));
-                q.push(-2.0 * weight(k) * component);
-            }
+        self.tally.largest_piece = self.tally.largest_piece.max(vars.len());
+        #[cfg(test)]
+        if self.exact_only {
+            return self.solve_exact(settings, agents, commands, rows, vars, var_of, with_sum);
         }
-        for _ in 0..n_rows {
-            p_diag.push(0.0);
-            q.push(SLACK_COST * max_weight);
+        if let Some(relaxed) = self.solve_dual(settings, agents, commands, rows, vars, var_of, with_sum) {
+            return Ok(relaxed);
         }
-        // Constraint rows as (row, column, value) and b, zero cone first.
-        let mut entries: Vec<(usize, usize, f64)> = Vec::new();
-        let mut b = Vec::new();
-        let mut zero_rows = 0;
-        if with_sum && settings.keep_weighted_sum {
-            for axis in [0, 1] {
-                let mut total = 0.0;
-                for (v, &k) in vars.iter().enumerate() {
-                    entries.push((b.len(), 2 * v + axis, weight(k)));
-                    total += weight(k) * commands[k][axis];
-                }
-                b.push(total);
-                zero_rows += 1;
-            }
+        let time_left = self.time_left_s();
+        if self.deadline.is_none() || (vars.len() <= EXACT_MAX_VARS && time_left > 0.0) {
+            return self.solve_exact(settings, agents, commands, rows, vars, var_of, with_sum);
         }
-        for (r_index, r) in rows.iter().map(|&k| &self.rows[k]).enumerate() {
-            // a·(netᵢ − netⱼ) + σ ≥ b  ⇔  −a·xᵢ + a·xⱼ − σ + s = −b − a·cᵢ + a·cⱼ, s ≥ 0.
-            // A bound beyond what the two envelopes can give asks for the same thing as
-            // one just beyond it (all of both discs): clipped, the problem stays scaled.
-            let reach = if r.single() {
-                limit(&agents[r.i])
-            } else {
-                limit(&agents[r.i]) + limit(&agents[r.j])
-            };
-            let mut rhs = -r.row.b.min(reach + 1.0);
-            let sides: &[(usize, f64)] = if r.single() {
-                &[(r.i, -1.0)]
-            } else {
-                &[(r.i, -1.0), (r.j, 1.0)]
-            };
-            for &(k, sign) in sides {
-                if let Some(v) = var_of[k] {
-                    for axis in 0..2 {
-                        entries.push((b.len(), 2 * v + axis, sign * r.row.a[axis]));
-                    }
-                    rhs += sign * r.row.a.dot(&agents[k].drift_mps2);
-                }
-            }
-            entries.push((b.len(), n_u + r_index, -1.0));
-            b.push(rhs);
-        }
-        for r_index in 0..n_rows {
-            // σ ≥ 0.
-            entries.push((b.len(), n_u + r_index, -1.0));
-            b.push(0.0);
-        }
-        let nonnegative = b.len() - zero_rows;
-        // Each command inside its disc: s = (L, x, y) in the second-order cone.
+        self.tally.unfinished = true;
         for (v, &k) in vars.iter().enumerate() {
-            b.push(limit(&agents[k]));
-            entries.push((b.len(), 2 * v, -1.0));
-            b.push(0.0);
-            entries.push((b.len(), 2 * v + 1, -1.0));
-            b.push(0.0);
-        }
-        let m = b.len();
-        let a = csc(m, nv, &mut entries);
-        let p = csc(
-            nv,
-            nv,
-            &mut p_diag
-                .iter()
-                .enumerate()
-                .map(|(c, &x)| (c, c, x))
-                .collect::<Vec<_>>(),
-        );
-        let mut cones = Vec::with_capacity(2 + vars.len());
-        if zero_rows > 0 {
-            cones.push(SupportedConeT::ZeroConeT(zero_rows));
-        }
-        if nonnegative > 0 {
-            cones.push(SupportedConeT::NonnegativeConeT(nonnegative));
-        }
-        cones.extend(vars.iter().map(|_| SupportedConeT::SecondOrderConeT(3)));
-        let time_limit = if settings.time_limit_s.is_finite() && settings.time_limit_s > 0.0 {
-            settings.time_limit_s
-        } else {
-            f64::INFINITY
-        };
-        let solver_settings = DefaultSettingsBuilder::default()
-            .verbose(false)
-            .max_iter(100)
-            .time_limit(time_limit)
-            .build()
-            .map_err(|_| "solver setup")?;
-        let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, solver_settings)
-            .map_err(|_| "solver setup")?;
-        solver.solve();
-        match solver.solution.status {
-            SolverStatus::Solved | SolverStatus::AlmostSolved => {}
-            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
-                return Err("infeasible");
+            let mut u = self.dual.u[v];
+            let cap = limit(&agents[k]);
+            if u.norm() > cap {
+                u *= cap / u.norm();
             }
-            _ => return Err("not converged"),
+            commands[k] = u;
         }
-        let x = &solver.solution.x;
-        if x.len() != nv || x.iter().any(|v| !v.is_finite()) {
-            return Err("not converged");
-        }
-        for (v, &k) in vars.iter().enumerate() {
-            commands[k] = Vector2::new(x[2 * v], x[2 * v + 1]);
-        }
-        if with_sum && settings.keep_weighted_sum {
-            // The solver meets the equality to its tolerance (1e-8); the least weighted
-            // change that meets it exactly is uₖ −= δ/Σw (δ the sum's error per axis).
-            let total_w: f64 = vars.iter().map(|&k| weight(k)).sum();
-            for axis in 0..2 {
-                let got: f64 = vars.iter().map(|&k| weight(k) * commands[k][axis]).sum();
-                let delta = (got - b[axis]) / total_w;
-                for &k in vars {
-                    commands[k][axis] -= delta;
-                }
-            }
-        }
-        // A row is relaxed when the commands miss it by more than the solver's tolerance.
-        let tolerance = 1e-6 * (1.0 + b.iter().fold(0.0f64, |acc, v| acc.max(v.abs())));
-        // (Every commanded vehicle of a row is a variable, so `lhs` reads the solution.)
-        Ok(rows
+        let missed = rows
             .iter()
-            .map(|&k| &self.rows[k])
-            .any(|r| r.lhs(agents, commands) < r.row.b - tolerance))
+            .map(|&r| &self.rows[r])
+            .map(|r| r.row.b.min(reach_of(agents, r) + 1.0) - r.lhs(agents, commands))
+            .fold(0.0f64, f64::max);
+        self.tally.missed_mps2 = self.tally.missed_mps2.max(missed);
+        Ok(false)
+    }
+
+    /// The piece's QP by dual ascent, warm-started from the rows' multipliers; `None`
+    /// (commands untouched) when it stopped before converging.
+    #[allow(clippy::too_many_arguments)]
+    fn solve_dual(
+        &mut self,
+        settings: &Settings,
+        agents: &[Agent],
+        commands: &mut [Vector2<f64>],
+        rows: &[usize],
+        vars: &[usize],
+        var_of: &[Option<usize>],
+        with_sum: bool,
+    ) -> Option<bool> {
+        let weight = |k: usize| agents[k].weight.max(1e-9);
+        let piece = &mut self.piece;
+        piece.weight.clear();
+        piece.limit.clear();
+        piece.given.clear();
+        for &k in vars {
+            piece.weight.push(weight(k));
+            piece.limit.push(limit(&agents[k]));
+            piece.given.push(commands[k]);
+        }
+        piece.rows.clear();
+        for r in rows.iter().map(|&k| &self.rows[k]) {
+            // a·(netᵢ − netⱼ) ≥ b with net = u − drift for a commanded vehicle (a
+            // variable) and 0 otherwise; a bound beyond the two discs clipped as in
+            // `solve_exact`.
+            let mut c = r.row.b.min(reach_of(agents, r) + 1.0);
+            let mut sides = [(0, 0.0); 2];
+            let mut count = 0;
+            let ends: &[(usize, f64)] = if r.single() {
+                &[(r.i, 1.0)]
+            } else {
+                &[(r.i, 1.0), (r.j, -1.0)]
+            };
+            for &(k, sign) in ends {
+                if let Some(v) = var_of[k] {
+                    sides[count] = (v, sign);
+                    count += 1;
+                    c += sign * r.row.a.dot(&agents[k].drift_mps2);
+                }
+            }
+            if count > 0 {
+                piece.rows.push(dual::DualRow {
+                    sides,
+                    two: count == 2,
+                    a: r.row.a,
+                    c,
+                });
+            }
+        }
+        piece.keep_sum = with_sum && settings.keep_weighted_sum;
+        piece.rho = SLACK_COST * vars.iter().map(|&k| weight(k)).fold(1.0, f64::max);
+        self.dual.lambda.clear();
+        self.dual.lambda.extend(
+            rows.iter()
+                .filter(|&&k| piece_has_side(&self.rows[k], var_of))
+                .map(|&k| self.lambda[k]),
+        );
+        let deadline = self.deadline;
+        let max_sweeps = if deadline.is_some() {
+            MAX_SWEEPS_TIMED
+        } else {
+            MAX_SWEEPS
+        };
+        let end = dual::ascend(&self.piece, &mut self.dual, max_sweeps, || {
+            deadline.is_some_and(|d| Instant::now() >= d)
+        });
+        let used = rows
+            .iter()
+            .filter(|&&k| piece_has_side(&self.rows[k], var_of));
+        for (&k, &l) in used.zip(&self.dual.lambda) {
+            self.lambda[k] = l;
+        }
+        let sweeps = match end {
+            dual::DualEnd::Converged { sweeps } | dual::DualEnd::Stopped { sweeps } => sweeps,
+        };
+        self.tally.sweeps += sweeps;
+        if !matches!(end, dual::DualEnd::Converged { .. }) {
+            return None;
+        }
+        for (v, &k) in vars.iter().enumerate() {
+            let mut u = self.dual.u[v];
+            let cap = limit(&agents[k]);
+            if u.norm() > cap {
+                u *= cap / u.norm();
+            }
+            commands[k] = u;
+        }
+        // A row is relaxed when the commands miss it by more than the ascent's tolerance
+        // allows for.
+        let largest = self.piece.rows.iter().fold(0.0f64, |m, r| m.max(r.c.abs()));
+        let tolerance = 1e-6 * (1.0 + largest);
+        Some(
+            rows.iter()
+                .map(|&k| &self.rows[k])
+                .any(|r| r.lhs(agents, commands) < r.row.b - tolerance),
+        )
     }
 
     /// The broken rows solved piece by piece: the rows that bind fall apart into groups
@@ -629,6 +732,10 @@ impl SafetyFilter {
                     }
                 }
             }
+            if self.tally.unfinished {
+                // Out of time: the answer so far goes out.
+                return Some(relaxed);
+            }
             let mut joined = false;
             for (k, r) in self.rows.iter().enumerate() {
                 if !work[k] && r.lhs(agents, commands) < r.row.b - 1e-9 {
@@ -685,22 +792,18 @@ impl SafetyFilter {
     /// accelerates at its share of the authority away from the vehicles of its rows (the
     /// sum of their directions), or, where those cancel, brakes along its velocity; inside
     /// its disc.
-    fn brake(&self, agents: &[Agent], commands: &mut [Vector2<f64>], vars: &[usize]) {
+    fn brake(&mut self, agents: &[Agent], commands: &mut [Vector2<f64>], vars: &[usize]) {
+        self.away.clear();
+        self.away.resize(agents.len(), Vector2::zeros());
+        for r in &self.rows {
+            self.away[r.i] += r.row.a;
+            if !r.single() {
+                self.away[r.j] -= r.row.a;
+            }
+        }
         for &k in vars {
             let a = &agents[k];
-            let away: Vector2<f64> = self
-                .rows
-                .iter()
-                .map(|r| {
-                    if r.i == k {
-                        r.row.a
-                    } else if r.j == k && !r.single() {
-                        -r.row.a
-                    } else {
-                        Vector2::zeros()
-                    }
-                })
-                .sum();
+            let away = self.away[k];
             let v = a.side.map_or(Vector2::zeros(), |s| s.vel_mps.xy());
             let speed = v.norm();
             let net = if away.norm() > 1e-6 {
@@ -723,6 +826,20 @@ impl SafetyFilter {
             };
         }
     }
+}
+
+/// What the discs of a row's vehicles can give it at most (m/s²).
+fn reach_of(agents: &[Agent], r: &Row) -> f64 {
+    if r.single() {
+        limit(&agents[r.i])
+    } else {
+        limit(&agents[r.i]) + limit(&agents[r.j])
+    }
+}
+
+/// Whether a row has a variable of the piece on some side.
+fn piece_has_side(r: &Row, var_of: &[Option<usize>]) -> bool {
+    var_of[r.i].is_some() || (!r.single() && var_of[r.j].is_some())
 }
 
 /// A row with both vehicles commanded (not the fence's, not against one the filter does
@@ -754,23 +871,6 @@ fn limit(a: &Agent) -> f64 {
     } else {
         0.0
     }
-}
-
-/// A compressed-column matrix from (row, column, value) entries (sorted here).
-fn csc(m: usize, n: usize, entries: &mut [(usize, usize, f64)]) -> CscMatrix<f64> {
-    entries.sort_by_key(|e| (e.1, e.0));
-    let mut colptr = vec![0usize; n + 1];
-    let mut rowval = Vec::with_capacity(entries.len());
-    let mut nzval = Vec::with_capacity(entries.len());
-    for &(r, c, v) in entries.iter() {
-        colptr[c + 1] += 1;
-        rowval.push(r);
-        nzval.push(v);
-    }
-    for c in 0..n {
-        colptr[c + 1] += colptr[c];
-    }
-    CscMatrix::new(m, n, colptr, rowval, nzval)
 }
 
 #[cfg(test)]

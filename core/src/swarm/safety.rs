@@ -33,6 +33,17 @@ pub struct SafetyStats {
     pub relaxed_ticks: u64,
     /// Ticks on which it fell back to braking.
     pub fallbacks: u64,
+    /// Ticks on which the time limit or the sweep limit ended a solve before its answer
+    /// ([`Outcome::Unfinished`]).
+    pub unfinished_ticks: u64,
+    /// The most a barrier row was missed by on those ticks (m/s²).
+    pub unfinished_missed_mps2: f64,
+    /// How long each tick's filter call took (wall clock).
+    pub filter_time: super::timing::Histogram,
+    /// The most vehicles in one piece solved together.
+    pub largest_piece: usize,
+    /// The most sweeps of the dual ascent in one tick.
+    pub most_sweeps: usize,
     /// Times the fence made the swarm hold or land.
     pub fence_actions: u64,
     /// Times a pair the filter could not keep apart made the swarm hold or land.
@@ -154,7 +165,11 @@ impl Swarm {
             separation: setup.separation,
             age_s: age_s + period_s,
             keep_weighted_sum: consensus,
-            time_limit_s: 0.5 * period_s,
+            time_limit_s: if setup.wall_clock_budget {
+                setup.budget_share * period_s
+            } else {
+                f64::INFINITY
+            },
         };
         let report = self.safety.filter.filter(
             &settings,
@@ -166,6 +181,9 @@ impl Swarm {
         let stats = &mut self.safety.stats;
         stats.ticks += 1;
         stats.active_ticks += u64::from(report.active > 0);
+        stats.filter_time.record(report.elapsed);
+        stats.largest_piece = stats.largest_piece.max(report.largest_piece);
+        stats.most_sweeps = stats.most_sweeps.max(report.sweeps);
         if let Some((_, _, d)) = report.closest {
             stats.min_seen_m = stats.min_seen_m.min(d);
         }
@@ -189,6 +207,21 @@ impl Swarm {
                             ),
                         );
                     }
+                }
+            }
+            Outcome::Unfinished { missed_mps2 } => {
+                stats.filtered_ticks += 1;
+                stats.unfinished_ticks += 1;
+                stats.unfinished_missed_mps2 = stats.unfinished_missed_mps2.max(missed_mps2);
+                if stats.unfinished_ticks % 100 == 1 {
+                    self.log.push(
+                        now,
+                        true,
+                        format!(
+                            "safety filter: its time ran out before the answer: the answer so far went out, a row missed by up to {missed_mps2:.3} m/s² (unfinished tick {})",
+                            stats.unfinished_ticks
+                        ),
+                    );
                 }
             }
             Outcome::Fallback { reason } => {

@@ -97,6 +97,13 @@ pub struct SafetySetup {
     /// Breaking jams (`None`: off): vehicles the filter holds without progress are
     /// turned past each other (`crate::safety::jam`).
     pub jams: Option<crate::safety::jam::JamSettings>,
+    /// The share of the control period the filter may take (wall clock), when
+    /// `wall_clock_budget`.
+    pub budget_share: f64,
+    /// Whether the filter's time is limited by the wall clock (flights in real time).
+    /// Off in lockstep, where only the sweep limit applies and a flight does not depend
+    /// on the machine.
+    pub wall_clock_budget: bool,
 }
 
 /// The barrier's class-K gain `γ` in `ḣ ≥ −γh³` (s/m²): a pair 1 m/s from its braking

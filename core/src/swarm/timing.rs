@@ -10,7 +10,7 @@ use serde::Serialize;
 
 /// Durations counted in log-linear bins: exact to the microsecond below 1.024 ms, within
 /// 0.2 % above (512 bins per octave), up to 2⁴² µs (50 days); the longest is kept exactly.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Histogram {
     counts: Vec<u64>,
     /// Samples beyond the last bin.
@@ -86,6 +86,17 @@ impl Histogram {
         Duration::from_micros(self.max_us)
     }
 
+    /// The median, the 99th percentile and the longest, in ms.
+    pub fn quantiles(&self) -> Quantiles {
+        let ms = |d: Option<Duration>| d.map(|d| d.as_secs_f64() * 1e3);
+        Quantiles {
+            samples: self.total(),
+            p50_ms: ms(self.quantile(0.5)),
+            p99_ms: ms(self.quantile(0.99)),
+            max_ms: ms((self.total() > 0).then(|| self.max())),
+        }
+    }
+
     /// The `q`-quantile (0 ≤ q ≤ 1): the smallest value with at least ⌈q·n⌉ samples at or
     /// below it, exact below 1.024 ms, the top of its bin above (never below the true
     /// quantile, at most 0.2 % above it); `None` before any sample.
@@ -156,13 +167,7 @@ impl TickTiming {
 
     /// The figures so far.
     pub fn report(&self) -> TimingReport {
-        let ms = |d: Option<Duration>| d.map(|d| d.as_secs_f64() * 1e3);
-        let quantiles = |h: &Histogram| Quantiles {
-            samples: h.total(),
-            p50_ms: ms(h.quantile(0.5)),
-            p99_ms: ms(h.quantile(0.99)),
-            max_ms: ms((h.total() > 0).then(|| h.max())),
-        };
+        let quantiles = Histogram::quantiles;
         let late = self.late;
         TimingReport {
             control_period_ms: self.period.as_secs_f64() * 1e3,

@@ -1,0 +1,226 @@
+//! How far each vehicle looks for pairs: the distance beyond which no pair's barrier row
+//! can bind, whatever the commands inside the envelopes.
+//!
+//! A row `aᵀ(uᵢ − uⱼ) ≥ b` is dropped when `b ≤ −(Lᵢ + Lⱼ) − 1` (no command inside the
+//! two discs can break it). From [`super::barrier`], with the closing rate `s ≥ −V`
+//! (`V` a bound on the pair's scaled relative speed), the curvature term `≥ 0` and the
+//! vertical term at most `Z`:
+//!
+//! ```text
+//! b = −γh³ − known − A·s/√(2A·room) ≤ −γ(r − V)³ + A·V/r + Z,   r = √(2A·room) > V,
+//! ```
+//!
+//! decreasing in `r` (and so in the distance). It is at most `−(2L + 1)` once
+//! `r ≥ V + x`, `γx³ = 2L + 1 + Z + A` (as `A·V/r ≤ A`), which holds once
+//!
+//! ```text
+//! D ≥ r_h + V·τ + A_hi·τ²/2 + (V + x)²/(2·A_lo) + margin,
+//! ```
+//!
+//! `A_lo`, `A_hi` the least and greatest braking authority a pair can have, `L` the
+//! widest disc, `τ` the state age. The bound is convex in `V`, and
+//! `V ≤ |ṽᵢ − v̄| + |ṽⱼ − v̄|` for any common `v̄` (the swarm's mean velocity), so each
+//! vehicle reaching half the bound at `V = 2|ṽᵢ − v̄|` finds every pair that can bind
+//! (`D*(vᵢ + vⱼ) ≤ (D*(2vᵢ) + D*(2vⱼ))/2`).
+//!
+//! Pure: no allocation, no clock.
+
+use nalgebra::Vector3;
+
+use super::{Agent, Separation, braking, limit};
+
+/// Added to every bound (m), for rounding.
+const MARGIN_M: f64 = 0.01;
+
+/// The bound for one tick's agents.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReachBound {
+    /// `r_h + A_hi·τ²/2 + margin` (m).
+    base_m: f64,
+    /// The state age `τ` (s).
+    age_s: f64,
+    /// `x` (m/s).
+    x_mps: f64,
+    /// `2·A_lo` (m/s²).
+    two_a_lo: f64,
+    /// The swarm's mean scaled velocity (m/s).
+    mean_mps: Vector3<f64>,
+}
+
+impl ReachBound {
+    /// The bound for these agents; `None` when no pair can be bounded (no commanded
+    /// vehicle with braking authority, or a gain or age that is not a positive number):
+    /// then only the cap limits the search.
+    pub fn new(sep: &Separation, age_s: f64, agents: &[Agent]) -> Option<Self> {
+        let commanded = agents.iter().filter(|a| a.controlled && a.side.is_some());
+        let (mut a_lo, mut a_hi, mut widest) = (f64::INFINITY, 0.0f64, 0.0f64);
+        for a in commanded {
+            let b = braking(a);
+            if b > 0.0 {
+                a_lo = a_lo.min(b);
+            }
+            a_hi = a_hi.max(b);
+            widest = widest.max(limit(a));
+        }
+        let vertical = agents
+            .iter()
+            .filter_map(|a| a.side.map(|s| s.accel_z_mps2.abs()))
+            .filter(|z| z.is_finite())
+            .fold(0.0f64, f64::max);
+        let mut mean = Vector3::zeros();
+        let mut known = 0.0;
+        for s in agents.iter().filter_map(|a| a.side) {
+            let v = sep.scaled(s.vel_mps);
+            if v.iter().all(|c| c.is_finite()) {
+                mean += v;
+                known += 1.0;
+            }
+        }
+        let (a_hi, z) = (2.0 * a_hi, 2.0 * sep.vertical_scale() * vertical);
+        let usable = a_lo.is_finite()
+            && a_lo > 0.0
+            && sep.gamma > 0.0
+            && sep.gamma.is_finite()
+            && age_s.is_finite()
+            && age_s >= 0.0
+            && known > 0.0;
+        if !usable {
+            return None;
+        }
+        let x = ((2.0 * widest + 1.0 + z + a_hi) / sep.gamma).cbrt();
+        Some(Self {
+            base_m: sep.horizontal_m + 0.5 * a_hi * age_s * age_s + MARGIN_M,
+            age_s,
+            x_mps: x,
+            two_a_lo: 2.0 * a_lo,
+            mean_mps: mean / known,
+        })
+    }
+
+    /// The distance (m, scaled) beyond which a pair whose relative scaled speed is at
+    /// most `v_mps` has no row that can bind.
+    pub fn distance_m(&self, v_mps: f64) -> f64 {
+        let v = v_mps.max(0.0);
+        self.base_m + v * self.age_s + (v + self.x_mps).powi(2) / self.two_a_lo
+    }
+
+    /// How far a vehicle moving at `vel_mps` (m/s, ENU) looks (m, scaled): half the bound
+    /// at twice its speed about the swarm's mean. Infinite for a velocity that is not a
+    /// number.
+    pub fn reach_m(&self, sep: &Separation, vel_mps: Vector3<f64>) -> f64 {
+        let v = (sep.scaled(vel_mps) - self.mean_mps).norm();
+        if v.is_finite() {
+            0.5 * self.distance_m(2.0 * v)
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Vector2;
+
+    use super::super::{Side, pair_row};
+    use super::*;
+
+    fn sep() -> Separation {
+        Separation {
+            horizontal_m: 3.0,
+            vertical_m: 9.0,
+            gamma: 1.0,
+        }
+    }
+
+    fn agent(p: Vector3<f64>, v: Vector3<f64>, az: f64, limit: f64, braking: f64) -> Agent {
+        Agent {
+            side: Some(Side {
+                pos_m: p,
+                vel_mps: v,
+                accel_z_mps2: az,
+            }),
+            controlled: true,
+            weight: 1.0,
+            drift_mps2: Vector2::zeros(),
+            limit_mps2: limit,
+            braking_mps2: braking,
+        }
+    }
+
+    #[test]
+    fn no_pair_beyond_the_two_reaches_has_a_row_that_can_bind() {
+        // Random pairs with random speeds, vertical accelerations, envelopes and ages:
+        // every pair at least as far apart as the sum of its reaches has
+        // b ≤ −(Lᵢ + Lⱼ) − 1, and the bound is no looser than needed by more than the
+        // head-on worst case.
+        let s = sep();
+        let mut x: u64 = 3;
+        let mut next = || {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (x >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut checked = 0;
+        let mut tightest = f64::INFINITY;
+        for _ in 0..20_000 {
+            let mut v = || Vector3::new(8.0 * next() - 4.0, 8.0 * next() - 4.0, 2.0 * next() - 1.0);
+            let (vi, vj, vk) = (v(), v(), v());
+            let (li, lj) = (2.0 + 6.0 * next(), 2.0 + 6.0 * next());
+            let (azi, azj) = (2.0 * next() - 1.0, 2.0 * next() - 1.0);
+            let age = 0.3 * next();
+            let third = agent(Vector3::new(500.0, 0.0, 0.0), vk, 0.0, 4.0, 2.0);
+            let mut pair = [
+                agent(Vector3::zeros(), vi, azi, li, 0.5 * li),
+                agent(Vector3::zeros(), vj, azj, lj, 0.5 * lj),
+                third,
+            ];
+            let bound = ReachBound::new(&s, age, &pair).expect("usable");
+            let reach = bound.reach_m(&s, vi) + bound.reach_m(&s, vj);
+            // A direction with a vertical part, the pair just beyond its reaches.
+            let dir = Vector3::new(next() - 0.5, next() - 0.5, 0.3 * (next() - 0.5)).normalize();
+            let scaled_dir = s.scaled(dir).norm();
+            let distance = reach * (1.0 + 1e-9) / scaled_dir;
+            pair[0].side = Some(Side {
+                pos_m: dir * distance,
+                ..pair[0].side.expect("known")
+            });
+            let (si, sj) = (pair[0].side.expect("known"), pair[1].side.expect("known"));
+            let row = pair_row(&s, &si, &sj, 0.5 * li + 0.5 * lj, age).expect("apart");
+            assert!(row.b <= -(li + lj) - 1.0, "b {} at {} m", row.b, reach);
+            tightest = tightest.min(-(li + lj) - 1.0 - row.b);
+            checked += 1;
+        }
+        assert_eq!(checked, 20_000);
+        assert!(tightest.is_finite());
+    }
+
+    #[test]
+    fn a_swarm_moving_together_looks_no_farther_than_one_at_rest() {
+        let s = sep();
+        let at_rest = [
+            agent(Vector3::zeros(), Vector3::zeros(), 0.0, 6.0, 3.0),
+            agent(Vector3::new(4.0, 0.0, 0.0), Vector3::zeros(), 0.0, 6.0, 3.0),
+        ];
+        let moving = at_rest.map(|mut a| {
+            a.side = a.side.map(|side| Side {
+                vel_mps: Vector3::new(5.0, -2.0, 0.0),
+                ..side
+            });
+            a
+        });
+        let rest = ReachBound::new(&s, 0.1, &at_rest).expect("usable");
+        let together = ReachBound::new(&s, 0.1, &moving).expect("usable");
+        let r0 = rest.reach_m(&s, Vector3::zeros());
+        let r1 = together.reach_m(&s, Vector3::new(5.0, -2.0, 0.0));
+        assert!((r0 - r1).abs() < 1e-12);
+        // At rest: 3 m + 3·0.01/2... + (x)²/(2·3) with γx³ = 2·6 + 1 + 0 + 6 = 19.
+        let x = 19f64.cbrt();
+        let expected = 0.5 * (3.0 + 0.5 * 6.0 * 0.01 + 0.01 + x * x / 6.0);
+        assert!((r0 - expected).abs() < 1e-12, "{r0} vs {expected}");
+        // Nobody commanded: no bound.
+        let mut idle = at_rest;
+        idle.iter_mut().for_each(|a| a.controlled = false);
+        assert!(ReachBound::new(&s, 0.1, &idle).is_none());
+    }
+}
