@@ -137,7 +137,11 @@ fn filter_table(sides: &[usize]) {
             let mut commands: Vec<Vector2<f64>> = (0..n)
                 .map(|k| {
                     let u = (places[k] - pos[k]) * 0.05 - vel[k] * 0.5;
-                    if u.norm() > 6.0 { u * (6.0 / u.norm()) } else { u }
+                    if u.norm() > 6.0 {
+                        u * (6.0 / u.norm())
+                    } else {
+                        u
+                    }
                 })
                 .collect();
             let start = Instant::now();
@@ -162,8 +166,10 @@ fn filter_table(sides: &[usize]) {
         let first = times[0];
         times.sort();
         sweeps.sort();
-        let positions: Vec<Option<Vector3<f64>>> =
-            pos.iter().map(|p| Some(Vector3::new(p.x, p.y, 50.0))).collect();
+        let positions: Vec<Option<Vector3<f64>>> = pos
+            .iter()
+            .map(|p| Some(Vector3::new(p.x, p.y, 50.0)))
+            .collect();
         let mut sweep = Sweep::default();
         let start = Instant::now();
         for _ in 0..ticks {

@@ -26,7 +26,12 @@ impl Config {
         ok &= p.positive("safety.braking_share", s.braking_share, 1.0, "");
         ok &= p.positive("safety.jam_hold_s", s.jam_hold_s, 600.0, " s");
         ok &= p.positive("safety.jam_turn_mps2", s.jam_turn_mps2, 20.0, " m/s²");
-        ok &= p.positive("safety.budget_share", s.budget_share, 0.9, " of the control period");
+        ok &= p.positive(
+            "safety.budget_share",
+            s.budget_share,
+            0.9,
+            " of the control period",
+        );
         if !(ok && s.enabled) {
             return None;
         }

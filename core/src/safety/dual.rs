@@ -197,12 +197,7 @@ pub fn ascend(
             state.u[v] = projected;
         }
         if piece.keep_sum && total_weight > 0.0 {
-            let got: Vector2<f64> = piece
-                .weight
-                .iter()
-                .zip(&state.u)
-                .map(|(w, u)| *w * u)
-                .sum();
+            let got: Vector2<f64> = piece.weight.iter().zip(&state.u).map(|(w, u)| *w * u).sum();
             let shift = (target - got) / total_weight;
             state.u.iter_mut().for_each(|u| *u += shift);
         }

@@ -7,23 +7,25 @@ use clarabel::solver::{
 };
 use nalgebra::Vector2;
 
-use super::{Agent, SLACK_COST, SafetyFilter, Settings, limit};
+use super::{Agent, Piece, SLACK_COST, SafetyFilter, Settings, limit};
 
 impl SafetyFilter {
     /// One QP over the variables solved by clarabel (interior point, the discs as
     /// second-order cones) within what is left of the time limit; writes the commands when solved and says whether a
     /// row had to be relaxed (its slack used).
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn solve_exact(
         &self,
         settings: &Settings,
         agents: &[Agent],
         commands: &mut [Vector2<f64>],
-        rows: &[usize],
-        vars: &[usize],
-        var_of: &[Option<usize>],
-        with_sum: bool,
+        piece: Piece<'_>,
     ) -> Result<bool, &'static str> {
+        let Piece {
+            rows,
+            vars,
+            var_of,
+            with_sum,
+        } = piece;
         let n_u = 2 * vars.len();
         let n_rows = rows.len();
         let nv = n_u + n_rows;

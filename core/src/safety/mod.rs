@@ -219,6 +219,16 @@ pub struct SafetyFilter {
     pub(crate) exact_only: bool,
 }
 
+/// One QP of the filter: its rows and variables (indices into the rows and the agents),
+/// each agent's variable, and whether `Σ wᵢuᵢ` is held.
+#[derive(Debug, Clone, Copy)]
+struct Piece<'a> {
+    rows: &'a [usize],
+    vars: &'a [usize],
+    var_of: &'a [Option<usize>],
+    with_sum: bool,
+}
+
 /// One call's count of the solver's work.
 #[derive(Debug, Clone, Copy, Default)]
 struct Tally {
@@ -372,14 +382,20 @@ impl SafetyFilter {
             std::mem::take(&mut self.vars),
             std::mem::take(&mut self.var_of),
         );
-        let solved = self.solve(settings, agents, commands, &all, &vars, &var_of, true);
+        let whole = |with_sum| Piece {
+            rows: &all,
+            vars: &vars,
+            var_of: &var_of,
+            with_sum,
+        };
+        let solved = self.solve(settings, agents, commands, whole(true));
         let outcome = match solved {
             Ok(relaxed) => Outcome::Filtered {
                 sum_kept: settings.keep_weighted_sum,
                 relaxed,
             },
             Err(_) if settings.keep_weighted_sum => {
-                match self.solve(settings, agents, commands, &all, &vars, &var_of, false) {
+                match self.solve(settings, agents, commands, whole(false)) {
                     Ok(relaxed) => Outcome::Filtered {
                         sum_kept: false,
                         relaxed,
@@ -480,31 +496,28 @@ impl SafetyFilter {
     }
 
     /// One piece's QP over its variables: writes the commands and says whether a row had
-    /// to be relaxed (its slack used). The dual ascent first ([`dual`]); when it stops
-    /// unfinished, clarabel for a small piece with time left, otherwise the answer so far
-    /// with the vehicles of the rows it misses braking ([`Outcome::Unfinished`]).
-    #[allow(clippy::too_many_arguments)]
+    /// to be relaxed (its slack used). The dual ascent first ([`dual`]); when it does not
+    /// finish, clarabel without a time limit, or for a small piece with time left;
+    /// otherwise the ascent's answer so far ([`Outcome::Unfinished`]).
     fn solve(
         &mut self,
         settings: &Settings,
         agents: &[Agent],
         commands: &mut [Vector2<f64>],
-        rows: &[usize],
-        vars: &[usize],
-        var_of: &[Option<usize>],
-        with_sum: bool,
+        piece: Piece<'_>,
     ) -> Result<bool, &'static str> {
+        let Piece { rows, vars, .. } = piece;
         self.tally.largest_piece = self.tally.largest_piece.max(vars.len());
         #[cfg(test)]
         if self.exact_only {
-            return self.solve_exact(settings, agents, commands, rows, vars, var_of, with_sum);
+            return self.solve_exact(settings, agents, commands, piece);
         }
-        if let Some(relaxed) = self.solve_dual(settings, agents, commands, rows, vars, var_of, with_sum) {
+        if let Some(relaxed) = self.solve_dual(settings, agents, commands, piece) {
             return Ok(relaxed);
         }
         let time_left = self.time_left_s();
         if self.deadline.is_none() || (vars.len() <= EXACT_MAX_VARS && time_left > 0.0) {
-            return self.solve_exact(settings, agents, commands, rows, vars, var_of, with_sum);
+            return self.solve_exact(settings, agents, commands, piece);
         }
         self.tally.unfinished = true;
         for (v, &k) in vars.iter().enumerate() {
@@ -526,17 +539,19 @@ impl SafetyFilter {
 
     /// The piece's QP by dual ascent, warm-started from the rows' multipliers; `None`
     /// (commands untouched) when it stopped before converging.
-    #[allow(clippy::too_many_arguments)]
     fn solve_dual(
         &mut self,
         settings: &Settings,
         agents: &[Agent],
         commands: &mut [Vector2<f64>],
-        rows: &[usize],
-        vars: &[usize],
-        var_of: &[Option<usize>],
-        with_sum: bool,
+        piece: Piece<'_>,
     ) -> Option<bool> {
+        let Piece {
+            rows,
+            vars,
+            var_of,
+            with_sum,
+        } = piece;
         let weight = |k: usize| agents[k].weight.max(1e-9);
         let piece = &mut self.piece;
         piece.weight.clear();
@@ -692,10 +707,12 @@ impl SafetyFilter {
                     settings,
                     agents,
                     commands,
-                    &rows,
-                    &vars,
-                    &var_of,
-                    keeps_own_sum,
+                    Piece {
+                        rows: &rows,
+                        vars: &vars,
+                        var_of: &var_of,
+                        with_sum: keeps_own_sum,
+                    },
                 );
                 for &k in &vars {
                     var_of[k] = None;

@@ -150,7 +150,9 @@ mod tests {
                 (k % 13 != 0).then_some(p)
             })
             .collect();
-        let reach: Vec<f64> = (0..400).map(|k| 9.0 * ((k * 37) % 100) as f64 / 100.0).collect();
+        let reach: Vec<f64> = (0..400)
+            .map(|k| 9.0 * ((k * 37) % 100) as f64 / 100.0)
+            .collect();
         let scale = 1.0 / 3.0;
         let dist = |a: Vector3<f64>, b: Vector3<f64>| {
             let d = a - b;
@@ -181,7 +183,10 @@ mod tests {
         // Reaching nothing, the closest pair is still found.
         let none = sweep.sweep(&positions, scale, |_| 0.0, 12.0);
         assert!(none.pairs.is_empty());
-        assert_eq!(none.closest.map(|c| (c.0, c.1)), Some((nearest.0, nearest.1)));
+        assert_eq!(
+            none.closest.map(|c| (c.0, c.1)),
+            Some((nearest.0, nearest.1))
+        );
     }
 
     #[test]

@@ -408,9 +408,7 @@ fn the_dual_ascent_meets_the_interior_point_optimum_with_discs_and_the_sum() {
         assert_eq!(dual.outcome, exact.outcome, "case {case}");
         assert!(rows_hold(&s, &agents, &by_dual, 1e-6), "case {case}");
         compared += 1;
-        discs += usize::from(
-            (0..n).any(|k| by_exact[k].norm() > agents[k].limit_mps2 - 1e-6),
-        );
+        discs += usize::from((0..n).any(|k| by_exact[k].norm() > agents[k].limit_mps2 - 1e-6));
         for k in 0..n {
             max_diff = max_diff.max((by_dual[k] - by_exact[k]).norm());
         }
@@ -422,7 +420,10 @@ fn the_dual_ascent_meets_the_interior_point_optimum_with_discs_and_the_sum() {
         };
         let (c_dual, c_exact) = (cost(&by_dual), cost(&by_exact));
         worst_gap = worst_gap.max(c_dual - c_exact);
-        assert!(c_dual <= c_exact + 1e-6 * (1.0 + c_exact), "case {case}: {c_dual} > {c_exact}");
+        assert!(
+            c_dual <= c_exact + 1e-6 * (1.0 + c_exact),
+            "case {case}: {c_dual} > {c_exact}"
+        );
         if s.keep_weighted_sum {
             let delta: Vector2<f64> = (0..n)
                 .map(|k| agents[k].weight * (by_dual[k] - before[k]))
@@ -458,7 +459,10 @@ fn a_warm_start_from_the_last_tick_takes_fewer_sweeps() {
     let first = filter.filter(&s, &agents, &mut cold, None);
     let mut warm = before.clone();
     let second = filter.filter(&s, &agents, &mut warm, None);
-    assert!(matches!(first.outcome, Outcome::Filtered { relaxed: false, .. }), "{first:?}");
+    assert!(
+        matches!(first.outcome, Outcome::Filtered { relaxed: false, .. }),
+        "{first:?}"
+    );
     assert_eq!(first.outcome, second.outcome);
     assert!(first.sweeps > 10, "{first:?}");
     assert!(second.sweeps <= 2, "{second:?} after {first:?}");
