@@ -523,14 +523,7 @@ impl SafetyFilter {
             return self.solve_exact(settings, agents, commands, piece);
         }
         self.tally.unfinished = true;
-        for (v, &k) in vars.iter().enumerate() {
-            let mut u = self.dual.u[v];
-            let cap = limit(&agents[k]);
-            if u.norm() > cap {
-                u *= cap / u.norm();
-            }
-            commands[k] = u;
-        }
+        self.write_ascent(agents, commands, vars);
         let missed = rows
             .iter()
             .map(|&r| &self.rows[r])
@@ -538,6 +531,19 @@ impl SafetyFilter {
             .fold(0.0f64, f64::max);
         self.tally.missed_mps2 = self.tally.missed_mps2.max(missed);
         Ok(false)
+    }
+
+    /// The ascent's commands written for the piece's variables, each inside its disc (the
+    /// ascent leaves them at most its tolerance outside).
+    fn write_ascent(&self, agents: &[Agent], commands: &mut [Vector2<f64>], vars: &[usize]) {
+        for (&u, &k) in self.dual.u.iter().zip(vars) {
+            let cap = limit(&agents[k]);
+            commands[k] = if u.norm() > cap {
+                u * (cap / u.norm())
+            } else {
+                u
+            };
+        }
     }
 
     /// The piece's QP by dual ascent, warm-started from the rows' multipliers; `None`
@@ -624,14 +630,7 @@ impl SafetyFilter {
         if !matches!(end, dual::DualEnd::Converged { .. }) {
             return None;
         }
-        for (v, &k) in vars.iter().enumerate() {
-            let mut u = self.dual.u[v];
-            let cap = limit(&agents[k]);
-            if u.norm() > cap {
-                u *= cap / u.norm();
-            }
-            commands[k] = u;
-        }
+        self.write_ascent(agents, commands, vars);
         // A row is relaxed when the commands miss it by more than the ascent's tolerance
         // allows for.
         let largest = self.piece.rows.iter().fold(0.0f64, |m, r| m.max(r.c.abs()));
