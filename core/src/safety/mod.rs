@@ -307,7 +307,25 @@ impl SafetyFilter {
             _ => f64::INFINITY,
         };
         let mut sweep = std::mem::take(&mut self.sweep);
-        let found = sweep.sweep(&self.positions, sep.vertical_scale(), reach, radius);
+        // A pair's own bound, at its own relative speed (tighter than the two reaches).
+        let pair_limit = |i: usize, j: usize| match (bound, agents[i].side, agents[j].side) {
+            (Some(bound), Some(a), Some(b)) => {
+                let v = sep.scaled(a.vel_mps - b.vel_mps).norm();
+                if v.is_finite() {
+                    bound.distance_m(v)
+                } else {
+                    f64::INFINITY
+                }
+            }
+            _ => f64::INFINITY,
+        };
+        let found = sweep.sweep_pairs(
+            &self.positions,
+            sep.vertical_scale(),
+            reach,
+            radius,
+            pair_limit,
+        );
         let closest = found.closest;
         self.rows.clear();
         self.lambda.clear();

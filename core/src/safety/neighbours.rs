@@ -63,6 +63,22 @@ impl Sweep {
         reach_m: impl Fn(usize) -> f64,
         cap_m: f64,
     ) -> Found<'_> {
+        self.sweep_pairs(positions, vertical_scale, reach_m, cap_m, |_, _| {
+            f64::INFINITY
+        })
+    }
+
+    /// As [`Sweep::sweep`], keeping a pair `(i, j)` found only when it is also closer
+    /// than `pair_limit_m(i, j)` (asked only of pairs within their reaches: a bound of the
+    /// pair's own, tighter than the sum of two reaches).
+    pub fn sweep_pairs(
+        &mut self,
+        positions: &[Option<Vector3<f64>>],
+        vertical_scale: f64,
+        reach_m: impl Fn(usize) -> f64,
+        cap_m: f64,
+        pair_limit_m: impl Fn(usize, usize) -> f64,
+    ) -> Found<'_> {
         self.pairs.clear();
         let known = |p: &Option<Vector3<f64>>| p.filter(|p| p.iter().all(|x| x.is_finite()));
         let reach = |i: usize| {
@@ -114,7 +130,7 @@ impl Sweep {
                     let (i, j) = (a.min(b), a.max(b));
                     best.offer(i, j, d2);
                     let limit = (reach_a + reach(b)).min(cap_m);
-                    if d2 < limit * limit {
+                    if d2 < limit * limit && d2 < pair_limit_m(i, j).powi(2) {
                         self.pairs.push((i, j));
                     }
                 }
@@ -149,7 +165,7 @@ impl Sweep {
                     let (i, j) = (a.min(b), a.max(b));
                     best.offer(i, j, d2);
                     let limit = (reach_a + reach(b)).min(cap_m);
-                    if d2 < limit * limit {
+                    if d2 < limit * limit && d2 < pair_limit_m(i, j).powi(2) {
                         self.pairs.push((i, j));
                     }
                 }
@@ -304,6 +320,21 @@ mod tests {
             none.closest.map(|c| (c.0, c.1)),
             Some((nearest.0, nearest.1))
         );
+        // A pair's own limit keeps only the pairs within it too.
+        let own = |i: usize, j: usize| ((i + 3 * j) % 11) as f64;
+        let kept: Vec<(usize, usize)> = brute
+            .iter()
+            .copied()
+            .filter(|&(i, j)| {
+                let (Some(a), Some(b)) = (positions[i], positions[j]) else {
+                    return false;
+                };
+                dist(a, b) < own(i, j)
+            })
+            .collect();
+        assert!(!kept.is_empty() && kept.len() < brute.len());
+        let found = sweep.sweep_pairs(&positions, scale, |k| reach[k], 12.0, own);
+        assert_eq!(found.pairs, kept.as_slice());
         // Reaching a centimetre, no pair is within a cell: the closest is found along east.
         let tiny = sweep.sweep(&positions, scale, |_| 0.01, 12.0);
         assert!(tiny.pairs.is_empty());
