@@ -7,8 +7,11 @@
 //! loopback) against one emulator, and prints one row per shard: CPU, late ticks, the
 //! age of its own vehicles' states and of the other shards' ones it flies on.
 //!
-//! `cargo bench --bench realtime [-- [dense] N ...]` (default 64 250 500 1000; `dense`:
-//! the ring packed so that the safety filter's constraints bind) prints, per N: CPU
+//! `cargo bench --bench realtime [-- [dense] [equal] N ...]` (default 64 250 500 1000;
+//! `dense`: the ring packed so that the safety filter's constraints bind; `equal`: the
+//! emulator at the coordinator's priority rather than nice 10; `rt`: the coordinator's
+//! control loop at real-time priority 10, `fly --realtime-priority 10`, which needs the
+//! right to) prints, per N: CPU
 //! per vehicle-tick of each process over a steady window, control ticks started over half
 //! a period late, the age of the flown positions (p50/p99; `summary.json`), the setpoint
 //! rate the emulator took (its fleet line), the kernel's UDP drops, and what the safety
@@ -31,6 +34,20 @@ const WARM_UP: Duration = Duration::from_secs(10);
 const WINDOW: Duration = Duration::from_secs(20);
 /// Control rate (Hz).
 const RATE_HZ: f64 = 50.0;
+/// How one case is run (the words `dense`, `equal`, `rt`).
+struct Case {
+    /// The ring packed so that the filter binds.
+    dense: bool,
+    /// The emulator's niceness.
+    niceness: i32,
+    /// The coordinator's real-time priority (`fly --realtime-priority`), if any.
+    priority: Option<u8>,
+}
+
+/// The coordinator's real-time priority with the word `rt`.
+const COORDINATOR_PRIORITY: u8 = 10;
+/// The emulator's niceness (the word `equal`: 0, the coordinator's).
+const EMULATOR_NICENESS: i32 = 10;
 /// Datagrams per vehicle-tick at this rate: one setpoint, two telemetry messages.
 const DATAGRAMS_PER_TICK: f64 = 3.0;
 
@@ -52,7 +69,17 @@ fn main() {
         .skip(1)
         .filter_map(|a| a.parse().ok())
         .collect();
-    let dense = std::env::args().any(|a| a == "dense");
+    let case = Case {
+        dense: std::env::args().any(|a| a == "dense"),
+        niceness: if std::env::args().any(|a| a == "equal") {
+            0
+        } else {
+            EMULATOR_NICENESS
+        },
+        priority: std::env::args()
+            .any(|a| a == "rt")
+            .then_some(COORDINATOR_PRIORITY),
+    };
     let cases = if cases.is_empty() {
         vec![64, 250, 500, 1000]
     } else {
@@ -71,7 +98,7 @@ fn main() {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
     for n in cases {
-        match run_case(n, dense) {
+        match run_case(n, &case) {
             Ok(r) => {
                 let per_tick = |cpu_s: f64| cpu_s * 1e6 / (n as f64 * RATE_HZ * r.window_s);
                 let (e, c) = (per_tick(r.emulator_cpu_s), per_tick(r.coordinator_cpu_s));
@@ -128,27 +155,32 @@ impl Drop for Running {
     }
 }
 
-fn run_case(n: usize, dense: bool) -> Result<CaseResult, String> {
+fn run_case(n: usize, case: &Case) -> Result<CaseResult, String> {
     let bin = env!("CARGO_BIN_EXE_ringswarm");
     let dir = std::env::temp_dir().join(format!("ringswarm-realtime-{}-{n}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let config = dir.join("ring.toml");
-    let text = if dense {
+    let text = if case.dense {
         dense_ring(n, RATE_HZ)
     } else {
         ring(n, RATE_HZ)
     };
     std::fs::write(&config, text).map_err(|e| e.to_string())?;
 
-    let (sitl, lines) = start_sitl(bin, &config, &dir)?;
+    let (sitl, lines) = start_sitl(bin, &config, &dir, case.niceness)?;
     let out = dir.join("run");
+    let mut command = Command::new(bin);
+    command
+        .args(["fly", "--config"])
+        .arg(&config)
+        .arg("--out")
+        .arg(&out);
+    if let Some(priority) = case.priority {
+        command.args(["--realtime-priority", &priority.to_string()]);
+    }
     let fly = Running(
-        Command::new(bin)
-            .args(["fly", "--config"])
-            .arg(&config)
-            .arg("--out")
-            .arg(&out)
+        command
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(Stdio::null())
@@ -234,16 +266,19 @@ type Lines = Arc<Mutex<Vec<(Instant, String)>>>;
 
 /// Starts `ringswarm sitl --config config` and waits until it serves; its stdout lines,
 /// each with when it came, are collected as it runs. The emulator stands for the
-/// vehicles' own computers: on this shared machine it runs at a lower priority (nice 10),
-/// so that the coordinators' schedule is what is measured, not the scheduler's choice.
+/// vehicles' own computers: on this shared machine it runs at a lower priority
+/// (`niceness`, [`EMULATOR_NICENESS`] unless the word `equal` is given), so that the
+/// coordinators' schedule is what is measured, not the scheduler's choice.
 fn start_sitl(
     bin: &str,
     config: &std::path::Path,
     dir: &std::path::Path,
+    niceness: i32,
 ) -> Result<(Running, Lines), String> {
+    let niceness = niceness.to_string();
     let mut sitl = Running(
         Command::new("nice")
-            .args(["-n", "10", bin, "sitl", "--config"])
+            .args(["-n", &niceness, bin, "sitl", "--config"])
             .arg(config)
             .arg("--state-dir")
             .arg(dir.join("state"))
@@ -404,7 +439,7 @@ fn sharded(n: usize, shards: usize) {
         std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         let config = dir.join("ring.toml");
         std::fs::write(&config, sharded_ring(n, shards)).map_err(|e| e.to_string())?;
-        let (sitl, _) = start_sitl(bin, &config, &dir)?;
+        let (sitl, _) = start_sitl(bin, &config, &dir, EMULATOR_NICENESS)?;
         let mut flies = Vec::new();
         for s in 0..shards {
             flies.push(Running(

@@ -182,6 +182,10 @@ pub struct FlyArgs {
     /// Zenoh (docs/distributed.md); without it, one process flies every vehicle.
     #[arg(long)]
     pub shard: Option<String>,
+    /// Run the control loop at this real-time priority (Linux SCHED_FIFO, 1..=99; needs
+    /// root, CAP_SYS_NICE or an rtprio limit): ticks stay on time on a busy machine.
+    #[arg(long, value_name = "PRIORITY")]
+    pub realtime_priority: Option<u8>,
     /// The live view and the mirrors.
     #[command(flatten)]
     pub live: LiveArgs,

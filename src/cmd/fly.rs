@@ -73,6 +73,11 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("start the tokio runtime")?;
+    if let Some(priority) = args.realtime_priority {
+        // The runtime is this thread: the control loop runs ahead of ordinary work.
+        crate::driver::priority::run_ahead(priority).map_err(anyhow::Error::msg)?;
+        tracing::info!("control loop at real-time priority {priority} (SCHED_FIFO)");
+    }
     let summary = runtime.block_on(crate::flight::fly_over_udp(
         swarm, &transport, &out, signing, &args.live, bus,
     ))?;

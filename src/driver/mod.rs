@@ -10,6 +10,8 @@
 //! - [`mirror`]: every datagram of a UDP flight copied to extra addresses, read-only.
 //! - `zenoh_bus` (feature `zenoh`): the messages between shards over a Zenoh peer
 //!   session, on a thread of its own.
+//! - [`priority`]: the control loop's thread at real-time priority (`fly
+//!   --realtime-priority`).
 //! - [`listening`]: how far behind its sockets the UDP driver is, so that its own stall
 //!   is not taken for vehicles going silent.
 //!
@@ -20,6 +22,7 @@ pub mod listening;
 #[cfg(feature = "emulator")]
 pub mod lockstep;
 pub mod mirror;
+pub mod priority;
 pub mod serial;
 pub mod signals;
 pub mod udp;
