@@ -237,13 +237,7 @@ mod tests {
     #[test]
     fn the_sweep_finds_exactly_the_pairs_all_pairs_would() {
         // A deterministic scatter of 300 positions, some unknown, against the brute force.
-        let mut x: u64 = 99;
-        let mut next = || {
-            x = x
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (x >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = super::super::tests::uniform(99);
         let positions: Vec<Option<Vector3<f64>>> = (0..300)
             .map(|k| {
                 let p = Vector3::new(200.0 * next(), 200.0 * next(), 30.0 * next());
@@ -270,13 +264,7 @@ mod tests {
     #[test]
     fn each_vehicle_reaches_its_own_distance_and_the_closest_pair_is_exact() {
         // 400 positions with reaches from 0 to 9 m and a 12 m cap, against all pairs.
-        let mut x: u64 = 7;
-        let mut next = || {
-            x = x
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (x >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = super::super::tests::uniform(7);
         let positions: Vec<Option<Vector3<f64>>> = (0..400)
             .map(|k| {
                 let p = Vector3::new(300.0 * next(), 300.0 * next(), 30.0 * next());

@@ -154,13 +154,7 @@ mod tests {
         // b ≤ −(Lᵢ + Lⱼ) − 1, and the bound is no looser than needed by more than the
         // head-on worst case.
         let s = sep();
-        let mut x: u64 = 3;
-        let mut next = || {
-            x = x
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (x >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = super::super::tests::uniform(3);
         let mut checked = 0;
         let mut tightest = f64::INFINITY;
         for _ in 0..20_000 {

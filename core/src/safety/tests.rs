@@ -156,7 +156,7 @@ fn a_pair_too_fast_to_stop_brakes_as_hard_as_the_envelopes_allow() {
 
 /// Uniform numbers in [0, 1) from a 64-bit linear congruential generator (Knuth's MMIX
 /// constants): the same swarms on every run.
-fn uniform(seed: u64) -> impl FnMut() -> f64 {
+pub(super) fn uniform(seed: u64) -> impl FnMut() -> f64 {
     let mut x = seed;
     move || {
         x = x
