@@ -125,6 +125,16 @@ fn default_fence_margin_m() -> f64 {
     5.0
 }
 
+/// How `[safety]` breaks jams.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JamBreak {
+    /// The northbound vehicle of a jam passes over the others on the jam layer.
+    Layer,
+    /// Every held pair turns about its midpoint.
+    Turn,
+}
+
 /// `[safety]`: no command brings two vehicles closer than a downwash ellipsoid of
 /// `horizontal_m` by `vertical_m` (centre to centre), by a control-barrier-function
 /// filter between the law and the saturation (docs/math.md, "Keeping vehicles apart").
@@ -155,6 +165,15 @@ pub struct SafetySection {
     /// How long a vehicle is held without progress before it counts as jammed (s,
     /// default 5).
     pub jam_hold_s: f64,
+    /// How jams are broken (default `layer`): `layer` sends the jammed vehicle whose way
+    /// points north over the others on a layer `jam_layer_m` above the formation (below
+    /// when the fence's band has no room above); `turn` turns every held pair about its
+    /// midpoint at `jam_turn_mps2`.
+    pub jam_break: JamBreak,
+    /// The jam layer's distance from the formation's altitude (m, default
+    /// `vertical_m + horizontal_m`: clear of the downwash ellipsoid by a horizontal
+    /// separation; at least `vertical_m`).
+    pub jam_layer_m: Option<f64>,
     /// The turning acceleration of a jammed pair of equal weights, each (m/s², default 1).
     pub jam_turn_mps2: f64,
     /// The share of the control period the filter may take in a flight in real time
@@ -174,6 +193,8 @@ impl Default for SafetySection {
             action: crate::swarm::BreachAction::Hold,
             resolve_jams: false,
             jam_hold_s: 5.0,
+            jam_break: JamBreak::Layer,
+            jam_layer_m: None,
             jam_turn_mps2: 1.0,
             budget_share: 0.2,
         }

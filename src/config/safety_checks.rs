@@ -6,6 +6,10 @@ use super::problems::Problems;
 use super::validate::MAX_DISTANCE_M;
 use crate::swarm::{GuardLimits, MAX_SPEED_MPS};
 
+/// A vehicle comes back from the jam layer only with nobody within this many horizontal
+/// separations of it, or of its way to its place.
+const LAYER_CLEAR_SHARE: f64 = 1.2;
+
 impl Config {
     /// `[safety]`: every key checked by name, and no two formation places closer than the
     /// horizontal separation; `None` when the filter is off.
@@ -26,6 +30,14 @@ impl Config {
         ok &= p.positive("safety.braking_share", s.braking_share, 1.0, "");
         ok &= p.positive("safety.jam_hold_s", s.jam_hold_s, 600.0, " s");
         ok &= p.positive("safety.jam_turn_mps2", s.jam_turn_mps2, 20.0, " m/s²");
+        let layer_m = s.jam_layer_m.unwrap_or(s.vertical_m + s.horizontal_m);
+        ok &= p.within(
+            "safety.jam_layer_m",
+            layer_m,
+            s.vertical_m,
+            300.0,
+            " m (at least safety.vertical_m)",
+        );
         ok &= p.positive(
             "safety.budget_share",
             s.budget_share,
@@ -48,6 +60,11 @@ impl Config {
                 }
             }
         }
+        let layer = if s.resolve_jams && s.jam_break == super::JamBreak::Layer {
+            Some(self.jam_layer(layer_m, p)?)
+        } else {
+            None
+        };
         Some(crate::swarm::SafetySetup {
             separation: crate::safety::Separation {
                 horizontal_m: s.horizontal_m,
@@ -59,10 +76,39 @@ impl Config {
             jams: s.resolve_jams.then(|| crate::safety::jam::JamSettings {
                 hold_s: s.jam_hold_s,
                 bias_mps2: s.jam_turn_mps2,
+                layer,
                 ..crate::safety::jam::JamSettings::default()
             }),
             budget_share: s.budget_share,
             wall_clock_budget: false,
+        })
+    }
+
+    /// The jam layer `layer_m` from the formation's altitude: above it, or below it when
+    /// the fence's band has no room above (by the fence's margin), or a problem when it
+    /// has room on neither side.
+    fn jam_layer(
+        &self,
+        layer_m: f64,
+        p: &mut Problems,
+    ) -> Option<crate::safety::layers::LayerRule> {
+        let altitude = self.formation.altitude_m;
+        let above = match &self.fence {
+            None => true,
+            Some(f) if altitude + layer_m <= f.max_altitude_m - f.margin_m => true,
+            Some(f) if altitude - layer_m >= f.min_altitude_m + f.margin_m => false,
+            Some(f) => {
+                p.push(format!(
+                    "safety.jam_break = \"layer\": a jam layer {layer_m} m above or below formation.altitude_m = {altitude} m leaves the fence's altitudes [{}, {}] m (margin {} m): lower safety.jam_layer_m (at least safety.vertical_m = {} m), widen the band, or set safety.jam_break = \"turn\"",
+                    f.min_altitude_m, f.max_altitude_m, f.margin_m, self.safety.vertical_m
+                ));
+                return None;
+            }
+        };
+        Some(crate::safety::layers::LayerRule {
+            height_m: layer_m,
+            above,
+            clear_m: LAYER_CLEAR_SHARE * self.safety.horizontal_m,
         })
     }
 

@@ -292,6 +292,8 @@ pub struct SafetyReport {
     pub jams: u64,
     /// Consensus ticks with a jammed vehicle.
     pub jam_ticks: u64,
+    /// Times a vehicle left the formation's altitude for the jam layer.
+    pub layer_climbs: u64,
     /// Ticks on which the time limit (`budget_share`, in real time) ended a solve before
     /// its answer: the dual ascent's answer so far went out.
     pub unfinished_ticks: u64,
@@ -328,6 +330,7 @@ impl SafetyReport {
             separation_actions: s.separation_actions,
             jams: s.jams,
             jam_ticks: s.jam_ticks,
+            layer_climbs: s.layer_climbs,
             unfinished_ticks: s.unfinished_ticks,
             unfinished_missed_mps2: s.unfinished_missed_mps2,
             filter_time: s.filter_time.quantiles(),

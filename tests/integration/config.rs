@@ -660,6 +660,72 @@ fn a_fence_is_checked_by_name() {
 }
 
 #[test]
+fn the_jam_layer_fits_the_fence_band_above_or_below_or_is_refused() {
+    // paper-sim1 flies at 50 m; the layer defaults to vertical_m + horizontal_m.
+    let file = |safety: &str, band: Option<(f64, f64)>| {
+        let fence = band.map_or(String::new(), |(lo, hi)| {
+            format!(
+                "[fence]\nkind = \"circle\"\ncentre_enu_m = [0.0, 0.0]\nradius_m = 1000.0\n\
+                 min_altitude_m = {lo}\nmax_altitude_m = {hi}\nmargin_m = 2.0\n\n"
+            )
+        });
+        with(
+            "[formation]",
+            &format!("[safety]\nresolve_jams = true\n{safety}\n\n{fence}[formation]"),
+        )
+    };
+    let rule = |safety: &str, band| {
+        Config::from_toml(&file(safety, band))
+            .unwrap()
+            .validate()
+            .map(|s| s.safety.and_then(|s| s.jams).and_then(|j| j.layer))
+    };
+    // No fence: 12 m above (9 + 3), back with nobody within 1.2 × 3 m.
+    let up = rule("", None).unwrap().unwrap();
+    assert_eq!(
+        (up.height_m, up.above, up.offset_up_m()),
+        (12.0, true, 12.0)
+    );
+    assert!((up.clear_m - 3.6).abs() < 1e-12);
+    // A band up to 63 m (margin 2): 50 + 12 > 61, so below, 50 - 12 ≥ 0 + 2.
+    let down = rule("", Some((0.0, 63.0))).unwrap().unwrap();
+    assert_eq!((down.above, down.offset_up_m()), (false, -12.0));
+    // Exactly room above: 50 + 12 = 64 - 2.
+    assert!(rule("", Some((0.0, 64.0))).unwrap().unwrap().above);
+    // No room either way: refused, naming the numbers and the ways out.
+    let e = rule("", Some((40.0, 63.0))).unwrap_err();
+    assert!(
+        e.lines().any(|l| l == "safety.jam_break = \"layer\": a jam layer 12 m above or below formation.altitude_m = 50 m leaves the fence's altitudes [40, 63] m (margin 2 m): lower safety.jam_layer_m (at least safety.vertical_m = 9 m), widen the band, or set safety.jam_break = \"turn\""),
+        "{e}"
+    );
+    // ... which the turn needs no room for, and a smaller layer fits.
+    assert_eq!(
+        rule("jam_break = \"turn\"", Some((40.0, 63.0))).unwrap(),
+        None
+    );
+    let small = rule("jam_layer_m = 9.5", Some((40.0, 63.0)))
+        .unwrap()
+        .unwrap();
+    assert_eq!((small.height_m, small.above), (9.5, true));
+    // A layer inside the downwash ellipsoid is refused by its key; so is an unknown way.
+    let e = rule("jam_layer_m = 8.0", None).unwrap_err();
+    assert!(
+        e.lines()
+            .any(|l| l.starts_with("safety.jam_layer_m must be a finite number in [9, 300] m")),
+        "{e}"
+    );
+    let e = Config::from_toml(&file("jam_break = \"climb\"", None)).unwrap_err();
+    assert!(
+        e.contains("unknown variant `climb`, expected `layer` or `turn`"),
+        "{e}"
+    );
+    // Off unless jams are broken.
+    let off = with("[formation]", "[safety]\njam_layer_m = 12.0\n\n[formation]");
+    let setup = Config::from_toml(&off).unwrap().validate().unwrap();
+    assert_eq!(setup.safety.and_then(|s| s.jams), None);
+}
+
+#[test]
 fn a_coordinator_file_and_a_sitl_file_are_read_into_one_emulator_schema() {
     // paper-sim1's vehicle 1 (ENU start 20 m north, 9 east / 4 north m/s, 100 m above the
     // ground) with a true airframe and an estimator of its own…

@@ -10,7 +10,9 @@
 //! shorter than [`JamSettings::gap_s`] (a filter that binds every other tick holds all
 //! the same). It stays jammed until it has not been held for [`JamSettings::release_s`].
 //!
-//! [`rotation_bias`] breaks them with a consistent rotational preference: every active
+//! [`crate::safety::layers`] breaks them by sending one side of each jam over the other
+//! on another layer (the default). [`rotation_bias`] breaks them in the plane instead, with a
+//! consistent rotational preference: every active
 //! pair with a jammed vehicle turns about its midpoint counter-clockwise (seen from
 //! above), each vehicle accelerated along the pair's normal turned by +90°, the two in
 //! opposite directions and in inverse proportion to their weights. Like a barrier row,
@@ -40,6 +42,8 @@ pub struct JamSettings {
     pub release_s: f64,
     /// The turning acceleration of an equal-weight pair, each vehicle (m/s²).
     pub bias_mps2: f64,
+    /// Jams passed on another layer (`crate::safety::layers`); `None`: turned.
+    pub layer: Option<crate::safety::layers::LayerRule>,
 }
 
 impl Default for JamSettings {
@@ -51,6 +55,7 @@ impl Default for JamSettings {
             gap_s: 1.0,
             release_s: 2.0,
             bias_mps2: 1.0,
+            layer: None,
         }
     }
 }

@@ -31,6 +31,7 @@ mod dual;
 mod exact;
 pub mod fence;
 pub mod jam;
+pub mod layers;
 pub mod neighbours;
 mod pieces;
 pub mod reach;

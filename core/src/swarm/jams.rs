@@ -1,12 +1,15 @@
 //! Breaking jams in the control tick: the jam watch fed with the filter's active rows of
-//! the last tick and each vehicle's distance to its place, and the turning bias added to
-//! the commands before the saturation (`crate::safety::jam`).
+//! the last tick and each vehicle's distance to its place; jammed vehicles then pass on
+//! the jam layer (`crate::safety::layers`: their altitude target moves, from the next
+//! tick's altitude loop on), or are turned past each other by a bias added to the
+//! commands before the saturation (`crate::safety::jam`).
 
 use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
 use super::{Swarm, SwarmPhase};
-use crate::safety::jam::rotation_bias;
+use crate::safety::jam::{JamSettings, rotation_bias};
+use crate::safety::layers::{LayerRule, update_layers};
 
 impl Swarm {
     /// On consensus ticks with `[safety]` and jam breaking on: which vehicles are jammed
@@ -17,6 +20,7 @@ impl Swarm {
             return;
         };
         if !matches!(self.phase, SwarmPhase::Consensus(_)) {
+            self.leave_the_jam_layer(now);
             return;
         }
         let n = self.vehicle_count();
@@ -34,12 +38,15 @@ impl Swarm {
             }
         }
         let centre = (w_sum > 0.0).then(|| sum / w_sum);
-        work.errors.clear();
-        work.errors
+        work.offsets.clear();
+        work.offsets
             .extend(work.positions.iter().enumerate().map(|(i, p)| {
                 let (p, c) = ((*p)?, centre?);
-                Some((p - self.slots[i].place_m - c).norm())
+                Some(p - self.slots[i].place_m - c)
             }));
+        work.errors.clear();
+        work.errors
+            .extend(work.offsets.iter().map(|o| o.map(|o| o.norm())));
         let active = self.safety.filter.active_rows();
         let was_jammed = work.watch.any();
         let change = work.watch.update(&settings, now, active, &work.errors);
@@ -60,9 +67,14 @@ impl Swarm {
                 true,
                 format!(
                     "jam: vehicle(s) {} held by the safety filter for {:.1} s without closing on \
-                     their places: turning them past each other",
+                     their places: {}",
                     names.join(", "),
-                    settings.hold_s
+                    settings.hold_s,
+                    if settings.layer.is_some() {
+                        "passing it on the jam layer"
+                    } else {
+                        "turning them past each other"
+                    }
                 ),
             );
         }
@@ -77,6 +89,10 @@ impl Swarm {
                 false,
                 format!("jam over for vehicle(s) {}", names.join(", ")),
             );
+        }
+        if let Some(rule) = settings.layer {
+            self.pass_on_the_layer(now, &settings, &rule);
+            return;
         }
         if !self.safety.jams.watch.any() {
             return;
@@ -101,5 +117,80 @@ impl Swarm {
                 self.law.commands[i].y = u.y;
             }
         }
+    }
+}
+
+impl Swarm {
+    /// Vehicle `i`'s altitude target (m, up, common frame): the formation's, or the jam
+    /// layer's while it passes a jam there.
+    pub(super) fn altitude_target_m(&self, i: usize) -> f64 {
+        let layer = self
+            .setup
+            .safety
+            .and_then(|s| s.jams)
+            .and_then(|j| j.layer)
+            .filter(|_| self.safety.jams.layered.get(i).copied().unwrap_or(false));
+        self.setup.altitude_m + layer.map_or(0.0, |rule| rule.offset_up_m())
+    }
+
+    /// Which vehicles fly on the jam layer now, each move logged.
+    fn pass_on_the_layer(&mut self, now: SimTime, settings: &JamSettings, rule: &LayerRule) {
+        let n = self.vehicle_count();
+        let work = &mut self.safety.jams;
+        work.layered.resize(n, false);
+        let change = update_layers(
+            rule,
+            settings.min_error_m,
+            &work.watch,
+            self.safety.filter.active_rows(),
+            &work.offsets,
+            &work.positions,
+            &mut work.layered,
+        );
+        self.safety.stats.layer_climbs += change.left.len() as u64;
+        let side = if rule.above { "above" } else { "below" };
+        for k in change.left {
+            let name = self.setup.links[k].file_label();
+            self.log.push(
+                now,
+                false,
+                format!(
+                    "vehicle {name} leaves for the jam layer {:.1} m {side} the formation to pass \
+                     the vehicles holding it",
+                    rule.height_m
+                ),
+            );
+        }
+        for k in change.back {
+            let name = self.setup.links[k].file_label();
+            self.log.push(
+                now,
+                false,
+                format!("vehicle {name} back from the jam layer: nobody in its way"),
+            );
+        }
+    }
+
+    /// Out of consensus every vehicle flies at the formation's altitude again.
+    fn leave_the_jam_layer(&mut self, now: SimTime) {
+        let layered = &mut self.safety.jams.layered;
+        if !layered.iter().any(|&l| l) {
+            return;
+        }
+        let back: Vec<usize> = (0..layered.len()).filter(|&k| layered[k]).collect();
+        layered.iter_mut().for_each(|l| *l = false);
+        let names: Vec<String> = back
+            .iter()
+            .map(|&k| self.setup.links[k].file_label())
+            .collect();
+        self.log.push(
+            now,
+            true,
+            format!(
+                "consensus over: vehicle(s) {} come back from the jam layer to the formation's \
+                 altitude",
+                names.join(", ")
+            ),
+        );
     }
 }

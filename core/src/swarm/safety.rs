@@ -53,6 +53,8 @@ pub struct SafetyStats {
     pub jams: u64,
     /// Consensus ticks with a jammed vehicle.
     pub jam_ticks: u64,
+    /// Times a vehicle left the formation's altitude for the jam layer.
+    pub layer_climbs: u64,
     /// `safety.action = "continue"` was reported (once a flight).
     continue_reported: bool,
     /// The smallest ellipsoidal distance between two vehicles with a usable state, seen
@@ -91,6 +93,10 @@ pub(super) struct JamWork {
     pub(super) watch: crate::safety::jam::JamWatch,
     /// Each vehicle's distance to its place (m).
     pub(super) errors: Vec<Option<f64>>,
+    /// Each vehicle's offset from its place (m, ENU: where it is less where it should be).
+    pub(super) offsets: Vec<Option<Vector2<f64>>>,
+    /// Which vehicles fly on the jam layer (`crate::safety::layers`).
+    pub(super) layered: Vec<bool>,
     /// Horizontal positions (m, ENU).
     pub(super) positions: Vec<Option<Vector2<f64>>>,
     /// Horizontal commands (m/s², ENU).

@@ -103,11 +103,12 @@ impl Swarm {
     fn compose_commands(&mut self) {
         for (i, state) in self.law.states.iter().enumerate() {
             let s = state.unwrap_or_default();
+            let altitude_m = self.altitude_target_m(i);
             let slot = &mut self.slots[i];
             let u_z = self.setup.altitude_gains.acceleration_with(
                 s.pos_enu_m.z,
                 s.vel_enu_mps.z,
-                self.setup.altitude_m,
+                altitude_m,
                 slot.altitude_integral,
             );
             slot.u_z = u_z;
@@ -281,7 +282,7 @@ impl Swarm {
             self.slots[i].altitude_integral = self.setup.altitude_gains.integrate(
                 self.slots[i].altitude_integral,
                 s.pos_enu_m.z,
-                self.setup.altitude_m,
+                self.altitude_target_m(i.0),
                 dt,
                 saturated,
             );

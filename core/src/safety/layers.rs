@@ -1,0 +1,346 @@
+//! Passing a jam on another layer: a jammed vehicle leaves the formation's altitude for a
+//! layer far enough above (or below) it that the downwash ellipsoid no longer binds, flies
+//! over the vehicles that held it, and comes back once nobody is in its way.
+//!
+//! Which jammed vehicle leaves follows the semicircular rule of flight levels: the one
+//! whose way to its place points into the northern half (east included, west not). Of
+//! two vehicles head-on, exactly one leaves; vehicles going the same way stay together.
+//! A jammed vehicle held only by vehicles parked at their places leaves whatever its way
+//! (nobody else will move). A jammed vehicle on the layer whose way points south comes
+//! back as soon as nobody is under it: it is the one that stays.
+//!
+//! A layered vehicle that is no longer jammed comes back once no vehicle is within
+//! [`LayerRule::clear_m`] of it horizontally and either it is at its place or no vehicle
+//! at the formation's altitude is within `clear_m` of its straight way there.
+//!
+//! Only altitude changes: the horizontal commands, their weighted sum `Σ wᵢuᵢ` and so
+//! the velocity the law predicts are untouched, and the filter still keeps every pair
+//! apart in three dimensions while vehicles climb and descend.
+//!
+//! Pure and synchronous.
+
+use nalgebra::Vector2;
+
+use super::jam::JamWatch;
+
+/// Where the layer is and when a vehicle may leave it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LayerRule {
+    /// The layer's distance from the formation's altitude (m).
+    pub height_m: f64,
+    /// `true`: the layer is above the formation; `false`: below (a fence band with no
+    /// room above).
+    pub above: bool,
+    /// A vehicle comes back only with no other vehicle this close horizontally, and its
+    /// way to its place this clear (m).
+    pub clear_m: f64,
+}
+
+impl LayerRule {
+    /// The layer's altitude offset from the formation's (m, up).
+    pub fn offset_up_m(&self) -> f64 {
+        if self.above {
+            self.height_m
+        } else {
+            -self.height_m
+        }
+    }
+}
+
+/// What changed on a tick.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LayerChange {
+    /// Vehicles that leave for the layer.
+    pub left: Vec<usize>,
+    /// Vehicles that come back to the formation's altitude.
+    pub back: Vec<usize>,
+}
+
+/// Whether the way to a place points into the northern half (east included, west not):
+/// of two opposite ways, exactly one does.
+pub fn northern(way: Vector2<f64>) -> bool {
+    way.y > 0.0 || (way.y == 0.0 && way.x > 0.0)
+}
+
+fn segment_distance_m(q: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>) -> f64 {
+    let ab = b - a;
+    let len2 = ab.norm_squared();
+    let t = if len2 > 0.0 {
+        ((q - a).dot(&ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (a + ab * t - q).norm()
+}
+
+/// Takes a tick: the watch (which vehicles are jammed), the filter's active pair rows,
+/// each vehicle's offset from its place (m, ENU: where it is less where it should be;
+/// `None`: unknown) and horizontal position (m, ENU), and which vehicles are on the layer
+/// (`layered`, updated). `parked_m`: a vehicle not jammed and this close to its place
+/// counts as parked.
+#[allow(clippy::too_many_arguments)]
+pub fn update_layers(
+    rule: &LayerRule,
+    parked_m: f64,
+    watch: &JamWatch,
+    active: &[(usize, usize)],
+    offset_m: &[Option<Vector2<f64>>],
+    positions_m: &[Option<Vector2<f64>>],
+    layered: &mut [bool],
+) -> LayerChange {
+    let n = layered.len().min(offset_m.len()).min(positions_m.len());
+    let nobody_near = |k: usize| {
+        positions_m[k].is_some_and(|p| {
+            positions_m
+                .iter()
+                .enumerate()
+                .all(|(j, q)| j == k || q.is_none_or(|q| (q - p).norm() >= rule.clear_m))
+        })
+    };
+    let way_clear = |layered: &[bool], k: usize, offset: Vector2<f64>| {
+        positions_m[k].is_some_and(|p| {
+            positions_m.iter().enumerate().all(|(j, q)| {
+                j == k
+                    || layered.get(j).copied().unwrap_or(false)
+                    || q.is_none_or(|q| segment_distance_m(q, p, p - offset) >= rule.clear_m)
+            })
+        })
+    };
+    let parked =
+        |k: usize| !watch.is_jammed(k) && offset_m[k].is_some_and(|o| o.norm() <= parked_m);
+    let mut change = LayerChange::default();
+    for k in 0..n {
+        let Some(offset) = offset_m[k] else { continue };
+        if !watch.is_jammed(k) {
+            if layered[k]
+                && (offset.norm() <= parked_m || way_clear(layered, k, offset))
+                && nobody_near(k)
+            {
+                change.back.push(k);
+            }
+            continue;
+        }
+        if northern(-offset) {
+            if !layered[k] {
+                change.left.push(k);
+            }
+            continue;
+        }
+        if layered[k] {
+            if nobody_near(k) {
+                change.back.push(k);
+            }
+            continue;
+        }
+        let mut partners = active
+            .iter()
+            .filter(|&&(i, j)| i != j && (i == k || j == k))
+            .map(|&(i, j)| if i == k { j } else { i })
+            .peekable();
+        if partners.peek().is_some() && partners.all(|o| o < n && parked(o)) {
+            change.left.push(k);
+        }
+    }
+    for &k in &change.left {
+        layered[k] = true;
+    }
+    for &k in &change.back {
+        layered[k] = false;
+    }
+    change
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::safety::jam::JamSettings;
+    use ringswarm_wire::time::SimTime;
+
+    const RULE: LayerRule = LayerRule {
+        height_m: 12.0,
+        above: true,
+        clear_m: 3.6,
+    };
+
+    /// A watch with `jammed` held against each other for 5 s (the default hold).
+    fn watch_with(n: usize, rows: &[(usize, usize)], jammed: &[usize]) -> JamWatch {
+        let settings = JamSettings::default();
+        let mut watch = JamWatch::default();
+        let errors: Vec<Option<f64>> = (0..n)
+            .map(|k| Some(if jammed.contains(&k) { 8.0 } else { 0.2 }))
+            .collect();
+        for k in 0..=250 {
+            watch.update(
+                &settings,
+                SimTime::from_secs_f64(f64::from(k) * 0.02),
+                rows,
+                &errors,
+            );
+        }
+        for k in 0..n {
+            assert_eq!(watch.is_jammed(k), jammed.contains(&k), "vehicle {k}");
+        }
+        watch
+    }
+
+    fn v(x: f64, y: f64) -> Option<Vector2<f64>> {
+        Some(Vector2::new(x, y))
+    }
+
+    #[test]
+    fn of_two_opposite_ways_exactly_one_is_northern() {
+        for deg in (0..360).step_by(15) {
+            let a = f64::from(deg).to_radians();
+            let way = Vector2::new(a.cos(), a.sin());
+            let (way, back) = if deg % 90 == 0 {
+                // Exact axes: no rounding in the components.
+                let axis = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)][deg as usize / 90];
+                (Vector2::new(axis.0, axis.1), -Vector2::new(axis.0, axis.1))
+            } else {
+                (way, -way)
+            };
+            assert_ne!(northern(way), northern(back), "{deg}°");
+        }
+        assert!(northern(Vector2::new(1.0, 0.0)));
+        assert!(!northern(Vector2::new(-1.0, 0.0)));
+        assert!(northern(Vector2::new(-1.0, 0.01)));
+    }
+
+    #[test]
+    fn of_a_head_on_pair_the_northbound_vehicle_leaves_and_comes_back_past_it() {
+        // Vehicle 0 at (0, -2) bound north to (0, 8); vehicle 1 at (0, 2) bound south to
+        // (0, -8): offsets are where they are less where they should be.
+        let watch = watch_with(2, &[(0, 1)], &[0, 1]);
+        let positions = [v(0.0, -2.0), v(0.0, 2.0)];
+        let offsets = [v(0.0, -10.0), v(0.0, 10.0)];
+        let mut layered = [false; 2];
+        let change = update_layers(
+            &RULE,
+            1.0,
+            &watch,
+            &[(0, 1)],
+            &offsets,
+            &positions,
+            &mut layered,
+        );
+        assert_eq!(change.left, vec![0]);
+        assert!(change.back.is_empty());
+        assert_eq!(layered, [true, false]);
+        // Still jammed, right over the other: it stays up.
+        let change = update_layers(
+            &RULE,
+            1.0,
+            &watch,
+            &[],
+            &offsets,
+            &[v(0.0, 1.0), v(0.0, 2.0)],
+            &mut layered,
+        );
+        assert_eq!(change, LayerChange::default());
+        // Released, 3 m past the other and 6 m short of its place, the way there clear:
+        // it comes back. 3 m from the other is inside clear_m: not yet.
+        let free = JamWatch::default();
+        let change = update_layers(
+            &RULE,
+            1.0,
+            &free,
+            &[],
+            &[v(0.0, -6.0), v(0.0, 10.0)],
+            &[v(0.0, 5.0), v(0.0, 2.0)],
+            &mut layered,
+        );
+        assert!(change.back.is_empty());
+        let change = update_layers(
+            &RULE,
+            1.0,
+            &free,
+            &[],
+            &[v(0.0, -5.0), v(0.0, 10.0)],
+            &[v(0.0, 6.0), v(0.0, 2.0)],
+            &mut layered,
+        );
+        assert_eq!(change.back, vec![0]);
+        assert_eq!(layered, [false, false]);
+    }
+
+    #[test]
+    fn a_layered_vehicle_stays_up_while_one_below_is_on_its_way() {
+        // Released, 4 m from the vehicle below, but that vehicle sits on its way.
+        let free = JamWatch::default();
+        let mut layered = [true, false];
+        let change = update_layers(
+            &RULE,
+            1.0,
+            &free,
+            &[],
+            &[v(0.0, -10.0), v(0.0, 0.0)],
+            &[v(0.0, -2.0), v(0.0, 2.0)],
+            &mut layered,
+        );
+        assert!(change.back.is_empty());
+        // At its place (within 1 m) with nobody near, the way does not matter.
+        let change = update_layers(
+            &RULE,
+            1.0,
+            &free,
+            &[],
+            &[v(0.0, -0.5), v(0.0, 0.0)],
+            &[v(0.0, -2.0), v(0.0, 2.0)],
+            &mut layered,
+        );
+        assert_eq!(change.back, vec![0]);
+    }
+
+    #[test]
+    fn a_southbound_vehicle_leaves_only_when_held_by_parked_vehicles() {
+        // Vehicle 0 bound south, held by vehicle 1 parked at its place: it leaves.
+        let watch = watch_with(2, &[(0, 1)], &[0]);
+        let mut layered = [false; 2];
+        let change = update_layers(
+            &RULE,
+            1.0,
+            &watch,
+            &[(0, 1)],
+            &[v(0.0, 10.0), v(0.0, 0.2)],
+            &[v(0.0, 2.0), v(0.0, -1.5)],
+            &mut layered,
+        );
+        assert_eq!(change.left, vec![0]);
+        // Held by a vehicle that is jammed too (both south, side by side): it stays.
+        let watch = watch_with(2, &[(0, 1)], &[0, 1]);
+        let mut layered = [false; 2];
+        let change = update_layers(
+            &RULE,
+            1.0,
+            &watch,
+            &[(0, 1)],
+            &[v(0.0, 10.0), v(0.0, 10.0)],
+            &[v(-1.6, 2.0), v(1.6, 2.0)],
+            &mut layered,
+        );
+        assert_eq!(change, LayerChange::default());
+        // A jammed southbound vehicle already on the layer comes back once nobody is near.
+        let watch = watch_with(2, &[(0, 1)], &[0, 1]);
+        let mut layered = [true, false];
+        let change = update_layers(
+            &RULE,
+            1.0,
+            &watch,
+            &[(0, 1)],
+            &[v(0.0, 10.0), v(0.0, 10.0)],
+            &[v(0.0, 2.0), v(5.0, 2.0)],
+            &mut layered,
+        );
+        assert_eq!(change.back, vec![0]);
+    }
+
+    #[test]
+    fn the_layer_is_above_or_below() {
+        assert_eq!(RULE.offset_up_m(), 12.0);
+        let below = LayerRule {
+            above: false,
+            ..RULE
+        };
+        assert_eq!(below.offset_up_m(), -12.0);
+    }
+}
