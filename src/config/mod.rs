@@ -174,6 +174,9 @@ pub struct SafetySection {
     /// `vertical_m + horizontal_m`: clear of the downwash ellipsoid by a horizontal
     /// separation; at least `vertical_m`).
     pub jam_layer_m: Option<f64>,
+    /// The least time a vehicle stays on the jam layer unless it reaches its place (s,
+    /// default 20).
+    pub jam_layer_s: f64,
     /// The turning acceleration of a jammed pair of equal weights, each (m/s², default 1).
     pub jam_turn_mps2: f64,
     /// The share of the control period the filter may take in a flight in real time
@@ -195,6 +198,7 @@ impl Default for SafetySection {
             jam_hold_s: 5.0,
             jam_break: JamBreak::Layer,
             jam_layer_m: None,
+            jam_layer_s: 20.0,
             jam_turn_mps2: 1.0,
             budget_share: 0.2,
         }

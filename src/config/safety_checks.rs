@@ -30,6 +30,7 @@ impl Config {
         ok &= p.positive("safety.braking_share", s.braking_share, 1.0, "");
         ok &= p.positive("safety.jam_hold_s", s.jam_hold_s, 600.0, " s");
         ok &= p.positive("safety.jam_turn_mps2", s.jam_turn_mps2, 20.0, " m/s²");
+        ok &= p.positive("safety.jam_layer_s", s.jam_layer_s, 3600.0, " s");
         let layer_m = s.jam_layer_m.unwrap_or(s.vertical_m + s.horizontal_m);
         ok &= p.within(
             "safety.jam_layer_m",
@@ -109,6 +110,7 @@ impl Config {
             height_m: layer_m,
             above,
             clear_m: LAYER_CLEAR_SHARE * self.safety.horizontal_m,
+            dwell_s: self.safety.jam_layer_s,
         })
     }
 

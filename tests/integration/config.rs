@@ -687,6 +687,13 @@ fn the_jam_layer_fits_the_fence_band_above_or_below_or_is_refused() {
         (12.0, true, 12.0)
     );
     assert!((up.clear_m - 3.6).abs() < 1e-12);
+    assert_eq!(up.dwell_s, 20.0);
+    let e = rule("jam_layer_s = 0.0", None).unwrap_err();
+    assert!(
+        e.lines()
+            .any(|l| l.starts_with("safety.jam_layer_s must be a finite number in (0, 3600] s")),
+        "{e}"
+    );
     // A band up to 63 m (margin 2): 50 + 12 > 61, so below, 50 - 12 ≥ 0 + 2.
     let down = rule("", Some((0.0, 63.0))).unwrap().unwrap();
     assert_eq!((down.above, down.offset_up_m()), (false, -12.0));

@@ -10,8 +10,10 @@
 //! back as soon as nobody is under it: it is the one that stays.
 //!
 //! A layered vehicle that is no longer jammed comes back once no vehicle is within
-//! [`LayerRule::clear_m`] of it horizontally and either it is at its place or no vehicle
-//! at the formation's altitude is within `clear_m` of its straight way there.
+//! [`LayerRule::clear_m`] of it horizontally and either it is at its place or, after
+//! [`LayerRule::dwell_s`] on the layer, no vehicle at the formation's altitude is within
+//! `clear_m` of its straight way there. Without the dwell a vehicle comes back the moment
+//! the vehicles it passes have stepped aside, and meets them again.
 //!
 //! Only altitude changes: the horizontal commands, their weighted sum `Σ wᵢuᵢ` and so
 //! the velocity the law predicts are untouched, and the filter still keeps every pair
@@ -20,6 +22,7 @@
 //! Pure and synchronous.
 
 use nalgebra::Vector2;
+use ringswarm_wire::time::SimTime;
 
 use super::jam::JamWatch;
 
@@ -34,6 +37,8 @@ pub struct LayerRule {
     /// A vehicle comes back only with no other vehicle this close horizontally, and its
     /// way to its place this clear (m).
     pub clear_m: f64,
+    /// The least time a vehicle stays on the layer unless it reaches its place.
+    pub dwell_s: f64,
 }
 
 impl LayerRule {
@@ -73,20 +78,22 @@ fn segment_distance_m(q: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>) -> f64 
     (a + ab * t - q).norm()
 }
 
-/// Takes a tick: the watch (which vehicles are jammed), the filter's active pair rows,
-/// each vehicle's offset from its place (m, ENU: where it is less where it should be;
-/// `None`: unknown) and horizontal position (m, ENU), and which vehicles are on the layer
-/// (`layered`, updated). `parked_m`: a vehicle not jammed and this close to its place
-/// counts as parked.
+/// Takes a tick at `now`: the watch (which vehicles are jammed), the filter's active
+/// pair rows, each vehicle's offset from its place (m, ENU: where it is less where it
+/// should be; `None`: unknown) and horizontal position (m, ENU), and since when each
+/// vehicle has been on the layer (`layered`, `None`: at the formation's altitude;
+/// updated). `parked_m`: a vehicle not jammed and this close to its place counts as
+/// parked; it is also how close to its place a vehicle may come back before the dwell.
 #[allow(clippy::too_many_arguments)]
 pub fn update_layers(
     rule: &LayerRule,
+    now: SimTime,
     parked_m: f64,
     watch: &JamWatch,
     active: &[(usize, usize)],
     offset_m: &[Option<Vector2<f64>>],
     positions_m: &[Option<Vector2<f64>>],
-    layered: &mut [bool],
+    layered: &mut [Option<SimTime>],
 ) -> LayerChange {
     let n = layered.len().min(offset_m.len()).min(positions_m.len());
     let nobody_near = |k: usize| {
@@ -97,11 +104,11 @@ pub fn update_layers(
                 .all(|(j, q)| j == k || q.is_none_or(|q| (q - p).norm() >= rule.clear_m))
         })
     };
-    let way_clear = |layered: &[bool], k: usize, offset: Vector2<f64>| {
+    let way_clear = |layered: &[Option<SimTime>], k: usize, offset: Vector2<f64>| {
         positions_m[k].is_some_and(|p| {
             positions_m.iter().enumerate().all(|(j, q)| {
                 j == k
-                    || layered.get(j).copied().unwrap_or(false)
+                    || layered.get(j).is_some_and(Option::is_some)
                     || q.is_none_or(|q| segment_distance_m(q, p, p - offset) >= rule.clear_m)
             })
         })
@@ -111,23 +118,26 @@ pub fn update_layers(
     let mut change = LayerChange::default();
     for k in 0..n {
         let Some(offset) = offset_m[k] else { continue };
+        let at_place = offset.norm() <= parked_m;
+        // On the layer, and there long enough (or at its place) to come back.
+        let up = layered[k].is_some();
+        let may_come_back = layered[k].is_some_and(|since| {
+            at_place || now.saturating_since(since).as_secs_f64() >= rule.dwell_s
+        });
         if !watch.is_jammed(k) {
-            if layered[k]
-                && (offset.norm() <= parked_m || way_clear(layered, k, offset))
-                && nobody_near(k)
-            {
+            if may_come_back && (at_place || way_clear(layered, k, offset)) && nobody_near(k) {
                 change.back.push(k);
             }
             continue;
         }
         if northern(-offset) {
-            if !layered[k] {
+            if !up {
                 change.left.push(k);
             }
             continue;
         }
-        if layered[k] {
-            if nobody_near(k) {
+        if up {
+            if may_come_back && nobody_near(k) {
                 change.back.push(k);
             }
             continue;
@@ -142,10 +152,10 @@ pub fn update_layers(
         }
     }
     for &k in &change.left {
-        layered[k] = true;
+        layered[k] = Some(now);
     }
     for &k in &change.back {
-        layered[k] = false;
+        layered[k] = None;
     }
     change
 }
@@ -160,7 +170,14 @@ mod tests {
         height_m: 12.0,
         above: true,
         clear_m: 3.6,
+        dwell_s: 20.0,
     };
+
+    fn at(s: f64) -> SimTime {
+        SimTime::from_secs_f64(s)
+    }
+
+    const UP: Option<SimTime> = Some(SimTime::ZERO);
 
     /// A watch with `jammed` held against each other for 5 s (the default hold).
     fn watch_with(n: usize, rows: &[(usize, usize)], jammed: &[usize]) -> JamWatch {
@@ -213,9 +230,11 @@ mod tests {
         let watch = watch_with(2, &[(0, 1)], &[0, 1]);
         let positions = [v(0.0, -2.0), v(0.0, 2.0)];
         let offsets = [v(0.0, -10.0), v(0.0, 10.0)];
-        let mut layered = [false; 2];
+        let mut layered = [None; 2];
+        let now = at(0.0);
         let change = update_layers(
             &RULE,
+            now,
             1.0,
             &watch,
             &[(0, 1)],
@@ -225,10 +244,12 @@ mod tests {
         );
         assert_eq!(change.left, vec![0]);
         assert!(change.back.is_empty());
-        assert_eq!(layered, [true, false]);
+        assert_eq!(layered, [UP, None]);
         // Still jammed, right over the other: it stays up.
+        let now = at(1.0);
         let change = update_layers(
             &RULE,
+            now,
             1.0,
             &watch,
             &[],
@@ -237,11 +258,13 @@ mod tests {
             &mut layered,
         );
         assert_eq!(change, LayerChange::default());
-        // Released, 3 m past the other and 6 m short of its place, the way there clear:
-        // it comes back. 3 m from the other is inside clear_m: not yet.
+        // Released, 3 m past the other and 6 m short of its place: 3 m from the other is
+        // inside clear_m, it stays up.
         let free = JamWatch::default();
+        let now = at(25.0);
         let change = update_layers(
             &RULE,
+            now,
             1.0,
             &free,
             &[],
@@ -250,26 +273,34 @@ mod tests {
             &mut layered,
         );
         assert!(change.back.is_empty());
-        let change = update_layers(
-            &RULE,
-            1.0,
-            &free,
-            &[],
-            &[v(0.0, -5.0), v(0.0, 10.0)],
-            &[v(0.0, 6.0), v(0.0, 2.0)],
-            &mut layered,
-        );
-        assert_eq!(change.back, vec![0]);
-        assert_eq!(layered, [false, false]);
+        // 4 m past it, 5 m short of its place, the way there clear: it comes back once it
+        // has been up for the dwell (20 s), not before.
+        let past = |now, layered: &mut [Option<SimTime>]| {
+            update_layers(
+                &RULE,
+                now,
+                1.0,
+                &free,
+                &[],
+                &[v(0.0, -5.0), v(0.0, 10.0)],
+                &[v(0.0, 6.0), v(0.0, 2.0)],
+                layered,
+            )
+        };
+        assert!(past(at(19.9), &mut [UP, None]).back.is_empty());
+        assert_eq!(past(at(20.0), &mut layered).back, vec![0]);
+        assert_eq!(layered, [None, None]);
     }
 
     #[test]
     fn a_layered_vehicle_stays_up_while_one_below_is_on_its_way() {
         // Released, 4 m from the vehicle below, but that vehicle sits on its way.
         let free = JamWatch::default();
-        let mut layered = [true, false];
+        let mut layered = [UP, None];
+        let now = at(30.0);
         let change = update_layers(
             &RULE,
+            now,
             1.0,
             &free,
             &[],
@@ -278,9 +309,12 @@ mod tests {
             &mut layered,
         );
         assert!(change.back.is_empty());
-        // At its place (within 1 m) with nobody near, the way does not matter.
+        // At its place (within 1 m) with nobody near, neither the way nor the dwell
+        // matters.
+        let now = at(1.0);
         let change = update_layers(
             &RULE,
+            now,
             1.0,
             &free,
             &[],
@@ -295,9 +329,11 @@ mod tests {
     fn a_southbound_vehicle_leaves_only_when_held_by_parked_vehicles() {
         // Vehicle 0 bound south, held by vehicle 1 parked at its place: it leaves.
         let watch = watch_with(2, &[(0, 1)], &[0]);
-        let mut layered = [false; 2];
+        let mut layered = [None; 2];
+        let now = at(0.0);
         let change = update_layers(
             &RULE,
+            now,
             1.0,
             &watch,
             &[(0, 1)],
@@ -308,9 +344,10 @@ mod tests {
         assert_eq!(change.left, vec![0]);
         // Held by a vehicle that is jammed too (both south, side by side): it stays.
         let watch = watch_with(2, &[(0, 1)], &[0, 1]);
-        let mut layered = [false; 2];
+        let mut layered = [None; 2];
         let change = update_layers(
             &RULE,
+            now,
             1.0,
             &watch,
             &[(0, 1)],
@@ -319,11 +356,14 @@ mod tests {
             &mut layered,
         );
         assert_eq!(change, LayerChange::default());
-        // A jammed southbound vehicle already on the layer comes back once nobody is near.
+        // A jammed southbound vehicle on the layer for the dwell comes back once nobody is
+        // near.
         let watch = watch_with(2, &[(0, 1)], &[0, 1]);
-        let mut layered = [true, false];
+        let mut layered = [UP, None];
+        let now = at(20.0);
         let change = update_layers(
             &RULE,
+            now,
             1.0,
             &watch,
             &[(0, 1)],

@@ -129,7 +129,7 @@ impl Swarm {
             .safety
             .and_then(|s| s.jams)
             .and_then(|j| j.layer)
-            .filter(|_| self.safety.jams.layered.get(i).copied().unwrap_or(false));
+            .filter(|_| self.safety.jams.layered.get(i).is_some_and(Option::is_some));
         self.setup.altitude_m + layer.map_or(0.0, |rule| rule.offset_up_m())
     }
 
@@ -137,9 +137,10 @@ impl Swarm {
     fn pass_on_the_layer(&mut self, now: SimTime, settings: &JamSettings, rule: &LayerRule) {
         let n = self.vehicle_count();
         let work = &mut self.safety.jams;
-        work.layered.resize(n, false);
+        work.layered.resize(n, None);
         let change = update_layers(
             rule,
+            now,
             settings.min_error_m,
             &work.watch,
             self.safety.filter.active_rows(),
@@ -174,11 +175,13 @@ impl Swarm {
     /// Out of consensus every vehicle flies at the formation's altitude again.
     fn leave_the_jam_layer(&mut self, now: SimTime) {
         let layered = &mut self.safety.jams.layered;
-        if !layered.iter().any(|&l| l) {
+        if !layered.iter().any(Option::is_some) {
             return;
         }
-        let back: Vec<usize> = (0..layered.len()).filter(|&k| layered[k]).collect();
-        layered.iter_mut().for_each(|l| *l = false);
+        let back: Vec<usize> = (0..layered.len())
+            .filter(|&k| layered[k].is_some())
+            .collect();
+        layered.iter_mut().for_each(|l| *l = None);
         let names: Vec<String> = back
             .iter()
             .map(|&k| self.setup.links[k].file_label())

@@ -95,8 +95,9 @@ pub(super) struct JamWork {
     pub(super) errors: Vec<Option<f64>>,
     /// Each vehicle's offset from its place (m, ENU: where it is less where it should be).
     pub(super) offsets: Vec<Option<Vector2<f64>>>,
-    /// Which vehicles fly on the jam layer (`crate::safety::layers`).
-    pub(super) layered: Vec<bool>,
+    /// Since when each vehicle has flown on the jam layer (`crate::safety::layers`;
+    /// `None`: at the formation's altitude).
+    pub(super) layered: Vec<Option<ringswarm_wire::time::SimTime>>,
     /// Horizontal positions (m, ENU).
     pub(super) positions: Vec<Option<Vector2<f64>>>,
     /// Horizontal commands (m/s², ENU).
