@@ -11,11 +11,11 @@
 //! the same). It stays jammed until it has not been held for [`JamSettings::release_s`].
 //!
 //! [`crate::safety::layers`] breaks them by sending one side of each jam over the other
-//! on another layer (the default). [`rotation_bias`] breaks them in the plane instead, with a
-//! consistent rotational preference: every active
-//! pair with a jammed vehicle turns about its midpoint counter-clockwise (seen from
-//! above), each vehicle accelerated along the pair's normal turned by +90°, the two in
-//! opposite directions and in inverse proportion to their weights. Like a barrier row,
+//! on another layer (the default). [`rotation_bias`] breaks them in the plane instead,
+//! with a consistent rotational preference: every active pair with a jammed vehicle
+//! turns about its midpoint counter-clockwise (seen from above), each vehicle
+//! accelerated along the pair's normal turned by +90°, the two in opposite directions
+//! and in inverse proportion to their weights. Like a barrier row,
 //! the bias is `+a` on one vehicle and `−a` on the other in weighted terms, so it keeps
 //! `Σ wᵢuᵢ` (and with it the consensus value); the filter after it still keeps every
 //! pair apart.
