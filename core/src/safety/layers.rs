@@ -24,8 +24,6 @@
 use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
-use super::jam::JamWatch;
-
 /// Where the layer is and when a vehicle may leave it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LayerRule {
@@ -78,7 +76,7 @@ fn segment_distance_m(q: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>) -> f64 
     (a + ab * t - q).norm()
 }
 
-/// Takes a tick at `now`: the watch (which vehicles are jammed), the filter's active
+/// Takes a tick at `now`: which vehicles are jammed (`crate::safety::jam`), the filter's active
 /// pair rows, each vehicle's offset from its place (m, ENU: where it is less where it
 /// should be; `None`: unknown) and horizontal position (m, ENU), and since when each
 /// vehicle has been on the layer (`layered`, `None`: at the formation's altitude;
@@ -89,7 +87,7 @@ pub fn update_layers(
     rule: &LayerRule,
     now: SimTime,
     parked_m: f64,
-    watch: &JamWatch,
+    jammed: impl Fn(usize) -> bool,
     active: &[(usize, usize)],
     offset_m: &[Option<Vector2<f64>>],
     positions_m: &[Option<Vector2<f64>>],
@@ -113,8 +111,7 @@ pub fn update_layers(
             })
         })
     };
-    let parked =
-        |k: usize| !watch.is_jammed(k) && offset_m[k].is_some_and(|o| o.norm() <= parked_m);
+    let parked = |k: usize| !jammed(k) && offset_m[k].is_some_and(|o| o.norm() <= parked_m);
     let mut change = LayerChange::default();
     for k in 0..n {
         let Some(offset) = offset_m[k] else { continue };
@@ -124,7 +121,7 @@ pub fn update_layers(
         let may_come_back = layered[k].is_some_and(|since| {
             at_place || now.saturating_since(since).as_secs_f64() >= rule.dwell_s
         });
-        if !watch.is_jammed(k) {
+        if !jammed(k) {
             if may_come_back && (at_place || way_clear(layered, k, offset)) && nobody_near(k) {
                 change.back.push(k);
             }
@@ -163,7 +160,6 @@ pub fn update_layers(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::safety::jam::JamSettings;
     use ringswarm_wire::time::SimTime;
 
     const RULE: LayerRule = LayerRule {
@@ -179,25 +175,9 @@ mod tests {
 
     const UP: Option<SimTime> = Some(SimTime::ZERO);
 
-    /// A watch with `jammed` held against each other for 5 s (the default hold).
-    fn watch_with(n: usize, rows: &[(usize, usize)], jammed: &[usize]) -> JamWatch {
-        let settings = JamSettings::default();
-        let mut watch = JamWatch::default();
-        let errors: Vec<Option<f64>> = (0..n)
-            .map(|k| Some(if jammed.contains(&k) { 8.0 } else { 0.2 }))
-            .collect();
-        for k in 0..=250 {
-            watch.update(
-                &settings,
-                SimTime::from_secs_f64(f64::from(k) * 0.02),
-                rows,
-                &errors,
-            );
-        }
-        for k in 0..n {
-            assert_eq!(watch.is_jammed(k), jammed.contains(&k), "vehicle {k}");
-        }
-        watch
+    /// Jammed: the listed vehicles.
+    fn jammed_of(jammed: &[usize]) -> impl Fn(usize) -> bool + '_ {
+        move |k| jammed.contains(&k)
     }
 
     fn v(x: f64, y: f64) -> Option<Vector2<f64>> {
@@ -227,7 +207,7 @@ mod tests {
     fn of_a_head_on_pair_the_northbound_vehicle_leaves_and_comes_back_past_it() {
         // Vehicle 0 at (0, -2) bound north to (0, 8); vehicle 1 at (0, 2) bound south to
         // (0, -8): offsets are where they are less where they should be.
-        let watch = watch_with(2, &[(0, 1)], &[0, 1]);
+        let watch = jammed_of(&[0, 1]);
         let positions = [v(0.0, -2.0), v(0.0, 2.0)];
         let offsets = [v(0.0, -10.0), v(0.0, 10.0)];
         let mut layered = [None; 2];
@@ -260,7 +240,7 @@ mod tests {
         assert_eq!(change, LayerChange::default());
         // Released, 3 m past the other and 6 m short of its place: 3 m from the other is
         // inside clear_m, it stays up.
-        let free = JamWatch::default();
+        let free = jammed_of(&[]);
         let now = at(25.0);
         let change = update_layers(
             &RULE,
@@ -295,7 +275,7 @@ mod tests {
     #[test]
     fn a_layered_vehicle_stays_up_while_one_below_is_on_its_way() {
         // Released, 4 m from the vehicle below, but that vehicle sits on its way.
-        let free = JamWatch::default();
+        let free = jammed_of(&[]);
         let mut layered = [UP, None];
         let now = at(30.0);
         let change = update_layers(
@@ -328,7 +308,7 @@ mod tests {
     #[test]
     fn a_southbound_vehicle_leaves_only_when_held_by_parked_vehicles() {
         // Vehicle 0 bound south, held by vehicle 1 parked at its place: it leaves.
-        let watch = watch_with(2, &[(0, 1)], &[0]);
+        let watch = jammed_of(&[0]);
         let mut layered = [None; 2];
         let now = at(0.0);
         let change = update_layers(
@@ -343,7 +323,7 @@ mod tests {
         );
         assert_eq!(change.left, vec![0]);
         // Held by a vehicle that is jammed too (both south, side by side): it stays.
-        let watch = watch_with(2, &[(0, 1)], &[0, 1]);
+        let watch = jammed_of(&[0, 1]);
         let mut layered = [None; 2];
         let change = update_layers(
             &RULE,
@@ -358,7 +338,7 @@ mod tests {
         assert_eq!(change, LayerChange::default());
         // A jammed southbound vehicle on the layer for the dwell comes back once nobody is
         // near.
-        let watch = watch_with(2, &[(0, 1)], &[0, 1]);
+        let watch = jammed_of(&[0, 1]);
         let mut layered = [UP, None];
         let now = at(20.0);
         let change = update_layers(

@@ -142,7 +142,7 @@ impl Swarm {
             rule,
             now,
             settings.min_error_m,
-            &work.watch,
+            |k| work.watch.is_jammed(k),
             self.safety.filter.active_rows(),
             &work.offsets,
             &work.positions,
