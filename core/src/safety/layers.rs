@@ -76,12 +76,13 @@ fn segment_distance_m(q: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>) -> f64 
     (a + ab * t - q).norm()
 }
 
-/// Takes a tick at `now`: which vehicles are jammed (`crate::safety::jam`), the filter's active
-/// pair rows, each vehicle's offset from its place (m, ENU: where it is less where it
-/// should be; `None`: unknown) and horizontal position (m, ENU), and since when each
-/// vehicle has been on the layer (`layered`, `None`: at the formation's altitude;
-/// updated). `parked_m`: a vehicle not jammed and this close to its place counts as
-/// parked; it is also how close to its place a vehicle may come back before the dwell.
+/// Takes a tick at `now`: which vehicles are jammed (`crate::safety::jam`), the
+/// filter's active pair rows, each vehicle's offset from its place (m, ENU: where it is
+/// less where it should be; `None`: unknown) and horizontal position (m, ENU), and since
+/// when each vehicle has been on the layer (`layered`, `None`: at the formation's
+/// altitude; updated). `parked_m`: a vehicle not jammed and this close to its place
+/// counts as parked; it is also how close to its place a vehicle may come back before
+/// the dwell.
 #[allow(clippy::too_many_arguments)]
 pub fn update_layers(
     rule: &LayerRule,
