@@ -86,7 +86,7 @@ fn zenoh(args: &ViewArgs) -> anyhow::Result<()> {
         layout.names.len(),
         setup.links.len()
     );
-    let mut watch = SwarmWatch::new(&setup, layout.names.clone());
+    let mut watch = SwarmWatch::new(&setup, layout.names.clone(), layout.owner.clone());
     let unix_us = || {
         std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)

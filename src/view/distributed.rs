@@ -10,10 +10,14 @@
 //!   lost vehicle, `ended` when every shard's flight is over.
 //! - The prediction is what every shard computes: the start sums added in shard order.
 //! - The mean velocity is every shard's latest `Σ wᵢvᵢ` over `Σ wᵢ`.
+//! - The places, with interchangeable places, are the shards': once every shard has sent
+//!   its vehicles' positions at one start, the watch assigns from all of them as each
+//!   shard does, so the formation error is measured against the places flown.
 
 use nalgebra::Vector2;
 
-use crate::distributed::{ShardMessage, ShardReport, VehicleReport};
+use crate::assignment::assign_places;
+use crate::distributed::{ShardMessage, ShardReport, StartPositions, VehicleReport};
 use crate::swarm::SwarmSetup;
 use crate::view::state::{EventView, PairView, VehicleView, ViewState, formation_targets};
 
@@ -25,7 +29,18 @@ const SILENT_AFTER_US: u64 = 1_500_000;
 pub struct SwarmWatch {
     sysids: Vec<u8>,
     networks: Vec<Option<String>>,
+    /// The configured places, in ring order (m, ENU, from the formation's centre).
     offsets_m: Vec<Vector2<f64>>,
+    /// The places flown: the configured ones, or the ones assigned at the last start.
+    places_m: Vec<Vector2<f64>>,
+    /// Whether the places are assigned at each start of consensus.
+    assign: bool,
+    /// Each vehicle's shard (index into the names), in ring order.
+    owner: Vec<usize>,
+    /// Each shard's newest positions at a start of consensus.
+    start_positions: Vec<Option<StartPositions>>,
+    /// The start the places were last assigned at (µs, swarm clock).
+    assigned_at_us: Option<u64>,
     w: Vec<f64>,
     altitude_m: f64,
     shard_names: Vec<String>,
@@ -44,14 +59,20 @@ pub struct SwarmWatch {
 }
 
 impl SwarmWatch {
-    /// A watch of the swarm `setup` describes, split into the shards `shard_names`.
-    pub fn new(setup: &SwarmSetup, shard_names: Vec<String>) -> Self {
+    /// A watch of the swarm `setup` describes, split into the shards `shard_names`, each
+    /// vehicle flown by its `owner` (index into the names, in ring order).
+    pub fn new(setup: &SwarmSetup, shard_names: Vec<String>, owner: Vec<usize>) -> Self {
         let n = setup.links.len();
         let shards = shard_names.len();
         Self {
             sysids: setup.links.iter().map(|l| l.system_id).collect(),
             networks: setup.links.iter().map(|l| l.network.clone()).collect(),
             offsets_m: setup.offsets_m.clone(),
+            places_m: setup.offsets_m.clone(),
+            assign: setup.assign_places,
+            owner,
+            start_positions: vec![None; shards],
+            assigned_at_us: None,
             w: (0..n).map(|i| setup.ring.w(i)).collect(),
             altitude_m: setup.altitude_m,
             shard_names,
@@ -113,6 +134,10 @@ impl SwarmWatch {
                     return;
                 }
                 *slot = Some((now_us, r.clone()));
+                if let Some(p) = &r.start_positions {
+                    self.start_positions[s] = Some(p.clone());
+                    self.assign_places(now_us);
+                }
                 let name = self.shard_names[s].clone();
                 if first || self.silent[s] {
                     self.silent[s] = false;
@@ -129,6 +154,47 @@ impl SwarmWatch {
                     );
                 }
             }
+        }
+    }
+
+    /// With interchangeable places, once every shard has sent its vehicles' positions at
+    /// one start not yet assigned: the places every shard assigns from them.
+    fn assign_places(&mut self, now_us: u64) {
+        if !self.assign {
+            return;
+        }
+        let Some(Some(first)) = self.start_positions.first() else {
+            return;
+        };
+        let at_us = first.at_us;
+        if self.assigned_at_us == Some(at_us) {
+            return;
+        }
+        let mut lists = Vec::with_capacity(self.start_positions.len());
+        for (s, p) in self.start_positions.iter().enumerate() {
+            let Some(p) = p.as_ref().filter(|p| p.at_us == at_us) else {
+                return;
+            };
+            if p.pos_m.len() != self.owner.iter().filter(|&&o| o == s).count() {
+                return;
+            }
+            lists.push(p.pos_m.iter());
+        }
+        let positions: Option<Vec<Vector2<f64>>> = self
+            .owner
+            .iter()
+            .map(|&s| lists.get_mut(s)?.next().map(|&[x, y]| Vector2::new(x, y)))
+            .collect();
+        let Some(positions) = positions else {
+            return;
+        };
+        self.assigned_at_us = Some(at_us);
+        match assign_places(&positions, &self.offsets_m) {
+            Ok(a) => {
+                self.places_m = a.place_of.iter().map(|&p| self.offsets_m[p]).collect();
+                self.log(now_us, false, a.event_text());
+            }
+            Err(e) => self.log(now_us, true, format!("places not assigned: {e}")),
         }
     }
 
@@ -210,7 +276,7 @@ impl SwarmWatch {
                 v.map(|(_, r)| Vector2::new(f64::from(r.pos_enu_m[0]), f64::from(r.pos_enu_m[1])))
             })
             .collect();
-        let targets = formation_targets(&xy, &self.offsets_m, &self.w);
+        let targets = formation_targets(&xy, &self.places_m, &self.w);
         let formation_error_m = targets.as_ref().and_then(|(_, t)| {
             xy.iter()
                 .zip(t)
@@ -353,7 +419,7 @@ mod tests {
     fn the_prediction_is_the_start_sums_in_shard_order_and_the_phase_follows_the_shards() {
         let setup = setup();
         let names = ["a", "b", "c"].map(str::to_owned).to_vec();
-        let mut watch = SwarmWatch::new(&setup, names);
+        let mut watch = SwarmWatch::new(&setup, names, vec![0, 0, 1, 1, 2, 2]);
         let sum = |wv: [f64; 2], w: f64| WeightedSum {
             wp_m: [0.0, 0.0],
             wv_mps: wv,
@@ -404,7 +470,11 @@ mod tests {
     #[test]
     fn vehicles_take_their_newest_report_and_their_age_counts_the_hop() {
         let setup = setup();
-        let mut watch = SwarmWatch::new(&setup, ["a", "b", "c"].map(str::to_owned).to_vec());
+        let mut watch = SwarmWatch::new(
+            &setup,
+            ["a", "b", "c"].map(str::to_owned).to_vec(),
+            vec![0, 0, 1, 1, 2, 2],
+        );
         let t0 = 5_000_000;
         watch.handle(
             t0 + 30_000,
@@ -427,5 +497,79 @@ mod tests {
         assert!(state.vehicles[0].position_enu_m.is_none());
         assert_eq!(state.formation_error_m, None, "not every vehicle known");
         assert_eq!(watch.refused(), 1);
+    }
+
+    #[test]
+    fn interchangeable_places_are_assigned_from_every_shard_s_start_positions() {
+        let text = std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/paper-sim1.toml"),
+        )
+        .expect("paper-sim1.toml");
+        let mut config = crate::config::Config::from_toml(&text).expect("parses");
+        config.formation.assign = Some("optimal".into());
+        let setup = config.validate().expect("validates");
+        let d = setup.offsets_m.clone();
+        // Vehicle i starts exactly at place σ(i) about (100, 50): the assignment that
+        // costs nothing is σ, and no other does (the six places are distinct).
+        let sigma = [3, 4, 5, 0, 1, 2];
+        let centre = Vector2::new(100.0, 50.0);
+        let start: Vec<Vector2<f64>> = sigma.iter().map(|&p| centre + d[p]).collect();
+        let owner = vec![0, 0, 1, 1, 2, 2];
+        let names = ["a", "b", "c"].map(str::to_owned).to_vec();
+        let mut watch = SwarmWatch::new(&setup, names, owner);
+        let t0 = 2_000_000_000;
+        for (i, p) in start.iter().enumerate() {
+            watch.handle(
+                t0,
+                &vehicle(i as u16, t0, [p.x as f32, p.y as f32, 50.0], [0.0; 3]),
+            );
+        }
+        let configured_error = watch.state(t0).formation_error_m.expect("all known");
+        assert!(configured_error > 1.0, "{configured_error}");
+        let with_positions = |shard: u16, at_us: u64| {
+            let mut m = report(shard, t0 + 1_000, None, WeightedSum::default());
+            if let ShardMessage::Shard(r) = &mut m {
+                let k = usize::from(shard) * 2;
+                r.start_positions = Some(StartPositions {
+                    at_us,
+                    pos_m: start[k..k + 2].iter().map(|p| [p.x, p.y]).collect(),
+                });
+            }
+            m
+        };
+        // Two shards at one start, the third at another: nothing assigned yet.
+        watch.handle(t0 + 1_000, &with_positions(0, 7));
+        watch.handle(t0 + 1_000, &with_positions(1, 7));
+        watch.handle(t0 + 1_000, &with_positions(2, 8));
+        assert_eq!(watch.places_m, d);
+        // The third at the same start: the places are σ's, and the formation error
+        // against them is the float rounding of the reported positions.
+        watch.handle(t0 + 2_000, &with_positions(2, 7));
+        let expected: Vec<Vector2<f64>> = sigma.iter().map(|&p| d[p]).collect();
+        assert_eq!(watch.places_m, expected);
+        let error = watch
+            .state(t0 + 2_000)
+            .formation_error_m
+            .expect("all known");
+        assert!(error < 1e-4, "{error}");
+        let events = watch.state(t0 + 2_000).events;
+        assert_eq!(
+            events
+                .iter()
+                .filter(|e| e.text.starts_with("places assigned: 6 of 6 vehicles away"))
+                .count(),
+            1,
+            "{events:?}"
+        );
+        // The same start again assigns nothing more.
+        watch.handle(t0 + 3_000, &with_positions(0, 7));
+        let again = watch.state(t0 + 3_000).events;
+        assert_eq!(
+            again
+                .iter()
+                .filter(|e| e.text.starts_with("places assigned"))
+                .count(),
+            1
+        );
     }
 }

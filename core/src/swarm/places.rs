@@ -76,18 +76,7 @@ impl Swarm {
                 for (slot, &place) in self.slots.iter_mut().zip(&a.place_of) {
                     slot.place_m = self.setup.offsets_m[place];
                 }
-                self.log.push(
-                    now,
-                    false,
-                    format!(
-                        "places assigned: {} of {} vehicles away from their configured place; \
-                         total squared distance {:.1} m² (configured {:.1} m²)",
-                        a.moved(),
-                        a.place_of.len(),
-                        a.cost_m2,
-                        a.identity_cost_m2
-                    ),
-                );
+                self.log.push(now, false, a.event_text());
             }
             Err(e) => self
                 .log
