@@ -41,7 +41,9 @@ pub fn run(args: &FlyArgs) -> anyhow::Result<()> {
         setup.duration = Some(Duration::from_secs_f64(d));
     }
     crate::config::warn_if_too_fast(&setup, config.gains.time_scale);
-    // In real time the filter's time is limited by the clock (`safety.budget_share`).
+    // In real time the places are assigned off the control loop, and the filter's time is
+    // limited by the clock (`safety.budget_share`).
+    setup.assign_off_tick = true;
     if let Some(safety) = setup.safety.as_mut() {
         safety.wall_clock_budget = true;
     }

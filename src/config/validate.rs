@@ -96,6 +96,7 @@ impl Config {
             altitude_m: self.formation.altitude_m,
             offsets_m: offsets,
             assign_places,
+            assign_off_tick: false,
             models,
             drag_per_s: self.vehicle.iter().map(|v| v.drag_per_s).collect(),
             envelope,

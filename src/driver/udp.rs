@@ -200,6 +200,8 @@ pub async fn run_swarm<O: Observer>(
     let mut pieces = Vec::new();
     let mut unsent = vec![0u64; swarm.vehicle_count()];
     let mut listening = Listening::new(running.len());
+    // Place assignments solved off the control loop (a thousand vehicles take ~0.2 s).
+    let mut assignments = JoinSet::new();
     drop(tx);
     loop {
         let deadline = next_wake(&swarm, start);
@@ -223,6 +225,12 @@ pub async fn run_swarm<O: Observer>(
                 let t = now();
                 swarm.set_listen_lag(t, listening.lag(t));
                 swarm.handle_timeout(t);
+            }
+            Some(solved) = assignments.join_next(), if !assignments.is_empty() => {
+                match solved {
+                    Ok((id, result)) => swarm.finish_assignment(now(), id, result),
+                    Err(e) => tracing::warn!(error = %e, "the place assignment's thread failed"),
+                }
             }
             payload = async {
                 match shards.as_mut() {
@@ -259,6 +267,9 @@ pub async fn run_swarm<O: Observer>(
         .await;
         if let Some(s) = shards.as_mut() {
             publish_to_shards(&mut swarm, &mut **s);
+        }
+        if let Some(job) = swarm.take_assignment_job() {
+            assignments.spawn_blocking(move || (job.id, job.solve()));
         }
         observer.swarm(&swarm, now());
         if swarm.is_finished() {

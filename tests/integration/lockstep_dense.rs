@@ -264,3 +264,58 @@ fn a_mirror_swap_in_vehicle_order_passes_its_jams_on_the_layer() {
     assert!(jammed.min_separation_m >= 0.95 * 3.0, "{jammed:?}");
     assert_eq!(jammed.jams, 0);
 }
+
+/// In real time (`fly`) the places are assigned off the control loop: at the start of
+/// consensus the swarm hands out the job and keeps its places until the answer; the
+/// answer gives the places the solve inside the tick gives (lockstep's way), and an
+/// answer to another job is dropped.
+#[test]
+fn an_assignment_solved_off_the_tick_gives_the_places_solved_in_it() {
+    let config = config(&block_circle());
+    let mut inline = Lockstep::from_config(&config).unwrap();
+    inline.run_until(SimTime::from_secs_f64(2.0), |_| {});
+    let assigned: Vec<Vector2<f64>> = inline.swarm().places_m().collect();
+    let configured = config.validate().unwrap().offsets_m;
+    assert_ne!(assigned, configured);
+
+    let mut setup = config.validate().unwrap();
+    setup.assign_off_tick = true;
+    let (world, vehicles) = config.emulator().unwrap();
+    let vehicles = vehicles
+        .into_iter()
+        .map(|v| ringswarm_sitl::autopilot::Vehicle::new(v, world).unwrap())
+        .collect();
+    let faults = config.lockstep_faults().unwrap();
+    let mut off = Lockstep::new(
+        ringswarm::swarm::Swarm::new(setup),
+        vehicles,
+        faults.conditions,
+    )
+    .with_transport(&config.transport_layout().unwrap());
+    off.run_until(SimTime::from_secs_f64(2.0), |_| {});
+    assert!(matches!(off.swarm().phase(), SwarmPhase::Consensus(_)));
+    // Consensus flies the configured places while the job is out.
+    let places = |run: &Lockstep| run.swarm().places_m().collect::<Vec<_>>();
+    assert_eq!(places(&off), configured);
+    let job = off.swarm_mut().take_assignment_job().expect("a job");
+    assert!(
+        off.swarm_mut().take_assignment_job().is_none(),
+        "handed out once"
+    );
+    assert_eq!(job.places_m, configured);
+    let now = off.now();
+    off.swarm_mut()
+        .finish_assignment(now, job.id + 1, job.solve());
+    assert_eq!(places(&off), configured, "another job's answer");
+    off.swarm_mut().finish_assignment(now, job.id, job.solve());
+    // The same places: the positions at the start are the same in both flights.
+    assert_eq!(places(&off), assigned);
+    let events = off.swarm().events();
+    assert_eq!(
+        events
+            .iter()
+            .filter(|e| e.text.starts_with("places assigned: "))
+            .count(),
+        1
+    );
+}

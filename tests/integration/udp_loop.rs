@@ -89,6 +89,7 @@ async fn every_vehicle_reaches_offboard_and_setpoints_arrive_at_the_configured_r
         altitude_m: 5.0,
         offsets_m: (0..N).map(|i| Vector2::new(5.0 * i as f64, 0.0)).collect(),
         assign_places: false,
+        assign_off_tick: false,
         models: vec![model; N],
         drag_per_s: vec![0.1; N],
         envelope: Envelope::new(35f64.to_radians(), 0.1, 0.9).unwrap(),

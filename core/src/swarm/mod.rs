@@ -73,6 +73,7 @@ pub use events::{MAX_KEPT_EVENTS, REPEAT_WINDOW, SwarmEvent};
 pub use guard::{DivergenceGuard, GuardLimits, GuardTrip};
 pub use io::{LISTEN_LAG_FLOOR, MAX_TICK_DEFER};
 use model::FlownModel;
+pub use places::AssignJob;
 pub use safety::SafetyStats;
 use scheduler::LinkScheduler;
 pub use setup::{
@@ -159,6 +160,9 @@ pub struct Swarm {
     stop: Option<StopReason>,
     /// The other shards, when this swarm is one shard of several.
     peers: Option<Box<peers::Peers>>,
+    /// The place assignment handed out and not yet answered, and the one waiting to be
+    /// handed out ([`Swarm::take_assignment_job`]).
+    assignment: places::PendingAssignment,
 }
 
 impl Swarm {
@@ -248,6 +252,7 @@ impl Swarm {
             guard: setup_guard.map(DivergenceGuard::new),
             stop: None,
             peers: None,
+            assignment: places::PendingAssignment::default(),
         }
     }
 

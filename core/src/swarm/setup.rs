@@ -26,6 +26,12 @@ pub struct SwarmSetup {
     /// is given the place of minimum total squared distance (`crate::assignment`);
     /// otherwise vehicle `i` flies to `offsets_m[i]`.
     pub assign_places: bool,
+    /// Whether the assignment is solved off the control loop: the swarm hands it out
+    /// ([`crate::swarm::Swarm::take_assignment_job`]) and flies the places it had until the
+    /// answer comes back. Set by flights in real time, where a thousand vehicles' solve
+    /// (about 0.2 s) would make its control tick late; lockstep flights solve in the tick,
+    /// so that they do not depend on the machine.
+    pub assign_off_tick: bool,
     /// Vehicle models, one per vehicle.
     pub models: Vec<VehicleModel>,
     /// Linear drag of each vehicle (1/s), fed forward.

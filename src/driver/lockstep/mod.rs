@@ -201,6 +201,12 @@ impl Lockstep {
         &self.coordinators[0]
     }
 
+    /// The swarm machine, to hand it what a driver would (the first shard's, when
+    /// sharded).
+    pub fn swarm_mut(&mut self) -> &mut Swarm {
+        &mut self.coordinators[0]
+    }
+
     /// Every swarm machine: the one of one process, or each shard's.
     pub fn shards(&self) -> &[Swarm] {
         &self.coordinators
