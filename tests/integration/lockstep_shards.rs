@@ -664,11 +664,11 @@ fn shards_agree_on_one_assignment() {
 
 /// The 4 × 4 mirror swap in vehicle order (`config/block-swap.toml`) flown by four
 /// shards over a 20 ms bus: each shard watches every pair for jams and sends its own
-/// jammed vehicles over the layer (counted by every shard for every vehicle it watches);
-/// the block keeps apart in three dimensions and climbs to the layer, not past it. Where
-/// the swap ends is not asserted: the shards' watches see each other's vehicles a hop
-/// late and decide apart, and across jam_hold_s 3/5/8 s, jam_layer_s 20/30 s and hops of
-/// 20/40 ms it ended 0.50–8.6 m off (5.8 m without breaking; docs/dense.md).
+/// jammed vehicles over the layer (another shard's vehicle is on the layer when its
+/// altitude says so); the block keeps apart in three dimensions and climbs to the layer,
+/// not past it. Where the swap ends is not asserted: it varies with every detail. Across
+/// jam_hold_s 3/5/8 s, jam_layer_s 30 s and hops of 20/40/60 ms it ended 0.26–7.7 m off
+/// (5.8 m without breaking; docs/dense.md).
 #[test]
 fn four_shards_pass_the_mirror_swap_s_jams_on_the_layer() {
     let config = load("block-swap");

@@ -138,7 +138,30 @@ impl Swarm {
         let n = self.vehicle_count();
         let work = &mut self.safety.jams;
         work.layered.resize(n, None);
-        let change = update_layers(
+        // Another shard's vehicle is on the layer when its own shard sent it there: seen
+        // from here, when it flies above half the layer's height (below, for a layer
+        // below).
+        let half_up_m = rule.offset_up_m() / 2.0;
+        let sharded = self.peers.is_some();
+        for (k, slot) in self.slots.iter().enumerate() {
+            if !sharded || !slot.is_remote() {
+                continue;
+            }
+            let up = self.law.states[k].is_some_and(|s| {
+                let climb_m = s.pos_enu_m.z - self.setup.altitude_m;
+                climb_m * half_up_m.signum() > half_up_m.abs()
+            });
+            match (up, work.layered[k]) {
+                (true, None) => work.layered[k] = Some(now),
+                (false, Some(_)) => work.layered[k] = None,
+                _ => {}
+            }
+        }
+        work.remote_layered.clear();
+        if sharded {
+            work.remote_layered.extend_from_slice(&work.layered);
+        }
+        let mut change = update_layers(
             rule,
             now,
             settings.min_error_m,
@@ -148,6 +171,16 @@ impl Swarm {
             &work.positions,
             &mut work.layered,
         );
+        // Only this shard's vehicles move on its decisions; another shard's follow theirs.
+        if sharded {
+            for (k, slot) in self.slots.iter().enumerate() {
+                if slot.is_remote() {
+                    work.layered[k] = work.remote_layered[k];
+                }
+            }
+            change.left.retain(|&k| !self.slots[k].is_remote());
+            change.back.retain(|&k| !self.slots[k].is_remote());
+        }
         self.safety.stats.layer_climbs += change.left.len() as u64;
         let side = if rule.above { "above" } else { "below" };
         for k in change.left {

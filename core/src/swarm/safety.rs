@@ -98,6 +98,9 @@ pub(super) struct JamWork {
     /// Since when each vehicle has flown on the jam layer (`crate::safety::layers`;
     /// `None`: at the formation's altitude).
     pub(super) layered: Vec<Option<ringswarm_wire::time::SimTime>>,
+    /// With shards: the layer as seen before this shard decided (another shard's vehicles
+    /// keep it).
+    pub(super) remote_layered: Vec<Option<ringswarm_wire::time::SimTime>>,
     /// Horizontal positions (m, ENU).
     pub(super) positions: Vec<Option<Vector2<f64>>>,
     /// Horizontal commands (m/s², ENU).
