@@ -128,7 +128,7 @@ pub fn stop_point_m(
 }
 
 /// The distance from `p` to the segment `ab` (m).
-fn segment_distance_m(p: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>) -> f64 {
+pub(crate) fn segment_distance_m(p: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>) -> f64 {
     (p - segment_nearest(p, a, b)).norm()
 }
 

@@ -24,6 +24,8 @@
 use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
+use super::fence::segment_distance_m;
+
 /// Where the layer is and when a vehicle may leave it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LayerRule {
@@ -63,17 +65,6 @@ pub struct LayerChange {
 /// of two opposite ways, exactly one does.
 pub fn northern(way: Vector2<f64>) -> bool {
     way.y > 0.0 || (way.y == 0.0 && way.x > 0.0)
-}
-
-fn segment_distance_m(q: Vector2<f64>, a: Vector2<f64>, b: Vector2<f64>) -> f64 {
-    let ab = b - a;
-    let len2 = ab.norm_squared();
-    let t = if len2 > 0.0 {
-        ((q - a).dot(&ab) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (a + ab * t - q).norm()
 }
 
 /// Takes a tick at `now`: which vehicles are jammed (`crate::safety::jam`), the

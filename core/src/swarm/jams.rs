@@ -57,18 +57,14 @@ impl Swarm {
             }
         }
         if !change.jammed.is_empty() {
-            let names: Vec<String> = change
-                .jammed
-                .iter()
-                .map(|&k| self.setup.links[k].file_label())
-                .collect();
+            let names = self.labels(&change.jammed);
             self.log.push(
                 now,
                 true,
                 format!(
                     "jam: vehicle(s) {} held by the safety filter for {:.1} s without closing on \
                      their places: {}",
-                    names.join(", "),
+                    names,
                     settings.hold_s,
                     if settings.layer.is_some() {
                         "passing it on the jam layer"
@@ -79,16 +75,9 @@ impl Swarm {
             );
         }
         if !change.released.is_empty() {
-            let names: Vec<String> = change
-                .released
-                .iter()
-                .map(|&k| self.setup.links[k].file_label())
-                .collect();
-            self.log.push(
-                now,
-                false,
-                format!("jam over for vehicle(s) {}", names.join(", ")),
-            );
+            let names = self.labels(&change.released);
+            self.log
+                .push(now, false, format!("jam over for vehicle(s) {names}"));
         }
         if let Some(rule) = settings.layer {
             self.pass_on_the_layer(now, &settings, &rule);
@@ -205,6 +194,15 @@ impl Swarm {
         }
     }
 
+    /// The vehicles `ks` as the files name them, comma-separated.
+    fn labels(&self, ks: &[usize]) -> String {
+        let names: Vec<String> = ks
+            .iter()
+            .map(|&k| self.setup.links[k].file_label())
+            .collect();
+        names.join(", ")
+    }
+
     /// Out of consensus every vehicle flies at the formation's altitude again.
     fn leave_the_jam_layer(&mut self, now: SimTime) {
         let layered = &mut self.safety.jams.layered;
@@ -215,17 +213,14 @@ impl Swarm {
             .filter(|&k| layered[k].is_some())
             .collect();
         layered.iter_mut().for_each(|l| *l = None);
-        let names: Vec<String> = back
-            .iter()
-            .map(|&k| self.setup.links[k].file_label())
-            .collect();
+        let names = self.labels(&back);
         self.log.push(
             now,
             true,
             format!(
                 "consensus over: vehicle(s) {} come back from the jam layer to the formation's \
                  altitude",
-                names.join(", ")
+                names
             ),
         );
     }
