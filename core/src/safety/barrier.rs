@@ -156,15 +156,8 @@ pub(super) fn barrier_row(
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::sep;
     use super::*;
-
-    fn sep() -> Separation {
-        Separation {
-            horizontal_m: 3.0,
-            vertical_m: 9.0,
-            gamma: 1.0,
-        }
-    }
 
     fn side(p: [f64; 3], v: [f64; 3]) -> Side {
         Side {

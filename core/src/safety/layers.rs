@@ -172,6 +172,18 @@ mod tests {
         move |k| jammed.contains(&k)
     }
 
+    /// One tick of the rule with the tests' layer, vehicles parked within 1 m.
+    fn step(
+        now: SimTime,
+        jammed: impl Fn(usize) -> bool,
+        active: &[(usize, usize)],
+        offsets: &[Option<Vector2<f64>>],
+        positions: &[Option<Vector2<f64>>],
+        layered: &mut [Option<SimTime>],
+    ) -> LayerChange {
+        update_layers(&RULE, now, 1.0, jammed, active, offsets, positions, layered)
+    }
+
     fn v(x: f64, y: f64) -> Option<Vector2<f64>> {
         Some(Vector2::new(x, y))
     }
@@ -204,25 +216,14 @@ mod tests {
         let offsets = [v(0.0, -10.0), v(0.0, 10.0)];
         let mut layered = [None; 2];
         let now = at(0.0);
-        let change = update_layers(
-            &RULE,
-            now,
-            1.0,
-            &watch,
-            &[(0, 1)],
-            &offsets,
-            &positions,
-            &mut layered,
-        );
+        let change = step(now, &watch, &[(0, 1)], &offsets, &positions, &mut layered);
         assert_eq!(change.left, vec![0]);
         assert!(change.back.is_empty());
         assert_eq!(layered, [UP, None]);
         // Still jammed, right over the other: it stays up.
         let now = at(1.0);
-        let change = update_layers(
-            &RULE,
+        let change = step(
             now,
-            1.0,
             &watch,
             &[],
             &offsets,
@@ -234,10 +235,8 @@ mod tests {
         // inside clear_m, it stays up.
         let free = jammed_of(&[]);
         let now = at(25.0);
-        let change = update_layers(
-            &RULE,
+        let change = step(
             now,
-            1.0,
             &free,
             &[],
             &[v(0.0, -6.0), v(0.0, 10.0)],
@@ -248,10 +247,8 @@ mod tests {
         // 4 m past it, 5 m short of its place, the way there clear: it comes back once it
         // has been up for the dwell (20 s), not before.
         let past = |now, layered: &mut [Option<SimTime>]| {
-            update_layers(
-                &RULE,
+            step(
                 now,
-                1.0,
                 &free,
                 &[],
                 &[v(0.0, -5.0), v(0.0, 10.0)],
@@ -270,10 +267,8 @@ mod tests {
         let free = jammed_of(&[]);
         let mut layered = [UP, None];
         let now = at(30.0);
-        let change = update_layers(
-            &RULE,
+        let change = step(
             now,
-            1.0,
             &free,
             &[],
             &[v(0.0, -10.0), v(0.0, 0.0)],
@@ -284,10 +279,8 @@ mod tests {
         // At its place (within 1 m) with nobody near, neither the way nor the dwell
         // matters.
         let now = at(1.0);
-        let change = update_layers(
-            &RULE,
+        let change = step(
             now,
-            1.0,
             &free,
             &[],
             &[v(0.0, -0.5), v(0.0, 0.0)],
@@ -303,10 +296,8 @@ mod tests {
         let watch = jammed_of(&[0]);
         let mut layered = [None; 2];
         let now = at(0.0);
-        let change = update_layers(
-            &RULE,
+        let change = step(
             now,
-            1.0,
             &watch,
             &[(0, 1)],
             &[v(0.0, 10.0), v(0.0, 0.2)],
@@ -317,10 +308,8 @@ mod tests {
         // Held by a vehicle that is jammed too (both south, side by side): it stays.
         let watch = jammed_of(&[0, 1]);
         let mut layered = [None; 2];
-        let change = update_layers(
-            &RULE,
+        let change = step(
             now,
-            1.0,
             &watch,
             &[(0, 1)],
             &[v(0.0, 10.0), v(0.0, 10.0)],
@@ -333,10 +322,8 @@ mod tests {
         let watch = jammed_of(&[0, 1]);
         let mut layered = [UP, None];
         let now = at(20.0);
-        let change = update_layers(
-            &RULE,
+        let change = step(
             now,
-            1.0,
             &watch,
             &[(0, 1)],
             &[v(0.0, 10.0), v(0.0, 10.0)],

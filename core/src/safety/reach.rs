@@ -119,18 +119,11 @@ impl ReachBound {
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::sep;
     use nalgebra::Vector2;
 
     use super::super::{Side, pair_row};
     use super::*;
-
-    fn sep() -> Separation {
-        Separation {
-            horizontal_m: 3.0,
-            vertical_m: 9.0,
-            gamma: 1.0,
-        }
-    }
 
     fn agent(p: Vector3<f64>, v: Vector3<f64>, az: f64, limit: f64, braking: f64) -> Agent {
         Agent {

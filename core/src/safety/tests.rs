@@ -1,6 +1,7 @@
 use super::*;
 
-fn sep() -> Separation {
+/// The separation the filter's tests fly: 3 m by 9 m, γ = 1.
+pub(super) fn sep() -> Separation {
     Separation {
         horizontal_m: 3.0,
         vertical_m: 9.0,

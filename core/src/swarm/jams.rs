@@ -116,8 +116,9 @@ impl Swarm {
         let layer = self
             .setup
             .safety
-            .and_then(|s| s.jams)
-            .and_then(|j| j.layer)
+            .as_ref()
+            .and_then(|s| s.jams.as_ref())
+            .and_then(|j| j.layer.as_ref())
             .filter(|_| self.safety.jams.layered.get(i).is_some_and(Option::is_some));
         self.setup.altitude_m + layer.map_or(0.0, |rule| rule.offset_up_m())
     }
