@@ -116,6 +116,7 @@ fn filter_row(side: usize, share: f64, limit_s: f64) {
     let settings = Settings {
         separation: sep,
         age_s: 0.02,
+        period_s: 0.01,
         keep_weighted_sum: true,
         time_limit_s: limit_s,
     };
@@ -127,6 +128,7 @@ fn filter_row(side: usize, share: f64, limit_s: f64) {
         // Each vehicle's place: its start mirrored through the centre.
         let places: Vec<Vector2<f64>> = pos.iter().map(|p| -p).collect();
         let mut vel: Vec<Vector2<f64>> = vec![Vector2::zeros(); pos.len()];
+        let mut flying: Vec<Vector2<f64>> = vec![Vector2::zeros(); pos.len()];
         let n = pos.len();
         let mut filter = SafetyFilter::default();
         let mut times = Vec::with_capacity(ticks);
@@ -176,10 +178,13 @@ fn filter_row(side: usize, share: f64, limit_s: f64) {
             if let Some((_, _, d)) = report.closest {
                 closest = closest.min(d);
             }
+            // Each command acts a tick after the state it was filtered on (the state age
+            // of 0.02 s: a tick of delay and a tick of hold).
             for k in 0..n {
-                vel[k] += commands[k] * dt;
+                vel[k] += flying[k] * dt;
                 pos[k] += vel[k] * dt;
             }
+            flying = commands;
         }
         let first = times[0];
         times.sort();

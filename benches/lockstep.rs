@@ -375,6 +375,7 @@ fn safety_table() {
             gamma: 1.0,
         },
         age_s: 0.34,
+        period_s: 0.02,
         keep_weighted_sum: true,
         time_limit_s: f64::INFINITY,
     };

@@ -180,8 +180,9 @@ pub struct SafetySection {
     /// The turning acceleration of a jammed pair of equal weights, each (m/s², default 1).
     pub jam_turn_mps2: f64,
     /// The share of the control period the filter may take in a flight in real time
-    /// (default 0.2): past it, the tick goes out with the answer so far, and the vehicles
-    /// of the rows that answer misses brake (counted as `unfinished_ticks`). Lockstep
+    /// (default 0.2): past it, the tick goes out with the answer so far, where every
+    /// vehicle whose command and then braking would not keep the separation brakes
+    /// (counted as `unfinished_ticks`, `unfinished_braked`). Lockstep
     /// flights are limited by sweeps only.
     pub budget_share: f64,
 }

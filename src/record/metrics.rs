@@ -295,10 +295,15 @@ pub struct SafetyReport {
     /// Times a vehicle left the formation's altitude for the jam layer.
     pub layer_climbs: u64,
     /// Ticks on which the time limit (`budget_share`, in real time) ended a solve before
-    /// its answer: the dual ascent's answer so far went out.
+    /// its answer: the dual ascent's answer so far went out, secured by the stopping
+    /// check.
     pub unfinished_ticks: u64,
-    /// The most a barrier row was missed by on those ticks (m/s²).
+    /// The most a barrier row of the ascent's answer was missed by on those ticks (m/s²).
     pub unfinished_missed_mps2: f64,
+    /// Vehicles the stopping check turned to braking, summed over those ticks.
+    pub unfinished_braked: u64,
+    /// Pairs that conflicted even braking, summed over those ticks.
+    pub unfinished_unresolved: u64,
     /// The filter's time per control tick (wall clock; the sweep for pairs and the
     /// solve): median, 99th percentile and longest.
     pub filter_time: crate::swarm::timing::Quantiles,
@@ -333,6 +338,8 @@ impl SafetyReport {
             layer_climbs: s.layer_climbs,
             unfinished_ticks: s.unfinished_ticks,
             unfinished_missed_mps2: s.unfinished_missed_mps2,
+            unfinished_braked: s.unfinished_braked,
+            unfinished_unresolved: s.unfinished_unresolved,
             filter_time: s.filter_time.quantiles(),
             largest_piece: s.largest_piece,
             most_sweeps: s.most_sweeps,

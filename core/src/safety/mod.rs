@@ -30,11 +30,14 @@ pub mod barrier;
 mod dual;
 mod exact;
 pub mod fence;
+pub mod flow;
 pub mod jam;
 pub mod layers;
 pub mod neighbours;
 mod pieces;
 pub mod reach;
+mod secure;
+pub mod stopping;
 
 use std::time::{Duration, Instant};
 
@@ -61,6 +64,9 @@ pub const SLACK_COST: f64 = 1e4;
 pub fn look_radius_m(separation: &Separation, top_speed_mps: f64, lookahead_s: f64) -> f64 {
     separation.horizontal_m + 2.0 * top_speed_mps * lookahead_s + 1.0
 }
+
+/// The share of the time limit left to the stopping check after the solve.
+pub const SECURE_SHARE: f64 = 0.25;
 
 /// A barrier row counts as active when the command leaves less slack than this (m/s²).
 pub const ACTIVE_SLACK_MPS2: f64 = 1e-6;
@@ -115,13 +121,16 @@ pub enum Outcome {
         reason: &'static str,
     },
     /// The time limit ended a piece's solve before its answer: the ascent's answer so
-    /// far went out. It keeps `Σ wᵢuᵢ` and the discs; its rows are met but for what the
-    /// ascent had still to close (measured: a packed mirror swap of 256 kept 2.93 m with 3 m
-    /// enforced at 20 sweeps a tick, where braking the vehicles of the missed rows
-    /// instead brought a pair to 0.02 m).
+    /// far, secured by the stopping check ([`stopping`]): every vehicle whose command
+    /// and then braking would come within the separation of a neighbour's plan brakes
+    /// instead. The braked vehicles no longer keep `Σ wᵢuᵢ`.
     Unfinished {
-        /// The most a row was missed by (m/s²).
+        /// The most a row of the ascent's answer was missed by (m/s²).
         missed_mps2: f64,
+        /// Vehicles turned to braking by the check.
+        braked: usize,
+        /// Pairs that conflict even braking (already closer than braking can keep).
+        unresolved: usize,
     },
 }
 
@@ -151,6 +160,9 @@ pub struct Settings {
     pub separation: Separation,
     /// How old what is known of the vehicles may be when the command acts (s).
     pub age_s: f64,
+    /// How long a command holds before the next can act (s): the control period, at
+    /// most `age_s`.
+    pub period_s: f64,
     /// Hold `Σ wᵢuᵢ` as an equality (consensus).
     pub keep_weighted_sum: bool,
     /// How long the call may take (s, wall clock; infinite: no limit, only
@@ -196,8 +208,9 @@ fn net(agents: &[Agent], commands: &[Vector2<f64>], k: usize) -> Vector2<f64> {
 /// The filter, with its buffers.
 #[derive(Debug, Clone, Default)]
 pub struct SafetyFilter {
-    sweep: Sweep,
+    sweep: flow::FlowSweep,
     positions: Vec<Option<Vector3<f64>>>,
+    velocities: Vec<Option<Vector3<f64>>>,
     rows: Vec<Row>,
     var_of: Vec<Option<usize>>,
     vars: Vec<usize>,
@@ -212,6 +225,19 @@ pub struct SafetyFilter {
     dual: dual::DualState,
     /// Each agent's direction away from its rows (the fallback's buffer).
     away: Vec<Vector2<f64>>,
+    /// The stopping check's buffers ([`secure`]): each vehicle's plan, its neighbours
+    /// (`neighbours[neighbour_start[k]..neighbour_start[k + 1]]`), and the vehicles
+    /// turned to braking still to be checked against theirs.
+    plans: Vec<Option<stopping::Plan>>,
+    paths: Vec<f64>,
+    /// Each vehicle's net horizontal command of the last call (`None`: not ours then):
+    /// the command on its way when the next is checked.
+    last_net: Vec<Option<Vector2<f64>>>,
+    neighbour_start: Vec<usize>,
+    neighbours: Vec<usize>,
+    fill: Vec<usize>,
+    queue: Vec<usize>,
+    done: Vec<bool>,
     /// When this call must be done (`None`: no wall-clock limit).
     deadline: Option<Instant>,
     tally: Tally,
@@ -257,8 +283,11 @@ impl SafetyFilter {
         fence: Option<(&Fence, f64)>,
     ) -> Report {
         let started = Instant::now();
-        self.deadline = (settings.time_limit_s.is_finite() && settings.time_limit_s >= 0.0)
-            .then(|| started + Duration::from_secs_f64(settings.time_limit_s));
+        // The solve stops early enough to leave the stopping check its share.
+        self.deadline =
+            (settings.time_limit_s.is_finite() && settings.time_limit_s >= 0.0).then(|| {
+                started + Duration::from_secs_f64((1.0 - SECURE_SHARE) * settings.time_limit_s)
+            });
         self.tally = Tally::default();
         let mut report = self.filter_rows(settings, agents, commands, fence);
         self.warm.clear();
@@ -271,10 +300,20 @@ impl SafetyFilter {
         );
         self.warm.sort_unstable_by_key(|w| w.0);
         if self.tally.unfinished && matches!(report.outcome, Outcome::Filtered { .. }) {
+            let secured = self.secure(settings, agents, commands);
             report.outcome = Outcome::Unfinished {
                 missed_mps2: self.tally.missed_mps2,
+                braked: secured.braked,
+                unresolved: secured.unresolved,
             };
         }
+        self.last_net.clear();
+        self.last_net.extend(
+            agents
+                .iter()
+                .zip(commands.iter())
+                .map(|(a, u)| a.controlled.then(|| u - a.drift_mps2)),
+        );
         report.sweeps = self.tally.sweeps;
         report.largest_piece = self.tally.largest_piece;
         report.elapsed = started.elapsed();
@@ -300,32 +339,21 @@ impl SafetyFilter {
             .filter(|v| v.is_finite())
             .fold(0.0, f64::max);
         let radius = look_radius_m(&sep, top_speed, LOOKAHEAD_S);
-        // Each vehicle looks as far as a row of its pairs can bind, never beyond the
-        // look-ahead radius: what the radius finds that can bind is found.
+        // A pair is looked at as far as a row of it can bind at its own relative speed,
+        // never beyond the look-ahead radius: what the radius finds that can bind is found.
         let bound = ReachBound::new(&sep, settings.age_s, &agents[..n]);
-        let reach = |k: usize| match (bound, agents[k].side) {
-            (Some(bound), Some(side)) => bound.reach_m(&sep, side.vel_mps),
-            _ => f64::INFINITY,
-        };
+        let pair_limit = |v: f64| bound.map_or(f64::INFINITY, |b| b.distance_m(v));
+        self.velocities.clear();
+        self.velocities
+            .extend(agents[..n].iter().map(|a| a.side.map(|s| s.vel_mps)));
         let mut sweep = std::mem::take(&mut self.sweep);
-        // A pair's own bound, at its own relative speed (tighter than the two reaches).
-        let pair_limit = |i: usize, j: usize| match (bound, agents[i].side, agents[j].side) {
-            (Some(bound), Some(a), Some(b)) => {
-                let v = sep.scaled(a.vel_mps - b.vel_mps).norm();
-                if v.is_finite() {
-                    bound.distance_m(v)
-                } else {
-                    f64::INFINITY
-                }
-            }
-            _ => f64::INFINITY,
-        };
-        let found = sweep.sweep_pairs(
+        let found = sweep.sweep(
             &self.positions,
+            &self.velocities,
             sep.vertical_scale(),
-            reach,
-            radius,
             pair_limit,
+            radius,
+            2.0 * pair_limit(0.0),
         );
         let closest = found.closest;
         self.rows.clear();

@@ -137,7 +137,9 @@ impl Sweep {
             }
             if best.d2 >= cell_m * cell_m {
                 // A closer pair may lie further apart than a cell in east or north.
-                self.closest_along_east(positions, &mut best, distance2);
+                self.order.clear();
+                self.order.extend(self.cells.iter().map(|c| c.2));
+                closest_along_east(&mut self.order, positions, &mut best, distance2);
             }
         } else {
             // No grid (nothing reaches, or the cells would be too many): along east.
@@ -177,37 +179,36 @@ impl Sweep {
             closest: best.pair.map(|(i, j)| (i, j, best.d2.sqrt())),
         }
     }
+}
 
-    /// The closest pair of all by the sweep along east, starting from `best`.
-    fn closest_along_east(
-        &mut self,
-        positions: &[Option<Vector3<f64>>],
-        best: &mut Closest,
-        distance2: impl Fn(Vector3<f64>, Vector3<f64>) -> f64,
-    ) {
-        self.order.clear();
-        self.order.extend(self.cells.iter().map(|c| c.2));
-        let x = |i: usize| positions[i].map_or(0.0, |p| p.x);
-        self.order.sort_by(|&a, &b| x(a).total_cmp(&x(b)));
-        for (k, &a) in self.order.iter().enumerate() {
-            let Some(pa) = positions[a] else { continue };
-            for &b in &self.order[k + 1..] {
-                let Some(pb) = positions[b] else { continue };
-                let gap = pb.x - pa.x;
-                if gap * gap > best.d2 {
-                    break;
-                }
-                best.offer(a.min(b), a.max(b), distance2(pa, pb));
+/// The closest pair of all among the vehicles `order` by the sweep along east, starting
+/// from `best` (`order` is sorted here).
+pub(super) fn closest_along_east(
+    order: &mut [usize],
+    positions: &[Option<Vector3<f64>>],
+    best: &mut Closest,
+    distance2: impl Fn(Vector3<f64>, Vector3<f64>) -> f64,
+) {
+    let x = |i: usize| positions[i].map_or(0.0, |p| p.x);
+    order.sort_by(|&a, &b| x(a).total_cmp(&x(b)));
+    for (k, &a) in order.iter().enumerate() {
+        let Some(pa) = positions[a] else { continue };
+        for &b in &order[k + 1..] {
+            let Some(pb) = positions[b] else { continue };
+            let gap = pb.x - pa.x;
+            if gap * gap > best.d2 {
+                break;
             }
+            best.offer(a.min(b), a.max(b), distance2(pa, pb));
         }
     }
 }
 
 /// The closest pair so far and its squared distance.
 #[derive(Debug, Clone, Copy)]
-struct Closest {
-    pair: Option<(usize, usize)>,
-    d2: f64,
+pub(super) struct Closest {
+    pub(super) pair: Option<(usize, usize)>,
+    pub(super) d2: f64,
 }
 
 impl Default for Closest {
@@ -221,7 +222,7 @@ impl Default for Closest {
 
 impl Closest {
     /// Keeps `(i, j)` when it is closer, or as close and first in order.
-    fn offer(&mut self, i: usize, j: usize, d2: f64) {
+    pub(super) fn offer(&mut self, i: usize, j: usize, d2: f64) {
         let first = self.pair.is_none_or(|p| (i, j) < p);
         if d2 < self.d2 || (d2 == self.d2 && first) {
             self.pair = Some((i, j));

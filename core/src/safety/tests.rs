@@ -1,3 +1,4 @@
+use super::secure::Secured;
 use super::*;
 
 /// The separation the filter's tests fly: 3 m by 9 m, γ = 1.
@@ -13,6 +14,7 @@ fn settings(keep: bool) -> Settings {
     Settings {
         separation: sep(),
         age_s: 0.04,
+        period_s: 0.02,
         keep_weighted_sum: keep,
         time_limit_s: f64::INFINITY,
     }
@@ -470,4 +472,65 @@ fn a_warm_start_from_the_last_tick_takes_fewer_sweeps() {
     for k in 0..36 {
         assert!((cold[k] - warm[k]).norm() < 1e-6, "{k}");
     }
+}
+
+#[test]
+fn out_of_time_the_vehicles_whose_command_then_braking_would_meet_brake_instead() {
+    // Two vehicles closing at 2 m/s each, the law pushing them together at 2 m/s²; a
+    // third 100 m away flying on.
+    let s = Settings {
+        time_limit_s: 0.0,
+        ..settings(true)
+    };
+    let agents = [
+        agent([0.0, 0.0, 50.0], [2.0, 0.0, 0.0], 1.0),
+        agent([8.0, 0.0, 50.0], [-2.0, 0.0, 0.0], 1.0),
+        agent([100.0, 0.0, 50.0], [1.0, 0.0, 0.0], 1.0),
+    ];
+    let mut commands = [
+        Vector2::new(2.0, 0.0),
+        Vector2::new(-2.0, 0.0),
+        Vector2::new(0.5, 0.0),
+    ];
+    let mut filter = SafetyFilter::default();
+    let report = filter.filter(&s, &agents, &mut commands, None);
+    // 8 m apart the law's commands break no barrier row: untouched.
+    assert_eq!(report.outcome, Outcome::Untouched);
+    assert_eq!(commands[0], Vector2::new(2.0, 0.0));
+    // 4.4 m apart: rows break. Were there no time to solve, each command, held for the
+    // age (0.04 s) and then braking at 2 m/s², closes 0.0816 + 2.08²/4 = 1.16 m, so
+    // 4.4 − 2.33 < 3 m: both brake instead, along their velocities at 2 m/s².
+    let mut agents = agents;
+    agents[1].side = Some(Side {
+        pos_m: Vector3::new(4.4, 0.0, 50.0),
+        vel_mps: Vector3::new(-2.0, 0.0, 0.0),
+        accel_z_mps2: 0.0,
+    });
+    let mut commands = [
+        Vector2::new(2.0, 0.0),
+        Vector2::new(-2.0, 0.0),
+        Vector2::new(0.5, 0.0),
+    ];
+    let mut filter = SafetyFilter::default();
+    let law = commands;
+    let report = filter.filter(&s, &agents, &mut commands, None);
+    assert!(report.rows > 0);
+    // The check on the law's own commands, over the rows of that call.
+    let mut commands = law;
+    let Secured { braked, unresolved } = filter.secure(&s, &agents, &mut commands);
+    assert_eq!(braked, 2);
+    // The command already on its way still flies for the delay (0.02 s): 0.0404 m, then
+    // 2.04²/4 = 1.04 m braking, each: 2.24 m apart at rest, inside 3 m, so counted.
+    assert_eq!(unresolved, 1);
+    assert!(
+        (commands[0] - Vector2::new(-2.0, 0.0)).norm() < 1e-12,
+        "{:?}",
+        commands[0]
+    );
+    assert!(
+        (commands[1] - Vector2::new(2.0, 0.0)).norm() < 1e-12,
+        "{:?}",
+        commands[1]
+    );
+    assert_eq!(commands[2], Vector2::new(0.5, 0.0));
 }

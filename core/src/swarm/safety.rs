@@ -38,6 +38,10 @@ pub struct SafetyStats {
     pub unfinished_ticks: u64,
     /// The most a barrier row was missed by on those ticks (m/s²).
     pub unfinished_missed_mps2: f64,
+    /// Vehicles the stopping check turned to braking on those ticks, summed over them.
+    pub unfinished_braked: u64,
+    /// Pairs that conflicted even braking on those ticks, summed over them.
+    pub unfinished_unresolved: u64,
     /// How long each tick's filter call took (wall clock).
     pub filter_time: super::timing::Histogram,
     /// The most vehicles in one piece solved together.
@@ -174,6 +178,7 @@ impl Swarm {
         let settings = Settings {
             separation: setup.separation,
             age_s: age_s + period_s,
+            period_s,
             keep_weighted_sum: consensus,
             time_limit_s: if setup.wall_clock_budget {
                 setup.budget_share * period_s
@@ -219,16 +224,22 @@ impl Swarm {
                     }
                 }
             }
-            Outcome::Unfinished { missed_mps2 } => {
+            Outcome::Unfinished {
+                missed_mps2,
+                braked,
+                unresolved,
+            } => {
                 stats.filtered_ticks += 1;
                 stats.unfinished_ticks += 1;
                 stats.unfinished_missed_mps2 = stats.unfinished_missed_mps2.max(missed_mps2);
+                stats.unfinished_braked += braked as u64;
+                stats.unfinished_unresolved += unresolved as u64;
                 if stats.unfinished_ticks % 100 == 1 {
                     self.log.push(
                         now,
                         true,
                         format!(
-                            "safety filter: its time ran out before the answer: the answer so far went out, a row missed by up to {missed_mps2:.3} m/s² (unfinished tick {})",
+                            "safety filter: its time ran out before the answer: the answer so far went out, {braked} vehicles braking where it and then braking would not keep the separation (unfinished tick {})",
                             stats.unfinished_ticks
                         ),
                     );
