@@ -715,18 +715,20 @@ impl SafetyFilter {
             } else {
                 Vector2::zeros()
             };
-            let mut command = net + a.drift_mps2;
-            let cap = limit(a);
-            if command.norm() > cap {
-                command *= cap / command.norm();
-            }
-            commands[k] = if command.iter().all(|x| x.is_finite()) {
-                command
-            } else {
-                Vector2::zeros()
-            };
+            commands[k] = command_for(a, net).unwrap_or_else(Vector2::zeros);
         }
     }
+}
+
+/// The command that gives `a` the net acceleration `net` (m/s²): the drift added back,
+/// inside its disc; `None` when it is not a number.
+fn command_for(a: &Agent, net: Vector2<f64>) -> Option<Vector2<f64>> {
+    let mut command = net + a.drift_mps2;
+    let cap = limit(a);
+    if command.norm() > cap {
+        command *= cap / command.norm();
+    }
+    command.iter().all(|x| x.is_finite()).then_some(command)
 }
 
 /// What the discs of a row's vehicles can give it at most (m/s²).

@@ -7,7 +7,7 @@
 use nalgebra::Vector2;
 
 use super::stopping::{First, Plan, Timing, closest_m, path_m};
-use super::{Agent, SafetyFilter, Settings, braking, limit};
+use super::{Agent, SafetyFilter, Settings, braking, command_for, limit};
 
 /// What securing an answer did.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -153,12 +153,7 @@ impl SafetyFilter {
             } else {
                 Vector2::zeros()
             };
-            let mut command = net + a.drift_mps2;
-            let cap = limit(a);
-            if command.norm() > cap {
-                command *= cap / command.norm();
-            }
-            if command.iter().all(|x| x.is_finite()) {
+            if let Some(command) = command_for(a, net) {
                 commands[k] = command;
             }
         }
