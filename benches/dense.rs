@@ -13,14 +13,15 @@
 //!   dual ascent, the largest piece, unfinished ticks and the closest pair, against the
 //!   floor: finding the neighbouring pairs of the block as it starts (the sweep).
 //!
-//! `-- WORD …` keeps the rows whose vehicle count is one of the words (`-- 1024`).
+//! `-- WORD …` keeps the rows whose vehicle count is one of the words (`-- 1024`), and
+//! `barrier` or `stopping` the rows of that kind only.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use nalgebra::{Vector2, Vector3};
 use ringswarm::assignment::assign_places;
-use ringswarm::safety::{Agent, SafetyFilter, Separation, Settings, Side, Sweep};
+use ringswarm::safety::{Agent, Rows, SafetyFilter, Separation, Settings, Side, Sweep};
 
 /// A `side` × `side` block `spacing_m` apart about the origin.
 fn block_at(side: usize, spacing_m: f64) -> Vec<Vector2<f64>> {
@@ -86,28 +87,30 @@ fn assignment_table(sides: &[usize]) {
     }
 }
 
-fn filter_table(sides: &[usize]) {
+fn filter_table(sides: &[usize], kinds: &[Rows]) {
     println!(
-        "\n| vehicles | braking share | time limit | ticks | rows (last) | largest piece | sweeps p50 / max | unfinished | closest m | first ms | p50 ms | p99 ms | max ms | sweep floor ms | p50 / floor |"
+        "\n| vehicles | rows | braking share | time limit | ticks | rows (last) | largest piece | sweeps p50 / max | unfinished | braked | unresolved | closest m | left m | first ms | p50 ms | p99 ms | max ms | sweep floor ms | p50 / floor |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for &side in sides {
-        for share in [0.5, 0.25] {
-            // As in real time at 100 Hz with `budget_share` 0.2; without a limit (as in
-            // lockstep) only up to 256, where one tick can take 0.1 s.
-            for limit_s in [0.002, f64::INFINITY] {
-                if limit_s.is_infinite() && side > 16 {
-                    continue;
+        for &kind in kinds {
+            for share in [0.5, 0.25] {
+                // As in real time at 100 Hz with `budget_share` 0.2; without a limit (as
+                // in lockstep) only up to 256, where one tick can take 0.1 s.
+                for limit_s in [0.002, f64::INFINITY] {
+                    if limit_s.is_infinite() && side > 16 {
+                        continue;
+                    }
+                    filter_row(side, share, limit_s, kind);
                 }
-                filter_row(side, share, limit_s);
             }
         }
     }
 }
 
 /// One row of the filter table: the mirror swap of a `side` × `side` block, each vehicle
-/// braking at `share` of its disc, with the filter's time limit `limit_s`.
-fn filter_row(side: usize, share: f64, limit_s: f64) {
+/// braking at `share` of its disc, with the filter's time limit `limit_s` and rows `kind`.
+fn filter_row(side: usize, share: f64, limit_s: f64, kind: Rows) {
     let sep = Separation {
         horizontal_m: 3.0,
         vertical_m: 9.0,
@@ -119,6 +122,7 @@ fn filter_row(side: usize, share: f64, limit_s: f64) {
         period_s: 0.01,
         keep_weighted_sum: true,
         time_limit_s: limit_s,
+        rows: kind,
     };
     {
         let spacing_m = 4.0;
@@ -134,6 +138,7 @@ fn filter_row(side: usize, share: f64, limit_s: f64) {
         let mut times = Vec::with_capacity(ticks);
         let mut sweeps = Vec::with_capacity(ticks);
         let (mut largest, mut unfinished, mut rows) = (0, 0, 0);
+        let (mut braked, mut unresolved) = (0, 0);
         let mut closest = f64::INFINITY;
         for _ in 0..ticks {
             let agents: Vec<Agent> = pos
@@ -169,6 +174,8 @@ fn filter_row(side: usize, share: f64, limit_s: f64) {
             times.push(start.elapsed());
             black_box(&commands);
             sweeps.push(report.sweeps);
+            braked += report.braked;
+            unresolved += report.unresolved;
             largest = largest.max(report.largest_piece);
             rows = report.rows;
             unfinished += usize::from(matches!(
@@ -181,12 +188,19 @@ fn filter_row(side: usize, share: f64, limit_s: f64) {
             // Each command acts a tick after the state it was filtered on (the state age
             // of 0.02 s: a tick of delay and a tick of hold).
             for k in 0..n {
+                pos[k] += vel[k] * dt + flying[k] * (0.5 * dt * dt);
                 vel[k] += flying[k] * dt;
-                pos[k] += vel[k] * dt;
             }
             flying = commands;
         }
         let first = times[0];
+        // How far the block is from its places at the end, on average.
+        let left = pos
+            .iter()
+            .zip(&places)
+            .map(|(p, q)| (p - q).norm())
+            .sum::<f64>()
+            / n as f64;
         times.sort();
         sweeps.sort();
         // The floor on the block as it starts (4 m apart).
@@ -206,7 +220,11 @@ fn filter_row(side: usize, share: f64, limit_s: f64) {
         let floor = start.elapsed() / ticks as u32;
         let p50 = percentile(&times, 0.5);
         println!(
-            "| {n} | {share} | {} | {ticks} | {rows} | {largest} | {} / {} | {unfinished} | {closest:.3} | {:.2} | {:.3} | {:.3} | {:.3} | {:.3} | {:.0} |",
+            "| {n} | {} | {share} | {} | {ticks} | {rows} | {largest} | {} / {} | {unfinished} | {braked} | {unresolved} | {closest:.3} | {left:.2} | {:.2} | {:.3} | {:.3} | {:.3} | {:.3} | {:.0} |",
+            match kind {
+                Rows::Barrier => "barrier",
+                Rows::Stopping => "stopping",
+            },
             if limit_s.is_finite() {
                 format!("{} ms", limit_s * 1e3)
             } else {
@@ -229,10 +247,20 @@ fn main() {
         .skip(1)
         .filter(|a| !a.starts_with('-'))
         .collect();
+    let named = |w: &str| words.iter().any(|x| x == w);
+    let kinds: Vec<Rows> = [("barrier", Rows::Barrier), ("stopping", Rows::Stopping)]
+        .into_iter()
+        .filter(|(w, _)| !(named("barrier") || named("stopping")) || named(w))
+        .map(|(_, k)| k)
+        .collect();
+    let sizes: Vec<&String> = words
+        .iter()
+        .filter(|w| w.parse::<usize>().is_ok())
+        .collect();
     let keep =
-        |side: &usize| words.is_empty() || words.iter().any(|w| *w == (side * side).to_string());
+        |side: &usize| sizes.is_empty() || sizes.iter().any(|w| **w == (side * side).to_string());
     let assignment: Vec<usize> = [4, 10, 32, 64].into_iter().filter(keep).collect();
     let filter: Vec<usize> = [10, 16, 32].into_iter().filter(keep).collect();
     assignment_table(&assignment);
-    filter_table(&filter);
+    filter_table(&filter, &kinds);
 }

@@ -363,7 +363,7 @@ fn main() {
 /// pair 4 m apart closing at 2 m/s on commands that push them together (a QP per pair),
 /// and a ring packed 3.3 m apart closing on its centre (one QP over every vehicle).
 fn safety_table() {
-    use ringswarm::safety::{Agent, SafetyFilter, Separation, Settings, Side};
+    use ringswarm::safety::{Agent, Rows, SafetyFilter, Separation, Settings, Side};
     println!(
         "| vehicles | law floor µs/tick | filter, formation µs/tick | ratio | filter, every pair in conflict µs/tick | ratio | filter, a packed ring closing µs/tick | ratio |"
     );
@@ -378,6 +378,7 @@ fn safety_table() {
         period_s: 0.02,
         keep_weighted_sum: true,
         time_limit_s: f64::INFINITY,
+        rows: Rows::Barrier,
     };
     for n in [6usize, 64, 1000] {
         let setup = Config::from_toml(&ring(n, 50.0))

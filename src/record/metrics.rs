@@ -304,6 +304,15 @@ pub struct SafetyReport {
     pub unfinished_braked: u64,
     /// Pairs that conflicted even braking, summed over those ticks.
     pub unfinished_unresolved: u64,
+    /// Ticks on which the stopping check turned a vehicle to braking (every tick is
+    /// checked with `safety.rows = "stopping"`, an unfinished one otherwise).
+    pub check_braked_ticks: u64,
+    /// Vehicles the stopping check turned to braking, summed over all ticks.
+    pub check_braked: u64,
+    /// Pairs the stopping check found in conflict even braking, summed over all ticks.
+    pub check_unresolved: u64,
+    /// Ticks on which the stopping check ran out of time and every vehicle braked.
+    pub check_out_of_time_ticks: u64,
     /// The filter's time per control tick (wall clock; the sweep for pairs and the
     /// solve): median, 99th percentile and longest.
     pub filter_time: crate::swarm::timing::Quantiles,
@@ -340,6 +349,10 @@ impl SafetyReport {
             unfinished_missed_mps2: s.unfinished_missed_mps2,
             unfinished_braked: s.unfinished_braked,
             unfinished_unresolved: s.unfinished_unresolved,
+            check_braked_ticks: s.check_braked_ticks,
+            check_braked: s.check_braked,
+            check_unresolved: s.check_unresolved,
+            check_out_of_time_ticks: s.check_out_of_time_ticks,
             filter_time: s.filter_time.quantiles(),
             largest_piece: s.largest_piece,
             most_sweeps: s.most_sweeps,

@@ -37,6 +37,7 @@ pub mod neighbours;
 mod pieces;
 pub mod reach;
 mod secure;
+pub mod stop_rows;
 pub mod stopping;
 
 use std::time::{Duration, Instant};
@@ -49,6 +50,7 @@ pub use barrier::{PairRow, Separation, Side, pair_row};
 pub use fence::{Fence, FenceItem, FenceItemKind, FenceShape, fence_row, stop_point_m};
 pub use neighbours::{Found, Sweep};
 pub use reach::ReachBound;
+pub use stop_rows::StopRows;
 
 /// How far ahead a pair is looked at (s): pairs that cannot meet within this time at
 /// the swarm's top speed are not considered.
@@ -65,8 +67,18 @@ pub fn look_radius_m(separation: &Separation, top_speed_mps: f64, lookahead_s: f
     separation.horizontal_m + 2.0 * top_speed_mps * lookahead_s + 1.0
 }
 
-/// The share of the time limit left to the stopping check after the solve.
+/// The least share of the time limit left to the stopping check after the solve.
 pub const SECURE_SHARE: f64 = 0.25;
+/// The most share of the time limit left to the stopping check after the solve.
+pub const MAX_SECURE_SHARE: f64 = 0.6;
+/// The check is given its last duration times this.
+pub const CHECK_ROOM: f64 = 1.5;
+/// The share of the time limit by which the check ends: past it every vehicle brakes.
+pub const CHECK_END_SHARE: f64 = 0.9;
+
+/// What a stopping row keeps beyond the stopping check's distance (m): the bend of the
+/// pair's path while the commands act, and rounding.
+pub const STOP_ROW_MARGIN_M: f64 = 0.005;
 
 /// A barrier row counts as active when the command leaves less slack than this (m/s²).
 pub const ACTIVE_SLACK_MPS2: f64 = 1e-6;
@@ -134,6 +146,19 @@ pub enum Outcome {
     },
 }
 
+/// Which row keeps each pair apart (`[safety] rows`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Rows {
+    /// The barrier row ([`barrier`]): each pair counts on braking its relative motion at
+    /// the two vehicles' summed braking shares.
+    #[default]
+    Barrier,
+    /// The stopping row ([`stop_rows`]): every vehicle must be able to stop together, at
+    /// the pace of the slowest, and stay apart; every tick's answer is checked against
+    /// that stop ([`stopping`]) and a vehicle that fails the check brakes instead.
+    Stopping,
+}
+
 /// One tick's report.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Report {
@@ -151,6 +176,13 @@ pub struct Report {
     pub largest_piece: usize,
     /// How long the call took (wall clock).
     pub elapsed: Duration,
+    /// Vehicles the stopping check turned to braking (with [`Rows::Stopping`] on every
+    /// tick, otherwise on an unfinished one).
+    pub braked: usize,
+    /// Pairs that conflict even with both braking.
+    pub unresolved: usize,
+    /// The check ran out of time and every vehicle braked.
+    pub check_out_of_time: bool,
 }
 
 /// The filter's settings for one tick.
@@ -169,6 +201,20 @@ pub struct Settings {
     /// [`MAX_SWEEPS`]). Past it, no piece starts a solver and one being solved stops with
     /// its answer so far ([`Outcome::Unfinished`]).
     pub time_limit_s: f64,
+    /// Which row keeps each pair apart.
+    pub rows: Rows,
+}
+
+impl Settings {
+    /// When a new command acts (after the age less a period) and how long it holds (a
+    /// period, at most the age).
+    pub fn timing(&self) -> stopping::Timing {
+        let hold_s = self.period_s.clamp(0.0, self.age_s.max(0.0));
+        stopping::Timing {
+            delay_s: self.age_s.max(0.0) - hold_s,
+            hold_s,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -229,6 +275,7 @@ pub struct SafetyFilter {
     /// (`neighbours[neighbour_start[k]..neighbour_start[k + 1]]`), and the vehicles
     /// turned to braking still to be checked against theirs.
     plans: Vec<Option<stopping::Plan>>,
+    motions: Vec<Option<stopping::Motion>>,
     paths: Vec<f64>,
     /// Each vehicle's net horizontal command of the last call (`None`: not ours then):
     /// the command on its way when the next is checked.
@@ -238,6 +285,15 @@ pub struct SafetyFilter {
     fill: Vec<usize>,
     queue: Vec<usize>,
     done: Vec<bool>,
+    /// This call's synchronised stop (`None`: barrier rows, or no stop).
+    stop: Option<StopRows>,
+    /// The last stopping check's common stop time (s; `None`: no check last call).
+    last_stop_s: Option<f64>,
+    /// How long the last stopping check took (s, wall clock).
+    last_check_s: f64,
+    /// Each vehicle's braking (m/s²) when the last check turned it to braking: braking on
+    /// continues at that rate, the tail of the plan that check passed.
+    committed: Vec<Option<f64>>,
     /// When this call must be done (`None`: no wall-clock limit).
     deadline: Option<Instant>,
     tally: Tally,
@@ -283,11 +339,16 @@ impl SafetyFilter {
         fence: Option<(&Fence, f64)>,
     ) -> Report {
         let started = Instant::now();
-        // The solve stops early enough to leave the stopping check its share.
-        self.deadline =
-            (settings.time_limit_s.is_finite() && settings.time_limit_s >= 0.0).then(|| {
-                started + Duration::from_secs_f64((1.0 - SECURE_SHARE) * settings.time_limit_s)
-            });
+        // The solve stops early enough to leave the stopping check its share: what the
+        // last check took with room to spare, within bounds. The check itself ends by
+        // the limit's last few per cent.
+        let limit_s = settings.time_limit_s;
+        let timed = limit_s.is_finite() && limit_s >= 0.0;
+        let reserve_s = (CHECK_ROOM * self.last_check_s)
+            .clamp(SECURE_SHARE * limit_s, MAX_SECURE_SHARE * limit_s);
+        self.deadline = timed.then(|| started + Duration::from_secs_f64(limit_s - reserve_s));
+        let check_deadline =
+            timed.then(|| started + Duration::from_secs_f64(CHECK_END_SHARE * limit_s));
         self.tally = Tally::default();
         let mut report = self.filter_rows(settings, agents, commands, fence);
         self.warm.clear();
@@ -299,14 +360,29 @@ impl SafetyFilter {
                 .map(|(r, l)| ((r.i, r.j), *l)),
         );
         self.warm.sort_unstable_by_key(|w| w.0);
-        if self.tally.unfinished && matches!(report.outcome, Outcome::Filtered { .. }) {
-            let secured = self.secure(settings, agents, commands);
-            report.outcome = Outcome::Unfinished {
-                missed_mps2: self.tally.missed_mps2,
-                braked: secured.braked,
-                unresolved: secured.unresolved,
-            };
+        let unfinished =
+            self.tally.unfinished && matches!(report.outcome, Outcome::Filtered { .. });
+        let every_tick = self.stop.is_some() && !self.rows.is_empty();
+        let checked = unfinished || every_tick;
+        if !checked {
+            self.committed.clear();
         }
+        if checked {
+            let check_started = Instant::now();
+            let secured = self.secure(settings, agents, commands, check_deadline);
+            self.last_check_s = check_started.elapsed().as_secs_f64();
+            report.braked = secured.braked;
+            report.unresolved = secured.unresolved;
+            report.check_out_of_time = secured.out_of_time;
+            if unfinished {
+                report.outcome = Outcome::Unfinished {
+                    missed_mps2: self.tally.missed_mps2,
+                    braked: secured.braked,
+                    unresolved: secured.unresolved,
+                };
+            }
+        }
+        self.last_stop_s = self.stop.filter(|_| checked).map(|s| s.stop_s);
         self.last_net.clear();
         self.last_net.extend(
             agents
@@ -339,10 +415,28 @@ impl SafetyFilter {
             .filter(|v| v.is_finite())
             .fold(0.0, f64::max);
         let radius = look_radius_m(&sep, top_speed, LOOKAHEAD_S);
+        self.stop = match settings.rows {
+            Rows::Barrier => None,
+            Rows::Stopping => StopRows::new(
+                &agents[..n],
+                &self.last_net,
+                (self.last_stop_s, &self.committed),
+                settings.timing(),
+            ),
+        };
         // A pair is looked at as far as a row of it can bind at its own relative speed,
         // never beyond the look-ahead radius: what the radius finds that can bind is found.
         let bound = ReachBound::new(&sep, settings.age_s, &agents[..n]);
-        let pair_limit = |v: f64| bound.map_or(f64::INFINITY, |b| b.distance_m(v));
+        let stop = self.stop;
+        let pair_limit = |v: f64| match (stop, bound) {
+            (Some(stop), _) => {
+                let delay_s = stop.timing.delay_s;
+                let keep = sep.horizontal_m + stop.widest_mps2() * delay_s * delay_s;
+                stop.distance_m(keep + STOP_ROW_MARGIN_M, v)
+            }
+            (None, Some(b)) => b.distance_m(v),
+            (None, None) => f64::INFINITY,
+        };
         self.velocities.clear();
         self.velocities
             .extend(agents[..n].iter().map(|a| a.side.map(|s| s.vel_mps)));
@@ -368,13 +462,28 @@ impl SafetyFilter {
             if !(a.controlled || b.controlled) {
                 continue;
             }
-            let authority = braking(a) + braking(b);
-            let Some(row) = pair_row(&sep, &si, &sj, authority, settings.age_s) else {
+            let row = if let Some(stop) = stop {
+                let on_way = |k: usize| self.last_net.get(k).copied().flatten();
+                let zero = Vector2::zeros();
+                // The check's distance and a little more: an answer that meets the row
+                // passes the check.
+                let keep = secure::keep_m(&sep, a, b, stop.timing) + STOP_ROW_MARGIN_M;
+                stop.row(
+                    &sep,
+                    (a, on_way(i).unwrap_or(zero)),
+                    (b, on_way(j).unwrap_or(zero)),
+                    keep,
+                )
+            } else {
+                pair_row(&sep, &si, &sj, braking(a) + braking(b), settings.age_s)
+            };
+            let Some(row) = row else {
                 continue;
             };
-            // A row no command inside the envelopes can reach never binds.
+            // A row no command inside the envelopes can reach never binds; with the
+            // stopping rows its pair is still checked (braking may bring it closer).
             let reach = limit(a) + limit(b);
-            if !row.b.is_finite() || row.b <= -reach - 1.0 {
+            if !row.b.is_finite() || (row.b <= -reach - 1.0 && stop.is_none()) {
                 continue;
             }
             let row = Row { i, j, row };
@@ -417,6 +526,9 @@ impl SafetyFilter {
                 sweeps: 0,
                 largest_piece: 0,
                 elapsed: Duration::ZERO,
+                braked: 0,
+                unresolved: 0,
+                check_out_of_time: false,
             };
         }
         if let Some(relaxed) = self.solve_in_pieces(settings, agents, &mut commands[..n]) {
@@ -488,6 +600,9 @@ impl SafetyFilter {
             sweeps: 0,
             largest_piece: 0,
             elapsed: Duration::ZERO,
+            braked: 0,
+            unresolved: 0,
+            check_out_of_time: false,
         }
     }
 

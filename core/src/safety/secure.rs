@@ -1,13 +1,16 @@
-//! The safe answer when the filter's time runs out: every vehicle whose command, held for
-//! the tick and followed by braking, would bring it within the separation of a
-//! neighbour's plan brakes instead ([`super::stopping`]), until no pair of the rows
-//! conflicts. Braking is always such an answer, so this needs no optimum and costs one
-//! check per row and per row of a vehicle that turned to braking.
+//! The stopping check: every vehicle whose command, held for the tick and followed by
+//! braking, would bring it within the separation of a neighbour's plan brakes instead
+//! ([`super::stopping`]), until no pair of the rows conflicts. Braking is always such an
+//! answer, so this needs no optimum and costs one check per row and per row of a vehicle
+//! that turned to braking. It secures the answer so far when the filter's time runs out
+//! and, with the stopping rows ([`super::stop_rows`]), every tick's answer.
+
+use std::time::Instant;
 
 use nalgebra::Vector2;
 
-use super::stopping::{First, Plan, Timing, closest_m, path_m};
-use super::{Agent, SafetyFilter, Settings, braking, command_for, limit};
+use super::stopping::{First, Motion, Plan, Timing, closest_between};
+use super::{Agent, Row, SafetyFilter, Separation, Settings, braking, command_for, limit};
 
 /// What securing an answer did.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -17,24 +20,37 @@ pub(super) struct Secured {
     /// Pairs that conflict even with both braking (the separation was already lost to
     /// what braking can do).
     pub(super) unresolved: usize,
+    /// The check ran out of time and every vehicle brakes.
+    pub(super) out_of_time: bool,
 }
 
 impl SafetyFilter {
     /// Makes `commands` safe by the stopping check over the pairs of this call's rows.
+    ///
+    /// With the stopping rows every tick is checked and the last check passed every pair,
+    /// so two vehicles that both brake from now fly the tails of plans already passed:
+    /// such a pair needs no check, and when `deadline` comes before the check is done,
+    /// every vehicle brakes (`out_of_time`).
     pub(super) fn secure(
         &mut self,
         settings: &Settings,
         agents: &[Agent],
         commands: &mut [Vector2<f64>],
+        deadline: Option<Instant>,
     ) -> Secured {
         let n = agents.len().min(commands.len());
         let sep = settings.separation;
-        let hold_s = settings.period_s.clamp(0.0, settings.age_s.max(0.0));
-        let timing = Timing {
-            delay_s: settings.age_s.max(0.0) - hold_s,
-            hold_s,
-        };
+        let timing = settings.timing();
+        let hold_s = timing.hold_s;
+        // With the stopping rows every vehicle brakes to rest after the common stop time;
+        // otherwise each at its own braking share.
+        let stops = self.stop.map(|s| Stops {
+            command_s: s.stop_s,
+            brake_s: self.last_stop_s.unwrap_or(s.stop_s),
+        });
+        self.committed.resize(n, None);
         self.plans.clear();
+        self.motions.clear();
         self.paths.clear();
         for (k, (a, u)) in agents[..n].iter().zip(&commands[..n]).enumerate() {
             let plan = a.side.and_then(|side| {
@@ -48,18 +64,22 @@ impl SafetyFilter {
                 };
                 // The command on its way: the last call's, when it had one.
                 let before = self.last_net.get(k).copied().flatten().unwrap_or(net);
-                ok.then_some(Plan {
+                let mut plan = Plan {
                     pos_m: pos,
                     vel_mps: vel.xy(),
                     vz_mps: vel.z,
                     before_mps2: if a.controlled { before } else { net },
                     first: First::Command(net),
                     braking_mps2: braking(a),
-                })
+                };
+                plan.braking_mps2 = braking_of(&plan, a, timing, stops, None);
+                ok.then_some(plan)
             });
+            let motion = plan.map(|p| Motion::of(&p, timing));
             self.paths
-                .push(plan.map_or(f64::INFINITY, |p| path_m(&p, timing)));
+                .push(motion.map_or(f64::INFINITY, |m| m.path_m()));
             self.plans.push(plan);
+            self.motions.push(motion);
         }
         // Each vehicle's pairs, as a list of neighbours by vehicle.
         self.neighbour_start.clear();
@@ -81,36 +101,25 @@ impl SafetyFilter {
             self.neighbours[self.fill[r.j]] = r.i;
             self.fill[r.j] += 1;
         }
-        // The distance a pair must keep: the separation and what the two can move apart
-        // from what is known in the age of it.
-        let delay_s = timing.delay_s;
-        let keep = |i: usize, j: usize| {
-            sep.horizontal_m + 0.5 * (limit(&agents[i]) + limit(&agents[j])) * delay_s * delay_s
-        };
-        // Whether a pair's plans conflict; a pair further apart than both can go does not.
-        let conflict = |plans: &[Option<Plan>], paths: &[f64], i: usize, j: usize| {
-            let (Some(a), Some(b)) = (plans[i], plans[j]) else {
-                return false;
-            };
-            let keep = keep(i, j);
-            if (a.pos_m - b.pos_m).norm() - paths[i] - paths[j] >= keep {
-                return false;
-            }
-            closest_m(&a, &b, timing) < keep
-        };
         let mut out = Secured::default();
+        let mut clock = Clock {
+            deadline,
+            checks: 0,
+        };
         self.queue.clear();
-        for r in self.rows.iter().filter(|r| !r.single()) {
-            if !conflict(&self.plans, &self.paths, r.i, r.j) {
+        for r in 0..self.rows.len() {
+            let Row { i, j, .. } = self.rows[r];
+            if i == j {
                 continue;
             }
-            for k in [r.i, r.j] {
-                if agents[k].controlled
-                    && let Some(p) = self.plans[k].as_mut()
-                    && p.first != First::Brake
-                {
-                    p.first = First::Brake;
-                    self.paths[k] = path_m(p, timing);
+            if clock.out(&mut out) {
+                break;
+            }
+            if !self.conflict(&sep, agents, timing, i, j) {
+                continue;
+            }
+            for k in [i, j] {
+                if self.turn_to_braking(agents, timing, stops, k) {
                     self.queue.push(k);
                 }
             }
@@ -126,30 +135,50 @@ impl SafetyFilter {
             self.done[k] = true;
             for s in self.neighbour_start[k]..self.neighbour_start[k + 1] {
                 let m = self.neighbours[s];
-                if !conflict(&self.plans, &self.paths, k, m) {
+                let braking_too = self.plans[m].is_some_and(|p| p.first == First::Brake);
+                if stops.is_some() && braking_too && agents[m].controlled {
+                    // Both fly the tails of plans the last check passed.
                     continue;
                 }
-                if agents[m].controlled
-                    && let Some(p) = self.plans[m].as_mut()
-                    && p.first != First::Brake
-                {
-                    p.first = First::Brake;
-                    self.paths[m] = path_m(p, timing);
+                if clock.out(&mut out) {
+                    break;
+                }
+                if !self.conflict(&sep, agents, timing, k, m) {
+                    continue;
+                }
+                if self.turn_to_braking(agents, timing, stops, m) {
                     self.queue.push(m);
                 } else if self.done[m] || !agents[m].controlled {
                     out.unresolved += 1;
                 }
             }
+            if out.out_of_time {
+                break;
+            }
+        }
+        if out.out_of_time {
+            // No time to finish: every vehicle brakes, the tail of what the last check
+            // passed.
+            self.queue.clear();
+            out.braked = 0;
+            for k in 0..n {
+                self.turn_to_braking(agents, timing, stops, k);
+                out.braked += usize::from(self.plans[k].is_some_and(|p| p.first == First::Brake));
+            }
         }
         for k in 0..n {
             let Some(p) = self.plans[k].filter(|p| p.first == First::Brake) else {
+                self.committed[k] = None;
                 continue;
             };
+            self.committed[k] = Some(p.braking_mps2);
             let a = &agents[k];
-            let speed = p.vel_mps.norm();
-            // Braking along the velocity, no further than to rest within the hold.
+            // Braking along the velocity as the plan does (from when the command acts),
+            // no further than to rest within the hold.
+            let v = p.vel_mps + p.before_mps2 * timing.delay_s;
+            let speed = v.norm();
             let net = if speed > 0.0 {
-                -p.vel_mps / speed * braking(a).min(speed / hold_s.max(1e-3))
+                -v / speed * p.braking_mps2.min(speed / hold_s.max(1e-3))
             } else {
                 Vector2::zeros()
             };
@@ -159,4 +188,123 @@ impl SafetyFilter {
         }
         out
     }
+
+    /// Whether the plans of `i` and `j` conflict; a pair further apart than both can go
+    /// does not.
+    fn conflict(
+        &self,
+        sep: &Separation,
+        agents: &[Agent],
+        timing: Timing,
+        i: usize,
+        j: usize,
+    ) -> bool {
+        let (Some(a), Some(b), Some(ma), Some(mb)) = (
+            self.plans[i],
+            self.plans[j],
+            self.motions[i],
+            self.motions[j],
+        ) else {
+            return false;
+        };
+        let keep = keep_m(sep, &agents[i], &agents[j], timing);
+        if (a.pos_m - b.pos_m).norm() - self.paths[i] - self.paths[j] >= keep {
+            return false;
+        }
+        // Rounding of a pair at rest exactly the distance apart is no conflict.
+        closest_between((&a, &ma), (&b, &mb)) < keep - 1e-9
+    }
+
+    /// Turns vehicle `k` (ours, with a plan, not yet braking) to braking; whether it did.
+    fn turn_to_braking(
+        &mut self,
+        agents: &[Agent],
+        timing: Timing,
+        stops: Option<Stops>,
+        k: usize,
+    ) -> bool {
+        let a = &agents[k];
+        let Some(p) = self.plans[k]
+            .as_mut()
+            .filter(|p| a.controlled && p.first != First::Brake)
+        else {
+            return false;
+        };
+        p.first = First::Brake;
+        p.braking_mps2 = braking_of(p, a, timing, stops, self.committed[k]);
+        let motion = Motion::of(p, timing);
+        self.paths[k] = motion.path_m();
+        self.motions[k] = Some(motion);
+        true
+    }
+}
+
+/// The check's deadline, looked at every few checks.
+struct Clock {
+    deadline: Option<Instant>,
+    checks: usize,
+}
+
+impl Clock {
+    /// Whether the deadline has passed (noted in `out`).
+    fn out(&mut self, out: &mut Secured) -> bool {
+        self.checks += 1;
+        // The first check looks too, then every 32nd.
+        if !out.out_of_time
+            && (self.checks - 1).is_multiple_of(32)
+            && self.deadline.is_some_and(|d| Instant::now() >= d)
+        {
+            out.out_of_time = true;
+        }
+        out.out_of_time
+    }
+}
+
+/// A check's stop times with the stopping rows (s).
+#[derive(Debug, Clone, Copy)]
+struct Stops {
+    /// After a new command: this tick's common stop time.
+    command_s: f64,
+    /// Braking from when the command on its way ends: the last check's, under which
+    /// braking then is the tail of the plan that check passed.
+    brake_s: f64,
+}
+
+/// A plan's braking (m/s²), never more than its share: a vehicle already braking keeps
+/// its rate (`committed`); with the stopping rows, the rate that brings it to rest after
+/// the common stop time from its velocity when it starts braking; otherwise its share.
+fn braking_of(
+    plan: &Plan,
+    a: &Agent,
+    timing: Timing,
+    stops: Option<Stops>,
+    committed: Option<f64>,
+) -> f64 {
+    let share = braking(a);
+    let Some(stops) = stops.filter(|_| share > 0.0) else {
+        return share;
+    };
+    let mut v = plan.vel_mps + plan.before_mps2 * timing.delay_s;
+    let stop_s = match plan.first {
+        First::Command(net) => {
+            v += net * timing.hold_s;
+            stops.command_s
+        }
+        First::Brake => match committed {
+            Some(rate) => return rate.min(share),
+            None => stops.brake_s,
+        },
+    };
+    if stop_s > 0.0 {
+        (v.norm() / stop_s).min(share)
+    } else {
+        share
+    }
+}
+
+/// The distance a pair must keep in the check (m, scaled): the separation and what the two
+/// can move apart from what is known in the delay.
+pub(super) fn keep_m(sep: &Separation, a: &Agent, b: &Agent, timing: Timing) -> f64 {
+    let delay_s = timing.delay_s;
+    sep.horizontal_m + 0.5 * (limit(a) + limit(b)) * delay_s * delay_s
 }

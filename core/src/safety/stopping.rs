@@ -76,7 +76,7 @@ impl Piece {
 
 /// A plan's horizontal motion as pieces (the last lasts for ever).
 #[derive(Debug, Clone, Copy)]
-struct Motion {
+pub struct Motion {
     pieces: [Piece; 4],
     count: usize,
     /// When it comes to rest (s; infinite: it does not).
@@ -123,7 +123,7 @@ impl Motion {
     }
 
     /// The plan's motion.
-    fn of(plan: &Plan, timing: Timing) -> Self {
+    pub fn of(plan: &Plan, timing: Timing) -> Self {
         let start = plan.pos_m.xy();
         let mut out = Self {
             pieces: [still(0.0, start); 4],
@@ -176,26 +176,32 @@ fn still(t0_s: f64, pos: Vector2<f64>) -> Piece {
 /// How far a plan goes from now at most (m; infinite for one that never stops): exact
 /// for pieces along a line, bounded by speed and acceleration for the others.
 pub fn path_m(plan: &Plan, timing: Timing) -> f64 {
-    let motion = Motion::of(plan, timing);
-    if motion.rest_s.is_infinite() {
-        return f64::INFINITY;
+    Motion::of(plan, timing).path_m()
+}
+
+impl Motion {
+    /// How far it goes from now at most (m), as [`path_m`].
+    pub fn path_m(&self) -> f64 {
+        if self.rest_s.is_infinite() {
+            return f64::INFINITY;
+        }
+        let pieces = self.pieces();
+        let mut length = 0.0;
+        for (k, p) in pieces.iter().enumerate() {
+            let t1 = pieces.get(k + 1).map_or(p.t0_s, |q| q.t0_s);
+            let dt = t1 - p.t0_s;
+            let cross = p.vel.x * p.acc.y - p.vel.y * p.acc.x;
+            let straight = cross.abs() <= 1e-12 * (1.0 + p.vel.norm() * p.acc.norm())
+                && p.at(t1).1.dot(&p.vel) >= 0.0;
+            length += if straight {
+                // Along one line without turning back (braking stops at its end): exact.
+                (p.at(t1).0 - p.pos).norm()
+            } else {
+                p.vel.norm() * dt + 0.5 * p.acc.norm() * dt * dt
+            };
+        }
+        length
     }
-    let pieces = motion.pieces();
-    let mut length = 0.0;
-    for (k, p) in pieces.iter().enumerate() {
-        let t1 = pieces.get(k + 1).map_or(p.t0_s, |q| q.t0_s);
-        let dt = t1 - p.t0_s;
-        let cross = p.vel.x * p.acc.y - p.vel.y * p.acc.x;
-        let straight = cross.abs() <= 1e-12 * (1.0 + p.vel.norm() * p.acc.norm())
-            && p.at(t1).1.dot(&p.vel) >= 0.0;
-        length += if straight {
-            // Along one line without turning back (braking stops at its end): exact.
-            (p.at(t1).0 - p.pos).norm()
-        } else {
-            p.vel.norm() * dt + 0.5 * p.acc.norm() * dt * dt
-        };
-    }
-    length
 }
 
 /// The closest (scaled, m) two plans come from now on.
@@ -204,7 +210,12 @@ pub fn closest_m(a: &Plan, b: &Plan, timing: Timing) -> f64 {
         delay_s: timing.delay_s.max(0.0),
         hold_s: timing.hold_s.max(0.0),
     };
-    let (ma, mb) = (Motion::of(a, timing), Motion::of(b, timing));
+    closest_between((a, &Motion::of(a, timing)), (b, &Motion::of(b, timing)))
+}
+
+/// The closest (scaled, m) two plans come from now on, each with its motion
+/// ([`Motion::of`] with the same timing).
+pub fn closest_between((a, ma): (&Plan, &Motion), (b, mb): (&Plan, &Motion)) -> f64 {
     let horizon_s = ma.rest_s.max(mb.rest_s);
     let closing_z = (a.vz_mps - b.vz_mps).abs()
         * if horizon_s.is_finite() {
@@ -213,15 +224,20 @@ pub fn closest_m(a: &Plan, b: &Plan, timing: Timing) -> f64 {
             VERTICAL_HORIZON_S
         };
     let gap_z = ((a.pos_m.z - b.pos_m.z).abs() - closing_z).max(0.0);
-    // The times at which either changes its piece.
+    // The times at which either changes its piece: the two sorted lists merged.
     let mut times = [0.0; 8];
-    let mut count = 0;
-    for p in ma.pieces().iter().chain(mb.pieces()) {
-        times[count] = p.t0_s;
-        count += 1;
+    let (pa, pb) = (ma.pieces(), mb.pieces());
+    let (mut x, mut y) = (0, 0);
+    while x < pa.len() || y < pb.len() {
+        let take_a = y == pb.len() || (x < pa.len() && pa[x].t0_s <= pb[y].t0_s);
+        times[x + y] = if take_a { pa[x].t0_s } else { pb[y].t0_s };
+        if take_a {
+            x += 1;
+        } else {
+            y += 1;
+        }
     }
-    let times = &mut times[..count];
-    times.sort_by(f64::total_cmp);
+    let times = &times[..pa.len() + pb.len()];
     let mut best = f64::INFINITY;
     for (k, &t0) in times.iter().enumerate() {
         let t1 = times.get(k + 1).copied().unwrap_or(f64::INFINITY);

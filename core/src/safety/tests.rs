@@ -17,6 +17,7 @@ fn settings(keep: bool) -> Settings {
         period_s: 0.02,
         keep_weighted_sum: keep,
         time_limit_s: f64::INFINITY,
+        rows: Rows::Barrier,
     }
 }
 
@@ -517,7 +518,9 @@ fn out_of_time_the_vehicles_whose_command_then_braking_would_meet_brake_instead(
     assert!(report.rows > 0);
     // The check on the law's own commands, over the rows of that call.
     let mut commands = law;
-    let Secured { braked, unresolved } = filter.secure(&s, &agents, &mut commands);
+    let Secured {
+        braked, unresolved, ..
+    } = filter.secure(&s, &agents, &mut commands, None);
     assert_eq!(braked, 2);
     // The command already on its way still flies for the delay (0.02 s): 0.0404 m, then
     // 2.04²/4 = 1.04 m braking, each: 2.24 m apart at rest, inside 3 m, so counted.
@@ -533,4 +536,85 @@ fn out_of_time_the_vehicles_whose_command_then_braking_would_meet_brake_instead(
         commands[1]
     );
     assert_eq!(commands[2], Vector2::new(0.5, 0.0));
+}
+
+/// A `side` × `side` block 4 m apart about the origin, each vehicle flown by a PD law to
+/// its start mirrored through the centre, every command acting a tick after its state
+/// (exact double integrators, 10 ms ticks, age 0.02 s); the filter with `s` except that
+/// ticks `[out_from, ticks)` have no time at all. The closest pair at any tick (m), the
+/// vehicles the check braked and the pairs it left unresolved.
+fn packed_swap(side: usize, s: Settings, ticks: usize, out_from: usize) -> (f64, usize, usize) {
+    let dt = 0.01;
+    let half = 2.0 * (side - 1) as f64;
+    let mut pos: Vec<Vector2<f64>> = (0..side * side)
+        .map(|i| {
+            Vector2::new(
+                4.0 * (i % side) as f64 - half,
+                4.0 * (i / side) as f64 - half,
+            )
+        })
+        .collect();
+    let places: Vec<Vector2<f64>> = pos.iter().map(|p| -p).collect();
+    let n = pos.len();
+    let mut vel = vec![Vector2::zeros(); n];
+    let mut flying = vec![Vector2::zeros(); n];
+    let mut filter = SafetyFilter::default();
+    let (mut closest, mut braked, mut unresolved) = (f64::INFINITY, 0, 0);
+    for tick in 0..ticks {
+        let agents: Vec<Agent> = (0..n)
+            .map(|k| Agent {
+                braking_mps2: 3.0,
+                ..agent([pos[k].x, pos[k].y, 50.0], [vel[k].x, vel[k].y, 0.0], 1.0)
+            })
+            .collect();
+        let mut commands: Vec<Vector2<f64>> = (0..n)
+            .map(|k| {
+                let u = (places[k] - pos[k]) * 0.05 - vel[k] * 0.5;
+                u * (6.0 / u.norm().max(6.0))
+            })
+            .collect();
+        let tick_settings = Settings {
+            time_limit_s: if tick >= out_from {
+                0.0
+            } else {
+                s.time_limit_s
+            },
+            ..s
+        };
+        let report = filter.filter(&tick_settings, &agents, &mut commands, None);
+        braked += report.braked;
+        unresolved += report.unresolved;
+        for i in 0..n {
+            for j in i + 1..n {
+                closest = closest.min((pos[i] - pos[j]).norm());
+            }
+        }
+        for k in 0..n {
+            pos[k] += vel[k] * dt + flying[k] * (0.5 * dt * dt);
+            vel[k] += flying[k] * dt;
+        }
+        flying = commands;
+    }
+    (closest, braked, unresolved)
+}
+
+#[test]
+fn with_the_stopping_rows_a_packed_swap_keeps_apart_and_braking_from_any_tick_is_safe() {
+    let s = Settings {
+        age_s: 0.02,
+        period_s: 0.01,
+        rows: Rows::Stopping,
+        ..settings(true)
+    };
+    // Solved every tick: the answers meet the stopping rows, which leave 5 mm to the
+    // check: it never brakes, and the block stays 3 m apart.
+    let (closest, braked, unresolved) = packed_swap(4, s, 800, usize::MAX);
+    assert!(closest >= 3.0, "{closest}");
+    assert_eq!((braked, unresolved), (0, 0));
+    // From tick 300 (the block compressed and moving) no time at all: every vehicle
+    // brakes along the plans the last check passed, and nobody comes within 3 m.
+    let (closest, braked, unresolved) = packed_swap(4, s, 800, 300);
+    assert!(closest >= 3.0 - 1e-9, "{closest}");
+    assert!(braked >= 16 * 400, "{braked}");
+    assert_eq!(unresolved, 0);
 }

@@ -42,6 +42,15 @@ pub struct SafetyStats {
     pub unfinished_braked: u64,
     /// Pairs that conflicted even braking on those ticks, summed over them.
     pub unfinished_unresolved: u64,
+    /// Ticks on which the stopping check turned a vehicle to braking (every tick is
+    /// checked with the stopping rows, an unfinished one otherwise).
+    pub check_braked_ticks: u64,
+    /// Vehicles the stopping check turned to braking, summed over all ticks.
+    pub check_braked: u64,
+    /// Pairs the stopping check found in conflict even braking, summed over all ticks.
+    pub check_unresolved: u64,
+    /// Ticks on which the stopping check ran out of time and every vehicle braked.
+    pub check_out_of_time_ticks: u64,
     /// How long each tick's filter call took (wall clock).
     pub filter_time: super::timing::Histogram,
     /// The most vehicles in one piece solved together.
@@ -185,6 +194,7 @@ impl Swarm {
             } else {
                 f64::INFINITY
             },
+            rows: setup.rows,
         };
         let report = self.safety.filter.filter(
             &settings,
@@ -201,6 +211,22 @@ impl Swarm {
         stats.most_sweeps = stats.most_sweeps.max(report.sweeps);
         if let Some((_, _, d)) = report.closest {
             stats.min_seen_m = stats.min_seen_m.min(d);
+        }
+        stats.check_braked_ticks += u64::from(report.braked > 0);
+        stats.check_braked += report.braked as u64;
+        stats.check_unresolved += report.unresolved as u64;
+        if report.check_out_of_time {
+            stats.check_out_of_time_ticks += 1;
+            if stats.check_out_of_time_ticks % 100 == 1 {
+                self.log.push(
+                    now,
+                    true,
+                    format!(
+                        "safety filter: the stopping check ran out of time: every vehicle brakes this tick (tick {})",
+                        stats.check_out_of_time_ticks
+                    ),
+                );
+            }
         }
         self.safety.closest_pair = report.closest;
         match report.outcome {
