@@ -135,16 +135,6 @@ pub enum JamBreak {
     Turn,
 }
 
-/// Which row keeps each pair apart (`[safety] rows`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum PairRows {
-    /// Each pair counts on braking its relative motion at its two braking shares.
-    Barrier,
-    /// Every vehicle must be able to stop together and stay apart, checked every tick.
-    Stopping,
-}
-
 /// `[safety]`: no command brings two vehicles closer than a downwash ellipsoid of
 /// `horizontal_m` by `vertical_m` (centre to centre), by a control-barrier-function
 /// filter between the law and the saturation (docs/math.md, "Keeping vehicles apart").
@@ -195,12 +185,6 @@ pub struct SafetySection {
     /// (counted as `unfinished_ticks`, `unfinished_braked`). Lockstep
     /// flights are limited by sweeps only.
     pub budget_share: f64,
-    /// Which row keeps each pair apart (default `barrier`): `barrier` counts on each pair
-    /// braking its relative motion at the two braking shares; `stopping` on every vehicle
-    /// stopping together at the pace of the slowest, the answer checked against that
-    /// stop on every tick, so that a packed block never enters a state no manoeuvre can
-    /// keep apart (docs/dense.md, "The synchronised stop").
-    pub rows: PairRows,
 }
 
 impl Default for SafetySection {
@@ -218,7 +202,6 @@ impl Default for SafetySection {
             jam_layer_s: 20.0,
             jam_turn_mps2: 1.0,
             budget_share: 0.2,
-            rows: PairRows::Barrier,
         }
     }
 }

@@ -82,10 +82,6 @@ impl Config {
             }),
             budget_share: s.budget_share,
             wall_clock_budget: false,
-            rows: match s.rows {
-                super::PairRows::Barrier => crate::safety::Rows::Barrier,
-                super::PairRows::Stopping => crate::safety::Rows::Stopping,
-            },
         })
     }
 

@@ -304,8 +304,8 @@ pub struct SafetyReport {
     pub unfinished_braked: u64,
     /// Pairs that conflicted even braking, summed over those ticks.
     pub unfinished_unresolved: u64,
-    /// Ticks on which the stopping check turned a vehicle to braking (every tick is
-    /// checked with `safety.rows = "stopping"`, an unfinished one otherwise).
+    /// Ticks on which the stopping check (run on the ticks whose solve the time limit
+    /// ended) turned a vehicle to braking.
     pub check_braked_ticks: u64,
     /// Vehicles the stopping check turned to braking, summed over all ticks.
     pub check_braked: u64,

@@ -576,23 +576,6 @@ fn the_safety_keys_are_checked_by_name_and_close_places_are_refused() {
         (3.0, 9.0, 0.5)
     );
     assert_eq!(s.action, ringswarm::swarm::BreachAction::Hold);
-    assert_eq!(s.rows, ringswarm::safety::Rows::Barrier);
-    // The rows are one of two words, and a wrong one is named.
-    let text = with(
-        "[formation]",
-        "[safety]\nrows = \"stopping\"\n\n[formation]",
-    );
-    let setup = Config::from_toml(&text).unwrap().validate().unwrap();
-    assert_eq!(
-        setup.safety.map(|s| s.rows),
-        Some(ringswarm::safety::Rows::Stopping)
-    );
-    let text = with("[formation]", "[safety]\nrows = \"stop\"\n\n[formation]");
-    let err = Config::from_toml(&text).unwrap_err();
-    assert!(
-        err.contains("unknown variant `stop`, expected `barrier` or `stopping`"),
-        "{err}"
-    );
     // The action is one of three words, and a wrong one is named.
     let text = with("[formation]", "[safety]\naction = \"brake\"\n\n[formation]");
     let err = Config::from_toml(&text).unwrap_err();

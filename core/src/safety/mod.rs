@@ -34,6 +34,7 @@ pub mod flow;
 pub mod jam;
 pub mod layers;
 pub mod neighbours;
+mod on_way;
 mod pieces;
 pub mod reach;
 mod secure;
@@ -146,7 +147,7 @@ pub enum Outcome {
     },
 }
 
-/// Which row keeps each pair apart (`[safety] rows`).
+/// Which row keeps each pair apart.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Rows {
     /// The barrier row ([`barrier`]): each pair counts on braking its relative motion at
@@ -280,6 +281,10 @@ pub struct SafetyFilter {
     /// Each vehicle's net horizontal command of the last call (`None`: not ours then):
     /// the command on its way when the next is checked.
     last_net: Vec<Option<Vector2<f64>>>,
+    /// Each vehicle's net commands of the last calls.
+    on_way: on_way::OnWay,
+    /// This call's accelerations on their way, over each half of the delay (m/s²).
+    before: Vec<[Vector2<f64>; 2]>,
     neighbour_start: Vec<usize>,
     neighbours: Vec<usize>,
     fill: Vec<usize>,
@@ -390,6 +395,7 @@ impl SafetyFilter {
                 .zip(commands.iter())
                 .map(|(a, u)| a.controlled.then(|| u - a.drift_mps2)),
         );
+        self.on_way.record(self.last_net.iter().copied());
         report.sweeps = self.tally.sweeps;
         report.largest_piece = self.tally.largest_piece;
         report.elapsed = started.elapsed();
@@ -415,11 +421,18 @@ impl SafetyFilter {
             .filter(|v| v.is_finite())
             .fold(0.0, f64::max);
         let radius = look_radius_m(&sep, top_speed, LOOKAHEAD_S);
+        // With the stopping rows, what each vehicle's commands on their way still do.
+        let timing = settings.timing();
+        self.before.clear();
+        if settings.rows == Rows::Stopping {
+            self.before
+                .extend((0..n).map(|k| self.on_way.halves(k, timing)));
+        }
         self.stop = match settings.rows {
             Rows::Barrier => None,
             Rows::Stopping => StopRows::new(
                 &agents[..n],
-                &self.last_net,
+                &self.before,
                 (self.last_stop_s, &self.committed),
                 settings.timing(),
             ),
@@ -429,11 +442,7 @@ impl SafetyFilter {
         let bound = ReachBound::new(&sep, settings.age_s, &agents[..n]);
         let stop = self.stop;
         let pair_limit = |v: f64| match (stop, bound) {
-            (Some(stop), _) => {
-                let delay_s = stop.timing.delay_s;
-                let keep = sep.horizontal_m + stop.widest_mps2() * delay_s * delay_s;
-                stop.distance_m(keep + STOP_ROW_MARGIN_M, v)
-            }
+            (Some(stop), _) => stop.distance_m(sep.horizontal_m + STOP_ROW_MARGIN_M, v),
             (None, Some(b)) => b.distance_m(v),
             (None, None) => f64::INFINITY,
         };
@@ -463,17 +472,10 @@ impl SafetyFilter {
                 continue;
             }
             let row = if let Some(stop) = stop {
-                let on_way = |k: usize| self.last_net.get(k).copied().flatten();
-                let zero = Vector2::zeros();
                 // The check's distance and a little more: an answer that meets the row
                 // passes the check.
-                let keep = secure::keep_m(&sep, a, b, stop.timing) + STOP_ROW_MARGIN_M;
-                stop.row(
-                    &sep,
-                    (a, on_way(i).unwrap_or(zero)),
-                    (b, on_way(j).unwrap_or(zero)),
-                    keep,
-                )
+                let keep = secure::keep_m(&sep, (a, b), stop.timing, true) + STOP_ROW_MARGIN_M;
+                stop.row(&sep, (a, self.before[i]), (b, self.before[j]), keep)
             } else {
                 pair_row(&sep, &si, &sj, braking(a) + braking(b), settings.age_s)
             };

@@ -62,13 +62,17 @@ impl SafetyFilter {
                 } else {
                     Vector2::zeros()
                 };
-                // The command on its way: the last call's, when it had one.
-                let before = self.last_net.get(k).copied().flatten().unwrap_or(net);
+                // The commands on their way: with the stopping rows all of them, as the
+                // rows; otherwise the last call's held for the delay, or this one.
+                let before = match self.stop {
+                    Some(_) => self.before.get(k).copied().unwrap_or_default(),
+                    None => [self.last_net.get(k).copied().flatten().unwrap_or(net); 2],
+                };
                 let mut plan = Plan {
                     pos_m: pos,
                     vel_mps: vel.xy(),
                     vz_mps: vel.z,
-                    before_mps2: if a.controlled { before } else { net },
+                    before_mps2: if a.controlled { before } else { [net; 2] },
                     first: First::Command(net),
                     braking_mps2: braking(a),
                 };
@@ -175,7 +179,7 @@ impl SafetyFilter {
             let a = &agents[k];
             // Braking along the velocity as the plan does (from when the command acts),
             // no further than to rest within the hold.
-            let v = p.vel_mps + p.before_mps2 * timing.delay_s;
+            let v = p.vel_mps + (p.before_mps2[0] + p.before_mps2[1]) * (0.5 * timing.delay_s);
             let speed = v.norm();
             let net = if speed > 0.0 {
                 -v / speed * p.braking_mps2.min(speed / hold_s.max(1e-3))
@@ -207,7 +211,7 @@ impl SafetyFilter {
         ) else {
             return false;
         };
-        let keep = keep_m(sep, &agents[i], &agents[j], timing);
+        let keep = keep_m(sep, (&agents[i], &agents[j]), timing, self.stop.is_some());
         if (a.pos_m - b.pos_m).norm() - self.paths[i] - self.paths[j] >= keep {
             return false;
         }
@@ -284,7 +288,7 @@ fn braking_of(
     let Some(stops) = stops.filter(|_| share > 0.0) else {
         return share;
     };
-    let mut v = plan.vel_mps + plan.before_mps2 * timing.delay_s;
+    let mut v = plan.vel_mps + (plan.before_mps2[0] + plan.before_mps2[1]) * (0.5 * timing.delay_s);
     let stop_s = match plan.first {
         First::Command(net) => {
             v += net * timing.hold_s;
@@ -302,9 +306,19 @@ fn braking_of(
     }
 }
 
-/// The distance a pair must keep in the check (m, scaled): the separation and what the two
-/// can move apart from what is known in the delay.
-pub(super) fn keep_m(sep: &Separation, a: &Agent, b: &Agent, timing: Timing) -> f64 {
+/// The distance a pair must keep in the check (m, scaled). With the stopping rows, the
+/// separation: what each vehicle does in the delay is in its plan (the command on its
+/// way). Otherwise, the separation and what the two can move apart from what is known in
+/// the delay, as the barrier's age-grown separation.
+pub(super) fn keep_m(
+    sep: &Separation,
+    (a, b): (&Agent, &Agent),
+    timing: Timing,
+    stopping: bool,
+) -> f64 {
+    if stopping {
+        return sep.horizontal_m;
+    }
     let delay_s = timing.delay_s;
     sep.horizontal_m + 0.5 * (limit(a) + limit(b)) * delay_s * delay_s
 }

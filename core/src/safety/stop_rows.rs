@@ -1,5 +1,5 @@
 //! The stopping row: a pair's row that holds when every vehicle can stop together and
-//! stay apart (`[safety] rows = "stopping"`; docs/dense.md, "The synchronised stop").
+//! stay apart ([`super::Rows::Stopping`]; docs/dense.md, "The synchronised stop").
 //!
 //! The barrier row ([`super::barrier`]) counts on each pair braking its relative motion
 //! at the two vehicles' summed authority. In a packed block a vehicle has many pairs and
@@ -23,6 +23,12 @@
 //! whole segment is: the pair can stop apart. `T` is taken at its largest over what the
 //! commands can do in `δ + h`, so a segment the commands make is never longer than the
 //! row assumes. A vehicle not ours keeps its velocity (`Eₖ = pₖ + vₖ(δ + h + T)`).
+//!
+//! The commands on their way are modelled as a pure delay ([`super::on_way`]): each acts
+//! for its period, `δ` after it was given. A vehicle whose attitude responds with a lag
+//! rather than a delay shows part of its recent commands in its state already, which the
+//! model then counts again; so the swarm flies the barrier rows, and these serve
+//! vehicles that follow their commands after a known delay.
 //!
 //! Pure: no allocation, no clock.
 
@@ -54,13 +60,13 @@ pub struct StopRows {
 }
 
 impl StopRows {
-    /// The stop for these agents; `before` is each one's net command on its way (`None`:
-    /// none known, taken as zero), `braking` what the last check left: its stop time and
-    /// the braking of the vehicles it turned to braking. `None` when no vehicle the
-    /// filter commands can brake or the timing is not a number.
+    /// The stop for these agents; `before` is each one's net acceleration on its way over
+    /// the two halves of the delay (missing: none), `braking_now` what the last check
+    /// left: its stop time and the braking of the vehicles it turned to braking. `None`
+    /// when no vehicle the filter commands can brake or the timing is not a number.
     pub fn new(
         agents: &[Agent],
-        before: &[Option<Vector2<f64>>],
+        before: &[[Vector2<f64>; 2]],
         braking_now: (Option<f64>, &[Option<f64>]),
         timing: Timing,
     ) -> Option<Self> {
@@ -79,17 +85,14 @@ impl StopRows {
                 free_mps = free_mps.max(side.vel_mps.xy().norm());
                 continue;
             }
-            let on_way = before
-                .get(k)
-                .copied()
-                .flatten()
-                .unwrap_or_else(Vector2::zeros);
+            let on_way = before.get(k).copied().unwrap_or_default();
+            let on_way_mps2 = on_way[0].norm().max(on_way[1].norm());
             let reach = limit(a) + a.drift_mps2.norm();
-            before_mps2 = before_mps2.max(on_way.norm());
+            before_mps2 = before_mps2.max(on_way_mps2);
             widest_mps2 = widest_mps2.max(limit(a));
             let b = braking(a);
             if b > 0.0 {
-                let fastest = side.vel_mps.xy().norm() + reach.max(on_way.norm()) * ahead_s;
+                let fastest = side.vel_mps.xy().norm() + reach.max(on_way_mps2) * ahead_s;
                 stop_s = stop_s.max(fastest / b);
                 any = true;
             }
@@ -110,12 +113,8 @@ impl StopRows {
             let (Some(side), true) = (a.side, a.controlled) else {
                 continue;
             };
-            let on_way = before
-                .get(k)
-                .copied()
-                .flatten()
-                .unwrap_or_else(Vector2::zeros);
-            let v = (side.vel_mps.xy() + on_way * timing.delay_s).norm();
+            let on_way = before.get(k).copied().unwrap_or_default();
+            let v = (side.vel_mps.xy() + (on_way[0] + on_way[1]) * (0.5 * timing.delay_s)).norm();
             let share = braking(a);
             if !(share > 0.0 && v > 0.0) {
                 continue;
@@ -159,27 +158,34 @@ impl StopRows {
         sep: &Separation,
         side: &Side,
         stops: bool,
-        before: Vector2<f64>,
+        [b1, b2]: [Vector2<f64>; 2],
     ) -> Vector3<f64> {
         let (d, h, t) = (self.timing.delay_s, self.timing.hold_s, self.stop_s);
         let pos = sep.scaled(side.pos_m);
         let vel = sep.scaled(side.vel_mps);
         let z = pos.z + vel.z * (d + h + 0.5 * t);
+        // Each half of the delay, τ = δ/2: its velocity change τb, flown for the rest of
+        // the delay, the hold and half the stop.
+        let tau = 0.5 * d;
+        let after = h + 0.5 * t;
         let xy = if stops {
-            pos.xy() + vel.xy() * (d + h + 0.5 * t) + before * (0.5 * d * d + d * (h + 0.5 * t))
+            pos.xy()
+                + vel.xy() * (d + after)
+                + b1 * (1.5 * tau * tau + tau * after)
+                + b2 * (0.5 * tau * tau + tau * after)
         } else {
             pos.xy() + vel.xy() * (d + h + t)
         };
         Vector3::new(xy.x, xy.y, z)
     }
 
-    /// The row of `i` and `j` (each with its net command on its way) keeping the scaled
+    /// The row of `i` and `j` (each with its accelerations on its way) keeping the scaled
     /// distance `keep_m`: `aᵀ(netᵢ − netⱼ) ≥ b` (m/s²). `None` when they coincide.
     pub fn row(
         &self,
         sep: &Separation,
-        (ai, bi): (&Agent, Vector2<f64>),
-        (aj, bj): (&Agent, Vector2<f64>),
+        (ai, bi): (&Agent, [Vector2<f64>; 2]),
+        (aj, bj): (&Agent, [Vector2<f64>; 2]),
         keep_m: f64,
     ) -> Option<PairRow> {
         let (si, sj) = (ai.side?, aj.side?);
@@ -250,12 +256,12 @@ mod tests {
     #[test]
     fn the_stop_time_is_the_slowest_stop_over_what_the_commands_can_do() {
         let agents = [agent([0.0, 0.0], [4.0, 0.0]), agent([5.0, 0.0], [0.0, 1.0])];
-        let rows = StopRows::new(&agents, &[None, None], (None, &[]), timing()).expect("usable");
+        let rows = StopRows::new(&agents, &[], (None, &[]), timing()).expect("usable");
         // (4 m/s + 6 m/s² · 0.02 s) / 3 m/s².
         assert!((rows.stop_s - 4.12 / 3.0).abs() < 1e-12, "{}", rows.stop_s);
         let mut idle = agents;
         idle.iter_mut().for_each(|a| a.braking_mps2 = 0.0);
-        assert!(StopRows::new(&idle, &[None, None], (None, &[]), timing()).is_none());
+        assert!(StopRows::new(&idle, &[], (None, &[]), timing()).is_none());
     }
 
     #[test]
@@ -269,9 +275,14 @@ mod tests {
         ];
         let before = [Vector2::new(0.5, 0.0), Vector2::new(0.0, 0.0)];
         let rows =
-            StopRows::new(&agents, &before.map(Some), (None, &[]), timing()).expect("usable");
+            StopRows::new(&agents, &before.map(|b| [b; 2]), (None, &[]), timing()).expect("usable");
         let row = rows
-            .row(&s, (&agents[1], before[1]), (&agents[0], before[0]), 3.0)
+            .row(
+                &s,
+                (&agents[1], [before[1]; 2]),
+                (&agents[0], [before[0]; 2]),
+                3.0,
+            )
             .expect("apart");
         assert_eq!(row.a, Vector2::new(1.0, 0.0));
         // Fly: `before` for δ, `u` for h, then brake at v/T to rest after T.
@@ -304,7 +315,7 @@ mod tests {
         for _ in 0..20_000 {
             let mut v = || Vector2::new(12.0 * next() - 6.0, 12.0 * next() - 6.0);
             let (vi, vj) = (v(), v());
-            let (bi, bj) = (v() * 0.5, v() * 0.5);
+            let (bi, bj) = ([v() * 0.5, v() * 0.5], [v() * 0.5, v() * 0.5]);
             let mut agents = [
                 agent([0.0, 0.0], [vi.x, vi.y]),
                 agent([0.0, 0.0], [vj.x, vj.y]),
@@ -314,8 +325,7 @@ mod tests {
                 delay_s: 0.05 * next(),
                 hold_s: 0.001 + 0.05 * next(),
             };
-            let rows =
-                StopRows::new(&agents, &[Some(bi), Some(bj)], (None, &[]), t).expect("usable");
+            let rows = StopRows::new(&agents, &[bi, bj], (None, &[]), t).expect("usable");
             let reach = rows.distance_m(3.0, (vi - vj).norm());
             let dir = Vector2::new(next() - 0.5, next() - 0.5).normalize() * (reach * (1.0 + 1e-9));
             agents[0].side = agents[0].side.map(|side| Side {

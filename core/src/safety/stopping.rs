@@ -28,9 +28,9 @@ pub struct Plan {
     pub vel_mps: Vector2<f64>,
     /// Scaled vertical velocity (m/s).
     pub vz_mps: f64,
-    /// Its net horizontal acceleration (m/s²) until the new command acts: the command
-    /// already on its way.
-    pub before_mps2: Vector2<f64>,
+    /// Its net horizontal acceleration (m/s²) until the new command acts, over each half
+    /// of the delay: the commands already on its way.
+    pub before_mps2: [Vector2<f64>; 2],
     /// What it does once the new command acts.
     pub first: First,
     /// Its braking (m/s²); zero: it never stops (a vehicle not ours).
@@ -77,7 +77,7 @@ impl Piece {
 /// A plan's horizontal motion as pieces (the last lasts for ever).
 #[derive(Debug, Clone, Copy)]
 pub struct Motion {
-    pieces: [Piece; 4],
+    pieces: [Piece; 5],
     count: usize,
     /// When it comes to rest (s; infinite: it does not).
     rest_s: f64,
@@ -126,7 +126,7 @@ impl Motion {
     pub fn of(plan: &Plan, timing: Timing) -> Self {
         let start = plan.pos_m.xy();
         let mut out = Self {
-            pieces: [still(0.0, start); 4],
+            pieces: [still(0.0, start); 5],
             count: 0,
             rest_s: 0.0,
         };
@@ -144,7 +144,9 @@ impl Motion {
                 (pos, vel) = piece.at(t);
             }
         };
-        hold(plan.before_mps2, timing.delay_s, &mut out);
+        for b in plan.before_mps2 {
+            hold(b, 0.5 * timing.delay_s, &mut out);
+        }
         if let First::Command(acc) = plan.first {
             hold(acc, timing.hold_s, &mut out);
         }
@@ -225,7 +227,7 @@ pub fn closest_between((a, ma): (&Plan, &Motion), (b, mb): (&Plan, &Motion)) -> 
         };
     let gap_z = ((a.pos_m.z - b.pos_m.z).abs() - closing_z).max(0.0);
     // The times at which either changes its piece: the two sorted lists merged.
-    let mut times = [0.0; 8];
+    let mut times = [0.0; 10];
     let (pa, pb) = (ma.pieces(), mb.pieces());
     let (mut x, mut y) = (0, 0);
     while x < pa.len() || y < pb.len() {
@@ -344,7 +346,7 @@ mod tests {
             pos_m: Vector3::new(p[0], p[1], p[2]),
             vel_mps: Vector2::new(v[0], v[1]),
             vz_mps: 0.0,
-            before_mps2: Vector2::zeros(),
+            before_mps2: [Vector2::zeros(); 2],
             first,
             braking_mps2: braking,
         }
@@ -398,8 +400,8 @@ mod tests {
         // 1 s before the brake can act: 4.5 m, then (5 m/s)²/4 = 6.25 m each: they meet.
         let mut a = plan([0.0, 0.0, 0.0], [4.0, 0.0], First::Brake, 2.0);
         let mut b = plan([20.0, 0.0, 0.0], [-4.0, 0.0], First::Brake, 2.0);
-        a.before_mps2 = Vector2::new(1.0, 0.0);
-        b.before_mps2 = Vector2::new(-1.0, 0.0);
+        a.before_mps2 = [Vector2::new(1.0, 0.0); 2];
+        b.before_mps2 = [Vector2::new(-1.0, 0.0); 2];
         let on_its_way = Timing {
             delay_s: 1.0,
             hold_s: 0.02,
@@ -468,7 +470,7 @@ mod tests {
             let (ux, uy, wx, wy) = (v(), v(), v(), v());
             let brake_a = ux > 2.0;
             let mut a = plan([v(), v(), 0.0], [ax, ay], first(ux, uy, brake_a), 2.5);
-            a.before_mps2 = Vector2::new(v(), v());
+            a.before_mps2 = [Vector2::new(v(), v()), Vector2::new(v(), v())];
             let b = plan([v(), v(), 0.0], [bx, by], first(wx, wy, false), 1.5);
             let timing = Timing {
                 delay_s: 0.1 + 0.05 * v(),

@@ -43,7 +43,7 @@ pub struct SafetyStats {
     /// Pairs that conflicted even braking on those ticks, summed over them.
     pub unfinished_unresolved: u64,
     /// Ticks on which the stopping check turned a vehicle to braking (every tick is
-    /// checked with the stopping rows, an unfinished one otherwise).
+    /// checked with the stopping rows, an unfinished one with the barrier's).
     pub check_braked_ticks: u64,
     /// Vehicles the stopping check turned to braking, summed over all ticks.
     pub check_braked: u64,
@@ -194,7 +194,10 @@ impl Swarm {
             } else {
                 f64::INFINITY
             },
-            rows: setup.rows,
+            // The stopping rows model the commands on their way as a pure delay; a
+            // vehicle's attitude response is a lag, under which they count its recent
+            // commands twice (docs/dense.md, "The synchronised stop").
+            rows: crate::safety::Rows::Barrier,
         };
         let report = self.safety.filter.filter(
             &settings,

@@ -110,8 +110,6 @@ pub struct SafetySetup {
     /// Off in lockstep, where only the sweep limit applies and a flight does not depend
     /// on the machine.
     pub wall_clock_budget: bool,
-    /// Which row keeps each pair apart.
-    pub rows: crate::safety::Rows,
 }
 
 /// The barrier's class-K gain `γ` in `ḣ ≥ −γh³` (s/m²): a pair 1 m/s from its braking
