@@ -70,13 +70,14 @@ mod tests {
     use super::*;
 
     fn fly(history: &[Vector2<f64>], timing: Timing) -> (Vector2<f64>, Vector2<f64>) {
-        // The commands of the history in their slots, integrated finely.
+        // The commands of the history in their slots, flown one after the other from now
+        // to the delay: the one given m + 1 calls ago over [δ − (m + 1)h, δ − mh].
         let (mut p, mut v) = (Vector2::zeros(), Vector2::zeros());
-        let steps = 100_000;
-        let dt = timing.delay_s / steps as f64;
-        for s in 0..steps {
-            let t = (s as f64 + 0.5) * dt;
-            let m = ((timing.delay_s - t) / timing.hold_s).floor() as usize;
+        let (delay_s, hold_s) = (timing.delay_s, timing.hold_s);
+        let slots = (delay_s / hold_s).ceil() as usize;
+        for m in (0..slots).rev() {
+            let end_s = delay_s - m as f64 * hold_s;
+            let dt = end_s - (end_s - hold_s).max(0.0);
             let a = history.get(m).copied().unwrap_or_else(Vector2::zeros);
             p += v * dt + a * (0.5 * dt * dt);
             v += a * dt;
@@ -106,8 +107,8 @@ mod tests {
             let v = (b1 + b2) * tau;
             let p = b1 * (1.5 * tau * tau) + b2 * (0.5 * tau * tau);
             let (p_true, v_true) = fly(&history, timing);
-            assert!((v - v_true).norm() < 1e-6, "{delay_s}: {v} vs {v_true}");
-            assert!((p - p_true).norm() < 1e-7, "{delay_s}: {p} vs {p_true}");
+            assert!((v - v_true).norm() < 1e-12, "{delay_s}: {v} vs {v_true}");
+            assert!((p - p_true).norm() < 1e-12, "{delay_s}: {p} vs {p_true}");
             // Not ours: nothing on its way.
             assert_eq!(on_way.halves(1, timing), [Vector2::zeros(); 2]);
         }
