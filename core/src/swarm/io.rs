@@ -120,7 +120,20 @@ impl Swarm {
             self.next_control = now + Duration::from_millis(1);
         } else if now >= self.next_control {
             self.tick_due_since = None;
-            self.timing.tick(self.next_control, now);
+            if let Some((late, count)) = self.timing.tick(self.next_control, now) {
+                // The first ten, then one in a hundred: where to look for what held it.
+                if count <= 10 || count % 100 == 0 {
+                    self.log.push(
+                        now,
+                        true,
+                        format!(
+                            "control tick started {:.1} ms late, over half the period ({}; late tick {count})",
+                            late.as_secs_f64() * 1e3,
+                            self.phase.name()
+                        ),
+                    );
+                }
+            }
             self.control(now);
             // A fixed schedule: lateness of one wake-up does not slow the rate down, and
             // a long stall restarts the schedule instead of bursting.

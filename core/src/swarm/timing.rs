@@ -143,14 +143,17 @@ impl TickTiming {
         }
     }
 
-    /// A tick scheduled for `due` started at `now`.
-    pub fn tick(&mut self, due: SimTime, now: SimTime) {
+    /// A tick scheduled for `due` started at `now`; how late, and the count of late ticks
+    /// so far, when it is one (over half a period).
+    pub fn tick(&mut self, due: SimTime, now: SimTime) -> Option<(Duration, u64)> {
         let late = now.saturating_since(due);
-        self.late += u64::from(late > self.period / 2);
+        let is_late = late > self.period / 2;
+        self.late += u64::from(is_late);
         if self.worst.is_none_or(|(_, worst)| late > worst) {
             self.worst = Some((due, late));
         }
         self.lateness.record(late);
+        is_late.then_some((late, self.late))
     }
 
     /// A vehicle's position, reported at `at`, used at `now`.
@@ -292,11 +295,14 @@ mod tests {
     fn late_ticks_are_those_over_half_a_period() {
         let mut t = TickTiming::new(ms(20.0));
         let due = SimTime::from_micros(1_000_000);
-        for late_us in [0, 500, 9_950, 10_000, 10_050, 40_000] {
-            t.tick(due, due + Duration::from_micros(late_us));
-        }
+        let said: Vec<_> = [0, 500, 9_950, 10_000, 10_050, 40_000]
+            .into_iter()
+            .filter_map(|late_us| t.tick(due, due + Duration::from_micros(late_us)))
+            .collect();
+        // Each late one says how late, and how many so far.
+        assert_eq!(said, vec![(ms(10.05), 1), (ms(40.0), 2)]);
         // A tick that starts before its schedule counts as on time.
-        t.tick(due, SimTime::from_micros(999_000));
+        assert_eq!(t.tick(due, SimTime::from_micros(999_000)), None);
         let r = t.report();
         assert_eq!(r.lateness.samples, 7);
         // Strictly more than 10 ms: 10.05 ms and 40 ms.
