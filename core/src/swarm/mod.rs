@@ -170,15 +170,23 @@ impl Swarm {
     pub fn new(setup: SwarmSetup) -> Self {
         let n = setup.links.len();
         let w = (0..n).map(|i| setup.ring.w(i)).collect();
-        let links = setup.links.iter().zip(&setup.models).map(|(cfg, model)| {
-            let level = attitude_thrust_from_acceleration(Vector3::zeros(), 0.0, model);
-            match setup.setpoint {
-                SetpointKind::Attitude => VehicleLink::new(cfg.clone(), level),
-                SetpointKind::Acceleration => {
-                    VehicleLink::new(cfg.clone(), Setpoint::Acceleration(Vector3::zeros()))
-                }
-            }
-        });
+        let links = setup
+            .links
+            .iter()
+            .zip(&setup.models)
+            .enumerate()
+            .map(|(k, (cfg, model))| {
+                let level = attitude_thrust_from_acceleration(Vector3::zeros(), 0.0, model);
+                let mut link = match setup.setpoint {
+                    SetpointKind::Attitude => VehicleLink::new(cfg.clone(), level),
+                    SetpointKind::Acceleration => {
+                        VehicleLink::new(cfg.clone(), Setpoint::Acceleration(Vector3::zeros()))
+                    }
+                };
+                // A thousand heartbeats and TIMESYNCs in one instant make the next tick late.
+                link.spread_heartbeat(k, n);
+                link
+            });
         let setpoints = setup
             .models
             .iter()

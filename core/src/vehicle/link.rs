@@ -43,6 +43,9 @@ pub struct VehicleLink {
     setpoint: Setpoint,
     next_setpoint: SimTime,
     next_heartbeat: SimTime,
+    /// How far after the first heartbeat's schedule the later ones go (a share of the
+    /// interval, set by [`VehicleLink::spread_heartbeat`]), applied once.
+    heartbeat_phase: Option<Duration>,
     pending: Option<Pending>,
     encoder: Encoder,
     signer: Option<Signer>,
@@ -118,6 +121,7 @@ impl VehicleLink {
             setpoint: idle.into(),
             next_setpoint: SimTime::ZERO,
             next_heartbeat: SimTime::ZERO,
+            heartbeat_phase: None,
             pending: None,
             encoder,
             outbox: VecDeque::new(),
@@ -135,6 +139,16 @@ impl VehicleLink {
             refusing: false,
             refused_reports: 0,
             next_origin: None,
+        }
+    }
+
+    /// Spreads this link's heartbeats over the interval: link `k` of `n` sends its first at
+    /// once and the later ones `k/n` of an interval after the whole intervals, so that a
+    /// swarm's links (each with a TIMESYNC) do not all send in the same instant.
+    pub fn spread_heartbeat(&mut self, k: usize, n: usize) {
+        if n > 1 {
+            let share = (k % n) as f64 / n as f64;
+            self.heartbeat_phase = Some(self.cfg.heartbeat_interval.mul_f64(share));
         }
     }
 

@@ -57,7 +57,9 @@ impl VehicleLink {
             if streaming && self.state.origin.is_none() {
                 self.request_origin();
             }
-            let next = self.next_heartbeat + self.cfg.heartbeat_interval;
+            let next = self.next_heartbeat
+                + self.cfg.heartbeat_interval
+                + self.heartbeat_phase.take().unwrap_or_default();
             self.next_heartbeat = if next <= now {
                 now + self.cfg.heartbeat_interval
             } else {
