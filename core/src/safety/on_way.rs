@@ -34,6 +34,11 @@ impl OnWay {
         }
     }
 
+    /// Whether any call's command of vehicle `k` is remembered.
+    pub(super) fn known(&self, k: usize) -> bool {
+        self.nets.get(k).is_some_and(|h| !h.is_empty())
+    }
+
     /// Vehicle `k`'s accelerations over the two halves of the delay (m/s²); zero where no
     /// command of ours is known.
     pub(super) fn halves(&self, k: usize, timing: Timing) -> [Vector2<f64>; 2] {

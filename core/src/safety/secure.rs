@@ -62,11 +62,12 @@ impl SafetyFilter {
                 } else {
                     Vector2::zeros()
                 };
-                // The commands on their way: with the stopping rows all of them, as the
-                // rows; otherwise the last call's held for the delay, or this one.
+                // The commands on their way, each for its period (as the stopping rows
+                // count them); before any call, this one held for the delay.
                 let before = match self.stop {
                     Some(_) => self.before.get(k).copied().unwrap_or_default(),
-                    None => [self.last_net.get(k).copied().flatten().unwrap_or(net); 2],
+                    None if self.on_way.known(k) => self.on_way.halves(k, timing),
+                    None => [net; 2],
                 };
                 let mut plan = Plan {
                     pos_m: pos,
