@@ -29,7 +29,7 @@ pub struct Plan {
     /// Scaled vertical velocity (m/s).
     pub vz_mps: f64,
     /// Its net horizontal acceleration (m/s²) until the new command acts, over each half
-    /// of the delay: the commands already on its way.
+    /// of the delay: the commands already on their way.
     pub before_mps2: [Vector2<f64>; 2],
     /// What it does once the new command acts.
     pub first: First,
