@@ -9,7 +9,8 @@
 //!
 //! `cargo bench --bench realtime [-- [dense] [equal] N ...]` (default 64 250 500 1000;
 //! `dense`: the ring packed so that the safety filter's constraints bind; `equal`: the
-//! emulator at the coordinator's priority rather than nice 10; `rt`: the coordinator's
+//! emulator at the coordinator's priority rather than nice 10; `quarter`: the filter's
+//! braking share 0.25 rather than 0.5; `rt`: the coordinator's
 //! control loop at real-time priority 10, `fly --realtime-priority 10`, which needs the
 //! right to) prints, per N: CPU
 //! per vehicle-tick of each process over a steady window, control ticks started over half
@@ -42,6 +43,9 @@ struct Case {
     niceness: i32,
     /// The coordinator's real-time priority (`fly --realtime-priority`), if any.
     priority: Option<u8>,
+    /// The filter's braking share (`[safety] braking_share`; the word `quarter`: 0.25),
+    /// when not the default.
+    braking_share: Option<f64>,
 }
 
 /// The coordinator's real-time priority with the word `rt`.
@@ -79,6 +83,7 @@ fn main() {
         priority: std::env::args()
             .any(|a| a == "rt")
             .then_some(COORDINATOR_PRIORITY),
+        braking_share: std::env::args().any(|a| a == "quarter").then_some(0.25),
     };
     let cases = if cases.is_empty() {
         vec![64, 250, 500, 1000]
@@ -161,11 +166,14 @@ fn run_case(n: usize, case: &Case) -> Result<CaseResult, String> {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let config = dir.join("ring.toml");
-    let text = if case.dense {
+    let mut text = if case.dense {
         dense_ring(n, RATE_HZ)
     } else {
         ring(n, RATE_HZ)
     };
+    if let Some(share) = case.braking_share {
+        text.push_str(&format!("[safety]\nbraking_share = {share}\n"));
+    }
     std::fs::write(&config, text).map_err(|e| e.to_string())?;
 
     let (sitl, lines) = start_sitl(bin, &config, &dir, case.niceness)?;
