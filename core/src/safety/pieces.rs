@@ -92,6 +92,11 @@ impl SafetyFilter {
                     }
                 }
             }
+            if self.tally.unfinished {
+                // Out of time: the answer so far goes out, as it is (the stopping check
+                // secures it); solving the whole problem again would only overrun.
+                return Some(relaxed);
+            }
             if settings.keep_weighted_sum {
                 let changed: Vector2<f64> = (0..n)
                     .filter(|&k| agents[k].controlled)
@@ -115,10 +120,6 @@ impl SafetyFilter {
                         }
                     }
                 }
-            }
-            if self.tally.unfinished {
-                // Out of time: the answer so far goes out.
-                return Some(relaxed);
             }
             let mut joined = false;
             for (k, r) in self.rows.iter().enumerate() {
