@@ -278,10 +278,8 @@ pub struct SafetyFilter {
     plans: Vec<Option<stopping::Plan>>,
     motions: Vec<Option<stopping::Motion>>,
     paths: Vec<f64>,
-    /// Each vehicle's net horizontal command of the last call (`None`: not ours then):
-    /// the command on its way when the next is checked.
-    last_net: Vec<Option<Vector2<f64>>>,
-    /// Each vehicle's net commands of the last calls.
+    /// Each vehicle's net commands of the last calls: the commands on their way when the
+    /// next is checked.
     on_way: on_way::OnWay,
     /// This call's accelerations on their way, over each half of the delay (m/s²).
     before: Vec<[Vector2<f64>; 2]>,
@@ -388,14 +386,12 @@ impl SafetyFilter {
             }
         }
         self.last_stop_s = self.stop.filter(|_| checked).map(|s| s.stop_s);
-        self.last_net.clear();
-        self.last_net.extend(
+        self.on_way.record(
             agents
                 .iter()
                 .zip(commands.iter())
                 .map(|(a, u)| a.controlled.then(|| u - a.drift_mps2)),
         );
-        self.on_way.record(self.last_net.iter().copied());
         report.sweeps = self.tally.sweeps;
         report.largest_piece = self.tally.largest_piece;
         report.elapsed = started.elapsed();
@@ -434,7 +430,7 @@ impl SafetyFilter {
                 &agents[..n],
                 &self.before,
                 (self.last_stop_s, &self.committed),
-                settings.timing(),
+                timing,
             ),
         };
         // A pair is looked at as far as a row of it can bind at its own relative speed,

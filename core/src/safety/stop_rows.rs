@@ -140,11 +140,6 @@ impl StopRows {
         })
     }
 
-    /// The widest disc of a vehicle the filter commands (m/s²).
-    pub fn widest_mps2(&self) -> f64 {
-        self.widest_mps2
-    }
-
     /// `h²/2 + hT/2`: how far a net acceleration held for the hold moves the stop's end
     /// (m per m/s²).
     pub fn gain_s2(&self) -> f64 {

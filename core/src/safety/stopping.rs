@@ -175,14 +175,9 @@ fn still(t0_s: f64, pos: Vector2<f64>) -> Piece {
     }
 }
 
-/// How far a plan goes from now at most (m; infinite for one that never stops): exact
-/// for pieces along a line, bounded by speed and acceleration for the others.
-pub fn path_m(plan: &Plan, timing: Timing) -> f64 {
-    Motion::of(plan, timing).path_m()
-}
-
 impl Motion {
-    /// How far it goes from now at most (m), as [`path_m`].
+    /// How far it goes from now at most (m; infinite for one that never stops): exact for
+    /// pieces along a line, bounded by speed and acceleration for the others.
     pub fn path_m(&self) -> f64 {
         if self.rest_s.is_infinite() {
             return f64::INFINITY;
@@ -408,7 +403,7 @@ mod tests {
         };
         assert!(closest_m(&a, &b, on_its_way) < 1e-6);
         // Each goes 4.5 + 6.25 m at most.
-        assert!((path_m(&a, on_its_way) - 10.75).abs() < 1e-9);
+        assert!((Motion::of(&a, on_its_way).path_m() - 10.75).abs() < 1e-9);
         // 30 m apart instead: 30 − 21.5 = 8.5 m.
         b.pos_m.x = 30.0;
         assert!((closest_m(&a, &b, on_its_way) - 8.5).abs() < 1e-9);
