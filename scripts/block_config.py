@@ -3,9 +3,14 @@
 `--spacing` metres apart at 50 m, in the air and drifting east at `--drift` m/s, each given
 the place mirrored through the block's centre with the places kept in vehicle order
 (`[formation] assign = "fixed"`): every path crosses the centre, and the whole block
-binds the safety filter (3 m enforced). On ceil(N/250) MAVLink networks (system ids
-1..250 on each; ports 14600, 14601, ...), so that `ringswarm sitl --config F` and
-`ringswarm fly --config F` fly it on one machine.
+binds the safety filter (3 m enforced). On MAVLink networks of at most 250 vehicles
+(system ids from 1 on each; ports 14600, 14601, ...), so that `ringswarm sitl --config F`
+and `ringswarm fly --config F` fly it on one machine.
+
+With `--shards S` the vehicles are split in S contiguous shards (`fly --shard s0` ...
+`s{S-1}`), each taking whole networks (one host's shards cannot bind one network's socket)
+and watching every vehicle over Zenoh on loopback (tcp/127.0.0.1:7500 + s, each shard
+connecting to every shard before it).
 
 Gains: k = 1, alpha = 1, beta = sqrt(1.25 * Yu's bound) (`ringswarm analyze -m N/2 -k 1`
 gives the bound); `--time-scale` as the bandwidth gate asks for the x500 (`fly` says it).
@@ -25,13 +30,24 @@ def main():
     ap.add_argument("--spacing", type=float, default=4.0, help="metres between neighbours")
     ap.add_argument("--drift", type=float, default=1.0, help="east velocity at the start (m/s)")
     ap.add_argument("--duration", type=float, default=60.0, help="seconds of consensus flight")
+    ap.add_argument("--shards", type=int, default=1, help="split the block in this many shards (1: none)")
     a = ap.parse_args()
     n = a.side * a.side
     if a.side < 2 or n % 2:
         raise SystemExit(f"the ring needs an even number of vehicles >= 4, got {a.side} x {a.side}")
     if not (a.spacing > 0 and a.time_scale > 0 and a.yu_bound > 0):
         raise SystemExit("--spacing, --time-scale and --yu-bound must be positive")
+    if a.shards < 1 or n % a.shards:
+        raise SystemExit(f"--shards must divide the {n} vehicles evenly, got {a.shards}")
+    # Unsharded: networks of 250 and the rest. Sharded: each shard takes whole networks of
+    # equal size, at most 250 vehicles each.
+    per_shard = n // a.shards
     per = 250
+    if a.shards > 1:
+        nets_per_shard = -(-per_shard // 250)
+        while per_shard % nets_per_shard:
+            nets_per_shard += 1
+        per = per_shard // nets_per_shard
     half = 0.5 * a.spacing * (a.side - 1)
     starts = [(a.spacing * (i % a.side) - half, a.spacing * (i // a.side) - half) for i in range(n)]
     beta = math.sqrt(1.25 * a.yu_bound)
@@ -76,6 +92,19 @@ def main():
         "ground_below_m = 100.0",
         "",
     ]
+    if a.shards > 1:
+        out += ["[distributed]", 'swarm = "block"', 'watch = "all"', ""]
+        for s in range(a.shards):
+            out += [
+                "[[shard]]",
+                f'name = "s{s}"',
+                "vehicles = ["
+                + ", ".join(f'{{ system_id = {i % per + 1}, network = "n{i // per}" }}' for i in range(s * per_shard, (s + 1) * per_shard))
+                + "]",
+                f'listen = ["tcp/127.0.0.1:{7500 + s}"]',
+                "connect = [" + ", ".join(f'"tcp/127.0.0.1:{7500 + t}"' for t in range(s)) + "]",
+                "",
+            ]
     for j in range((n + per - 1) // per):
         out += ["[[network]]", f'name = "n{j}"', f'bind = "0.0.0.0:{14600 + j}"', ""]
     for i, (x, y) in enumerate(starts):

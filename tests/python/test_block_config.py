@@ -41,3 +41,34 @@ def test_a_block_with_an_odd_number_of_vehicles_is_refused_by_name():
     )
     assert done.returncode != 0
     assert "even number of vehicles" in done.stderr
+
+
+def test_a_sharded_block_gives_each_shard_whole_networks_of_equal_size():
+    # 1024 vehicles in 4 shards: 256 each, more than one network (250) holds, so each shard
+    # takes two networks of 128; shard s listens on 7500 + s and connects to every earlier one.
+    text = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "block_config.py"), "32", "--yu-bound", "10", "--time-scale", "0.01", "--shards", "4"],
+        check=True, capture_output=True, text=True,
+    ).stdout
+    assert text.count("[[vehicle]]") == 1024
+    assert text.count("[[shard]]") == 4
+    assert text.count("[[network]]") == 8
+    assert 'watch = "all"' in text
+    shards = text.split("[[shard]]")[1:]
+    for s, block in enumerate(shards):
+        listed = block.split("vehicles = [", 1)[1].split("]\n", 1)[0]
+        assert listed.count("system_id") == 256
+        nets = {f"n{2 * s}", f"n{2 * s + 1}"}
+        assert {part.split('"')[1] for part in listed.split("network = ")[1:]} == nets
+        assert "system_id = 128, network" in listed and "system_id = 129," not in listed
+        assert f'listen = ["tcp/127.0.0.1:{7500 + s}"]' in block
+        assert block.count("tcp/127.0.0.1:") == 1 + s
+
+
+def test_shards_that_do_not_divide_the_block_are_refused_by_name():
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "block_config.py"), "4", "--yu-bound", "10", "--time-scale", "0.5", "--shards", "3"],
+        capture_output=True, text=True,
+    )
+    assert done.returncode != 0
+    assert "--shards must divide the 16 vehicles evenly, got 3" in done.stderr
