@@ -23,7 +23,7 @@
 //! never reaches the coordinator. The swarm machine still orders by the payload's own
 //! swarm-clock time, which lockstep (with no Zenoh) needs too.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::thread::JoinHandle;
@@ -31,7 +31,7 @@ use std::thread::JoinHandle;
 use tokio::sync::mpsc;
 
 use crate::config::ShardLayout;
-use crate::distributed::{ShardMessage, ShardPlan, TileInterest, encode};
+use crate::distributed::{ShardMessage, ShardPlan, TileInterest, Watch, encode};
 
 /// Payloads waiting for the coordinator's loop at most.
 const INBOUND_QUEUE: usize = 4096;
@@ -135,13 +135,32 @@ impl ZenohBus {
             .iter()
             .map(|(network, id)| layout.state_prefix(network.as_deref(), *id))
             .collect();
-        let watched: Vec<String> = state_prefixes
+        let watched = state_prefixes
             .iter()
             .enumerate()
-            .filter(|(i, _)| plan.is_watched(*i))
-            .map(|(_, k)| layout.watched_key(k))
-            .collect();
-        let reports = format!("ringswarm/{}/shard/*", layout.swarm);
+            .filter(|(i, _)| plan.is_watched(*i));
+        // Zenoh matches each arriving sample against every subscription of the session,
+        // so one subscription per remote vehicle costs O(N) per sample, O(N²) per tick:
+        // 1000 vehicles in 4 shards spent three quarters of a shard's core there. A shard
+        // that reads every remote vehicle takes the whole state tree in one subscription
+        // and keeps the watched vehicles by key instead (the data crosses the network
+        // either way); a shard that reads a few keeps a subscription each, so Zenoh sends
+        // it only those.
+        let mut subscriptions: Vec<Subscription> = if plan.watch() == Watch::All {
+            let keep: HashSet<String> = watched.map(|(_, k)| k.clone()).collect();
+            vec![Subscription {
+                key: format!("ringswarm/{}/state/**", layout.swarm),
+                keep: Some(Arc::new(keep)),
+            }]
+        } else {
+            watched
+                .map(|(_, k)| Subscription::all(layout.watched_key(k)))
+                .collect()
+        };
+        subscriptions.push(Subscription::all(format!(
+            "ringswarm/{}/shard/*",
+            layout.swarm
+        )));
         let alive = format!(
             "ringswarm/{}/alive/{}",
             layout.swarm,
@@ -150,10 +169,6 @@ impl ZenohBus {
         let listen = layout.listen.get(this).cloned().unwrap_or_default();
         let connect = layout.connect.get(this).cloned().unwrap_or_default();
         let config = peer_config(&listen, &connect)?;
-        let subscriptions = watched
-            .into_iter()
-            .chain(std::iter::once(reports))
-            .collect();
         let (thread, inbound, outbound, stats) = start_session(config, subscriptions, Some(alive))?;
         Ok(Self {
             inbound,
@@ -176,8 +191,8 @@ impl ZenohBus {
     pub fn watch(layout: &ShardLayout, connect: &[String]) -> Result<Self, String> {
         let config = peer_config(&[], connect)?;
         let subscriptions = vec![
-            format!("ringswarm/{}/state/**", layout.swarm),
-            format!("ringswarm/{}/shard/*", layout.swarm),
+            Subscription::all(format!("ringswarm/{}/state/**", layout.swarm)),
+            Subscription::all(format!("ringswarm/{}/shard/*", layout.swarm)),
         ];
         let (thread, inbound, outbound, stats) = start_session(config, subscriptions, None)?;
         Ok(Self {
@@ -295,7 +310,7 @@ type Session = (
 /// The session, a subscription or the token refused, named.
 fn start_session(
     config: zenoh::Config,
-    subscriptions: Vec<String>,
+    subscriptions: Vec<Subscription>,
     alive: Option<String>,
 ) -> Result<Session, String> {
     let (in_tx, inbound) = mpsc::channel::<Vec<u8>>(INBOUND_QUEUE);
@@ -343,7 +358,7 @@ fn start_session(
 /// is dropped, and closes everything.
 async fn serve_session(
     config: zenoh::Config,
-    subscriptions: Vec<String>,
+    subscriptions: Vec<Subscription>,
     alive: Option<String>,
     in_tx: mpsc::Sender<Vec<u8>>,
     mut orders: mpsc::Receiver<Order>,
@@ -359,8 +374,8 @@ async fn serve_session(
     };
     let newest: Newest = Arc::default();
     let mut subscribers = Vec::new();
-    for key in &subscriptions {
-        match subscribe(&session, key, &in_tx, &stats, &newest).await {
+    for sub in &subscriptions {
+        match subscribe(&session, sub, &in_tx, &stats, &newest).await {
             Ok(s) => subscribers.push(s),
             Err(e) => {
                 let _ = ready.send(Err(e));
@@ -448,7 +463,8 @@ impl Served<'_> {
             if self.followed.contains_key(&key) {
                 continue;
             }
-            match subscribe(self.session, &key, self.in_tx, self.stats, self.newest).await {
+            let sub = Subscription::all(key.clone());
+            match subscribe(self.session, &sub, self.in_tx, self.stats, self.newest).await {
                 Ok(s) => {
                     self.stats.subscribed.fetch_add(1, Ordering::Relaxed);
                     self.followed.insert(key, s);
@@ -496,14 +512,36 @@ fn newer(newest: &Newest, key: &str, stamp: Option<&zenoh::time::Timestamp>) -> 
     }
 }
 
-/// Declares a subscriber to `key` whose samples go to `tx` when newer than the last taken
-/// under their key (dropped and counted otherwise, and when `tx` is full).
+/// A key expression to subscribe to, and the ordering keys ([`ordering_key`]) of the
+/// samples to keep from it (`None`: every one).
+struct Subscription {
+    key: String,
+    keep: Option<Arc<HashSet<String>>>,
+}
+
+impl Subscription {
+    /// Every sample under `key`.
+    fn all(key: String) -> Self {
+        Self { key, keep: None }
+    }
+}
+
+/// Whether a sample under `key` is one to keep (`keep`: the ordering keys kept, `None`:
+/// every one).
+fn keeps(keep: Option<&HashSet<String>>, key: &str) -> bool {
+    keep.is_none_or(|keep| keep.contains(ordering_key(key)))
+}
+
+/// Declares a subscriber to `sub`'s key whose samples it keeps go to `tx` when newer
+/// than the last taken under their key (dropped and counted otherwise, and when `tx` is
+/// full). Samples it does not keep (the shard's own vehicles under a wildcard) are
+/// dropped uncounted.
 ///
 /// # Errors
 /// Zenoh refuses the key or the declaration, named.
 async fn subscribe(
     session: &zenoh::Session,
-    key: &str,
+    sub: &Subscription,
     tx: &mpsc::Sender<Vec<u8>>,
     stats: &Arc<BusStats>,
     newest: &Newest,
@@ -511,9 +549,14 @@ async fn subscribe(
     let tx = tx.clone();
     let stats = Arc::clone(stats);
     let newest = Arc::clone(newest);
+    let keep = sub.keep.clone();
+    let key = sub.key.as_str();
     session
         .declare_subscriber(key)
         .callback(move |sample| {
+            if !keeps(keep.as_deref(), sample.key_expr().as_str()) {
+                return;
+            }
             stats.received.fetch_add(1, Ordering::Relaxed);
             if !newer(&newest, sample.key_expr().as_str(), sample.timestamp()) {
                 stats.not_newer.fetch_add(1, Ordering::Relaxed);
@@ -655,6 +698,45 @@ mod tests {
             "ringswarm/s/state/-/3"
         );
         assert_eq!(ordering_key("ringswarm/s/shard/a"), "ringswarm/s/shard/a");
+        a.close();
+        b.close();
+    }
+
+    /// Under `watch = "all"` a shard takes the whole state tree in one subscription and
+    /// keeps every remote vehicle, in any tile, and none of its own.
+    #[test]
+    fn a_shard_watching_all_reads_every_remote_vehicle_and_none_of_its_own() {
+        let port = free_port();
+        let layout = ShardLayout {
+            swarm: format!("all-{port}"),
+            names: ["a", "b", "c"].map(str::to_owned).to_vec(),
+            owner: vec![0, 0, 1, 1, 2, 2],
+            listen: vec![vec![format!("tcp/127.0.0.1:{port}")], vec![], vec![]],
+            connect: vec![vec![], vec![format!("tcp/127.0.0.1:{port}")], vec![]],
+            watch: Watch::All,
+            tile_m: 100.0,
+            start_lead: Duration::from_millis(200),
+        };
+        let ring = RingDigraph::for_agents(6, 3.0).expect("ring");
+        let plan = |s| ShardPlan::new(s, 3, layout.owner.clone(), &ring, Watch::All);
+        let vehicles: Vec<(Option<String>, u8)> = (1..=6).map(|id| (None, id)).collect();
+        let a = ZenohBus::open(&layout, &plan(0).expect("plan a"), &vehicles).expect("a");
+        let mut b = ZenohBus::open(&layout, &plan(1).expect("plan b"), &vehicles).expect("b");
+        // a publishes under every vehicle's key, b's two included: b hears a's and c's
+        // vehicles, far apart, and not its own.
+        let seen = heard(&mut b, &[0, 1, 4, 5], || {
+            a.publish(&report(0, 10.0, 10.0));
+            a.publish(&report(1, 950.0, -950.0));
+            a.publish(&report(2, 10.0, 14.0));
+            a.publish(&report(3, 10.0, 18.0));
+            a.publish(&report(4, -5000.0, 20.0));
+            a.publish(&report(5, 150.0, 150.0));
+        });
+        assert_eq!(seen, vec![0, 1, 4, 5]);
+        let keep: HashSet<String> = ["ringswarm/s/state/n1/7".to_owned()].into();
+        assert!(keeps(Some(&keep), "ringswarm/s/state/n1/7/e1n2"));
+        assert!(!keeps(Some(&keep), "ringswarm/s/state/n1/8/e1n2"));
+        assert!(keeps(None, "ringswarm/s/state/n1/8/e1n2"));
         a.close();
         b.close();
     }
