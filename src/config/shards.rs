@@ -143,6 +143,17 @@ impl ShardLayout {
         format!("ringswarm/{}/state/*/*/{}", self.swarm, tile.chunk())
     }
 
+    /// The key a shard's vehicle states of one tick are published under together, as a
+    /// batch, when every shard reads them all (`watch = "all"`):
+    /// `ringswarm/<swarm>/states/<name>`.
+    pub fn batch_key(&self, shard: usize) -> String {
+        format!(
+            "ringswarm/{}/states/{}",
+            self.swarm,
+            self.names.get(shard).map_or("", String::as_str)
+        )
+    }
+
     /// The key a shard's report is published under: `ringswarm/<swarm>/shard/<name>`.
     pub fn shard_key(&self, shard: usize) -> String {
         format!(
@@ -524,6 +535,10 @@ connect = ["tcp/10.0.0.1:7447"]
             "ringswarm/paper/state/-/3/far"
         );
         assert_eq!(layout.watched_key(&prefix), "ringswarm/paper/state/-/3/*");
+        assert_eq!(
+            layout.batch_key(0),
+            format!("ringswarm/paper/states/{}", layout.names[0])
+        );
         assert_eq!(
             layout.tile_key(crate::distributed::Tile { east: 4, north: -2 }),
             "ringswarm/paper/state/*/*/e4n-2"

@@ -50,6 +50,8 @@ pub trait ShardTransport {
     fn inbound(&mut self) -> &mut mpsc::Receiver<Vec<u8>>;
     /// Sends one message to the shards that read it (never waits).
     fn publish(&mut self, message: &crate::distributed::ShardMessage);
+    /// Sends what this tick's [`Self::publish`] calls left gathered (a batch), if any.
+    fn flush(&mut self) {}
     /// Reads the tiles the swarm's horizon holds (`watch = "horizon"`), from now on.
     fn follow(&mut self, tiles: &crate::distributed::TileInterest);
     /// Sends what is queued and closes.
@@ -391,6 +393,7 @@ fn publish_to_shards(swarm: &mut Swarm, shards: &mut (dyn ShardTransport + Send 
     while let Some(message) = swarm.poll_shard_message() {
         shards.publish(&message);
     }
+    shards.flush();
     if let Some(tiles) = swarm.shard_tiles() {
         shards.follow(tiles);
     }

@@ -4,8 +4,11 @@
 //!
 //! - Publishes each [`ShardMessage`] the swarm makes: a vehicle's state under
 //!   `ringswarm/<swarm>/state/<network>/<sysid>/<tile>` (the tile its position is in),
-//!   the shard's report under `ringswarm/<swarm>/shard/<name>`.
-//! - Subscribes to the state keys of the remote vehicles its plan watches (any tile),
+//!   the shard's report under `ringswarm/<swarm>/shard/<name>`. Under `watch = "all"`
+//!   the shard's vehicle states of one tick go together, as one batch
+//!   ([`crate::distributed::encode_into_batch`]), under `ringswarm/<swarm>/states/<name>`.
+//! - Subscribes to the state keys of the remote vehicles its plan watches (any tile;
+//!   under `watch = "all"`, every other shard's batch),
 //!   to every shard's report (`ringswarm/<swarm>/shard/*`), and, under
 //!   `watch = "horizon"`, to the tiles its swarm reads
 //!   (`ringswarm/<swarm>/state/*/*/<tile>`), declared again as they move.
@@ -34,13 +37,16 @@ use crate::config::ShardLayout;
 use crate::distributed::{ShardMessage, ShardPlan, TileInterest, Watch, encode};
 
 /// Payloads waiting for the coordinator's loop at most.
-const INBOUND_QUEUE: usize = 4096;
+const INBOUND_QUEUE: usize = 16_384;
 
 /// Orders waiting for the Zenoh thread at most.
 const OUTBOUND_QUEUE: usize = 65_536;
 
 /// The publisher slot of the shard's report (vehicles use their ring index).
 const REPORT_SLOT: usize = usize::MAX;
+
+/// The publisher slot of the shard's batch of vehicle states (`watch = "all"`).
+const BATCH_SLOT: usize = usize::MAX - 1;
 
 /// What the coordinator asks of the Zenoh thread.
 #[derive(Debug)]
@@ -75,6 +81,8 @@ pub struct BusStats {
     pub dropped_outbound: AtomicU64,
     /// Subscriptions declared after the start (tiles entering the horizon).
     pub subscribed: AtomicU64,
+    /// Batches that ended in a cut payload (what came before the cut was taken).
+    pub malformed_batches: AtomicU64,
 }
 
 /// The coordinator's side of the bus.
@@ -87,6 +95,8 @@ pub struct ZenohBus {
     shard_key: String,
     /// The tiles' generation last declared.
     following: Option<u64>,
+    /// Under `watch = "all"`: the batch's key and the states of this tick so far.
+    batch: Option<(String, Vec<u8>)>,
     stats: Arc<BusStats>,
     thread: Option<JoinHandle<()>>,
 }
@@ -106,6 +116,10 @@ impl crate::driver::udp::ShardTransport for ZenohBus {
 
     fn publish(&mut self, message: &ShardMessage) {
         ZenohBus::publish(self, message);
+    }
+
+    fn flush(&mut self) {
+        ZenohBus::flush(self);
     }
 
     fn follow(&mut self, tiles: &TileInterest) {
@@ -139,18 +153,23 @@ impl ZenohBus {
             .iter()
             .enumerate()
             .filter(|(i, _)| plan.is_watched(*i));
-        // Zenoh matches each arriving sample against every subscription of the session,
-        // so one subscription per remote vehicle costs O(N) per sample, O(N²) per tick:
-        // 1000 vehicles in 4 shards spent three quarters of a shard's core there. A shard
-        // that reads every remote vehicle takes the whole state tree in one subscription
-        // and keeps the watched vehicles by key instead (the data crosses the network
-        // either way); a shard that reads a few keeps a subscription each, so Zenoh sends
-        // it only those.
-        let mut subscriptions: Vec<Subscription> = if plan.watch() == Watch::All {
-            let keep: HashSet<String> = watched.map(|(_, k)| k.clone()).collect();
+        // Zenoh routes each sample on its own (matching its key against the session's
+        // subscriptions and publishers, then queueing it): with a sample per vehicle per
+        // tick, 1000 vehicles in 4 shards spent most of each shard's core in Zenoh's
+        // routing. Where every shard reads every vehicle, a shard publishes its vehicles
+        // of one tick as one batch and reads every other shard's batch: a sample per
+        // shard per tick. A shard that reads a few keeps a subscription each, so Zenoh
+        // sends it only those.
+        let all = plan.watch() == Watch::All;
+        let mut subscriptions: Vec<Subscription> = if all {
+            let others: HashSet<String> = (0..layout.names.len())
+                .filter(|&s| s != this)
+                .map(|s| layout.batch_key(s))
+                .collect();
             vec![Subscription {
-                key: format!("ringswarm/{}/state/**", layout.swarm),
-                keep: Some(Arc::new(keep)),
+                key: format!("ringswarm/{}/states/*", layout.swarm),
+                keep: Some(Arc::new(others)),
+                batches: true,
             }]
         } else {
             watched
@@ -177,6 +196,7 @@ impl ZenohBus {
             state_prefixes,
             shard_key: layout.shard_key(this),
             following: None,
+            batch: all.then(|| (layout.batch_key(this), Vec::with_capacity(64 * 256))),
             stats,
             thread: Some(thread),
         })
@@ -192,6 +212,11 @@ impl ZenohBus {
         let config = peer_config(&[], connect)?;
         let subscriptions = vec![
             Subscription::all(format!("ringswarm/{}/state/**", layout.swarm)),
+            Subscription {
+                key: format!("ringswarm/{}/states/*", layout.swarm),
+                keep: None,
+                batches: true,
+            },
             Subscription::all(format!("ringswarm/{}/shard/*", layout.swarm)),
         ];
         let (thread, inbound, outbound, stats) = start_session(config, subscriptions, None)?;
@@ -202,13 +227,19 @@ impl ZenohBus {
             state_prefixes: Vec::new(),
             shard_key: String::new(),
             following: None,
+            batch: None,
             stats,
             thread: Some(thread),
         })
     }
 
-    /// Hands a message to the Zenoh thread (never waits: a full queue drops it).
-    pub fn publish(&self, message: &ShardMessage) {
+    /// Hands a message to the Zenoh thread (never waits: a full queue drops it). Under
+    /// `watch = "all"` a vehicle's state joins the tick's batch, sent by [`Self::flush`].
+    pub fn publish(&mut self, message: &ShardMessage) {
+        if let (ShardMessage::Vehicle(_), Some((_, batch))) = (message, &mut self.batch) {
+            crate::distributed::encode_into_batch(message, batch);
+            return;
+        }
         let (slot, key) = match message {
             ShardMessage::Vehicle(v) => {
                 let slot = usize::from(v.vehicle);
@@ -226,6 +257,26 @@ impl ZenohBus {
             .try_send(Order::Publish { slot, key, bytes })
             .is_err()
         {
+            self.stats.dropped_outbound.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    /// Hands the tick's batch of vehicle states to the Zenoh thread (`watch = "all"`;
+    /// nothing otherwise, or when no state was published since the last flush).
+    pub fn flush(&mut self) {
+        let Some((key, batch)) = &mut self.batch else {
+            return;
+        };
+        if batch.is_empty() {
+            return;
+        }
+        let bytes = std::mem::replace(batch, Vec::with_capacity(batch.capacity()));
+        let order = Order::Publish {
+            slot: BATCH_SLOT,
+            key: key.clone(),
+            bytes,
+        };
+        if self.outbound.try_send(order).is_err() {
             self.stats.dropped_outbound.fetch_add(1, Ordering::Relaxed);
         }
     }
@@ -512,17 +563,23 @@ fn newer(newest: &Newest, key: &str, stamp: Option<&zenoh::time::Timestamp>) -> 
     }
 }
 
-/// A key expression to subscribe to, and the ordering keys ([`ordering_key`]) of the
-/// samples to keep from it (`None`: every one).
+/// A key expression to subscribe to, the ordering keys ([`ordering_key`]) of the
+/// samples to keep from it (`None`: every one), and whether its samples are batches of
+/// payloads ([`crate::distributed::split_batch`]) rather than one payload each.
 struct Subscription {
     key: String,
     keep: Option<Arc<HashSet<String>>>,
+    batches: bool,
 }
 
 impl Subscription {
-    /// Every sample under `key`.
+    /// Every sample under `key`, one payload each.
     fn all(key: String) -> Self {
-        Self { key, keep: None }
+        Self {
+            key,
+            keep: None,
+            batches: false,
+        }
     }
 }
 
@@ -550,6 +607,7 @@ async fn subscribe(
     let stats = Arc::clone(stats);
     let newest = Arc::clone(newest);
     let keep = sub.keep.clone();
+    let batches = sub.batches;
     let key = sub.key.as_str();
     session
         .declare_subscriber(key)
@@ -562,9 +620,21 @@ async fn subscribe(
                 stats.not_newer.fetch_add(1, Ordering::Relaxed);
                 return;
             }
-            let bytes = sample.payload().to_bytes().into_owned();
-            if tx.try_send(bytes).is_err() {
-                stats.dropped_inbound.fetch_add(1, Ordering::Relaxed);
+            let bytes = sample.payload().to_bytes();
+            if !batches {
+                if tx.try_send(bytes.into_owned()).is_err() {
+                    stats.dropped_inbound.fetch_add(1, Ordering::Relaxed);
+                }
+                return;
+            }
+            for payload in crate::distributed::split_batch(&bytes) {
+                let Ok(payload) = payload else {
+                    stats.malformed_batches.fetch_add(1, Ordering::Relaxed);
+                    break;
+                };
+                if tx.try_send(payload.to_vec()).is_err() {
+                    stats.dropped_inbound.fetch_add(1, Ordering::Relaxed);
+                }
             }
         })
         .await
@@ -602,7 +672,7 @@ mod tests {
 
     /// The vehicles whose states reach `bus` while `publish` runs every 20 ms: until
     /// `expected` are all in (at most 20 s), then 0.3 s more for any other.
-    fn heard(bus: &mut ZenohBus, expected: &[u16], publish: impl Fn()) -> Vec<u16> {
+    fn heard(bus: &mut ZenohBus, expected: &[u16], mut publish: impl FnMut()) -> Vec<u16> {
         let mut seen = Vec::new();
         let deadline = Instant::now() + Duration::from_secs(20);
         let mut end: Option<Instant> = None;
@@ -641,7 +711,7 @@ mod tests {
         let ring = RingDigraph::for_agents(6, 3.0).expect("ring");
         let plan = |s| ShardPlan::new(s, 3, layout.owner.clone(), &ring, Watch::Horizon);
         let vehicles: Vec<(Option<String>, u8)> = (1..=6).map(|id| (None, id)).collect();
-        let a = ZenohBus::open(&layout, &plan(0).expect("plan a"), &vehicles).expect("a");
+        let mut a = ZenohBus::open(&layout, &plan(0).expect("plan a"), &vehicles).expect("a");
         let mut b = ZenohBus::open(&layout, &plan(1).expect("plan b"), &vehicles).expect("b");
         // b follows the tiles about (50, 50) with a 60 m horizon: tiles (−1..=1)².
         let mut tiles = TileInterest::new(100.0);
@@ -650,16 +720,17 @@ mod tests {
         // Vehicle 1 (index 1) is b's ring in-neighbour: read at (950, 950). Vehicle 0 is
         // in tile (0, 0): read. Vehicles 4 and 5 (shard c's, published here for it) are
         // in tile (9, 9) and (1, 1).
-        let publish = |v4: (f32, f32)| {
+        let publish = |a: &mut ZenohBus, v4: (f32, f32)| {
             a.publish(&report(0, 10.0, 10.0));
             a.publish(&report(1, 950.0, 950.0));
             a.publish(&report(4, v4.0, v4.1));
             a.publish(&report(5, 150.0, 150.0));
+            a.flush();
         };
-        let seen = heard(&mut b, &[0, 1, 5], || publish((950.0, 950.0)));
+        let seen = heard(&mut b, &[0, 1, 5], || publish(&mut a, (950.0, 950.0)));
         assert_eq!(seen, vec![0, 1, 5]);
         // Vehicle 4 flies into tile (−1, 0): its publisher moves to that key, and b reads it.
-        let seen = heard(&mut b, &[4], || publish((-50.0, 50.0)));
+        let seen = heard(&mut b, &[4], || publish(&mut a, (-50.0, 50.0)));
         assert_eq!(seen, vec![0, 1, 4, 5]);
         // Vehicle 1 in a followed tile comes through two subscriptions: each of its
         // samples is taken once, by its Zenoh timestamp.
@@ -691,7 +762,7 @@ mod tests {
         // (What was in flight when the subscriptions went is let through first.)
         std::thread::sleep(Duration::from_millis(500));
         while b.inbound.try_recv().is_ok() {}
-        let seen = heard(&mut b, &[1], || publish((-50.0, 50.0)));
+        let seen = heard(&mut b, &[1], || publish(&mut a, (-50.0, 50.0)));
         assert_eq!(seen, vec![1]);
         assert_eq!(
             ordering_key("ringswarm/s/state/-/3/e1n2"),
@@ -702,17 +773,21 @@ mod tests {
         b.close();
     }
 
-    /// Under `watch = "all"` a shard takes the whole state tree in one subscription and
-    /// keeps every remote vehicle, in any tile, and none of its own.
+    /// Under `watch = "all"` each shard publishes its vehicles of a tick as one batch,
+    /// and a shard reads every other shard's batch, not its own.
     #[test]
-    fn a_shard_watching_all_reads_every_remote_vehicle_and_none_of_its_own() {
+    fn a_shard_watching_all_reads_every_other_shards_batch_and_not_its_own() {
         let port = free_port();
         let layout = ShardLayout {
             swarm: format!("all-{port}"),
             names: ["a", "b", "c"].map(str::to_owned).to_vec(),
             owner: vec![0, 0, 1, 1, 2, 2],
             listen: vec![vec![format!("tcp/127.0.0.1:{port}")], vec![], vec![]],
-            connect: vec![vec![], vec![format!("tcp/127.0.0.1:{port}")], vec![]],
+            connect: vec![
+                vec![],
+                vec![format!("tcp/127.0.0.1:{port}")],
+                vec![format!("tcp/127.0.0.1:{port}")],
+            ],
             watch: Watch::All,
             tile_m: 100.0,
             start_lead: Duration::from_millis(200),
@@ -720,24 +795,47 @@ mod tests {
         let ring = RingDigraph::for_agents(6, 3.0).expect("ring");
         let plan = |s| ShardPlan::new(s, 3, layout.owner.clone(), &ring, Watch::All);
         let vehicles: Vec<(Option<String>, u8)> = (1..=6).map(|id| (None, id)).collect();
-        let a = ZenohBus::open(&layout, &plan(0).expect("plan a"), &vehicles).expect("a");
+        let mut a = ZenohBus::open(&layout, &plan(0).expect("plan a"), &vehicles).expect("a");
         let mut b = ZenohBus::open(&layout, &plan(1).expect("plan b"), &vehicles).expect("b");
-        // a publishes under every vehicle's key, b's two included: b hears a's and c's
-        // vehicles, far apart, and not its own.
+        let mut c = ZenohBus::open(&layout, &plan(2).expect("plan c"), &vehicles).expect("c");
+        // Each shard publishes its own two vehicles, far apart, then flushes its batch:
+        // b hears a's and c's, and not its own.
         let seen = heard(&mut b, &[0, 1, 4, 5], || {
             a.publish(&report(0, 10.0, 10.0));
             a.publish(&report(1, 950.0, -950.0));
-            a.publish(&report(2, 10.0, 14.0));
-            a.publish(&report(3, 10.0, 18.0));
-            a.publish(&report(4, -5000.0, 20.0));
-            a.publish(&report(5, 150.0, 150.0));
+            a.flush();
+            c.publish(&report(4, -5000.0, 20.0));
+            c.publish(&report(5, 150.0, 150.0));
+            c.flush();
         });
         assert_eq!(seen, vec![0, 1, 4, 5]);
-        let keep: HashSet<String> = ["ringswarm/s/state/n1/7".to_owned()].into();
-        assert!(keeps(Some(&keep), "ringswarm/s/state/n1/7/e1n2"));
-        assert!(!keeps(Some(&keep), "ringswarm/s/state/n1/8/e1n2"));
-        assert!(keeps(None, "ringswarm/s/state/n1/8/e1n2"));
+        let published = b.stats().published.load(Ordering::Relaxed);
+        let mut seen = Vec::new();
+        for _ in 0..10 {
+            b.publish(&report(2, 10.0, 14.0));
+            b.publish(&report(3, 10.0, 18.0));
+            b.flush();
+            std::thread::sleep(Duration::from_millis(30));
+        }
+        std::thread::sleep(Duration::from_millis(300));
+        while let Ok(bytes) = b.inbound.try_recv() {
+            if let Ok(ShardMessage::Vehicle(v)) = decode(&bytes) {
+                seen.push(v.vehicle);
+            }
+        }
+        seen.retain(|v| [2, 3].contains(v));
+        assert!(seen.is_empty(), "b heard its own {seen:?}");
+        // Each flush was one publication, and a flush with nothing gathered sends none.
+        b.flush();
+        std::thread::sleep(Duration::from_millis(100));
+        assert_eq!(b.stats().published.load(Ordering::Relaxed) - published, 10);
+        assert_eq!(b.stats().malformed_batches.load(Ordering::Relaxed), 0);
+        let keep: HashSet<String> = ["ringswarm/s/states/a".to_owned()].into();
+        assert!(keeps(Some(&keep), "ringswarm/s/states/a"));
+        assert!(!keeps(Some(&keep), "ringswarm/s/states/b"));
+        assert_eq!(ordering_key("ringswarm/s/states/a"), "ringswarm/s/states/a");
         a.close();
         b.close();
+        c.close();
     }
 }

@@ -16,7 +16,7 @@ pub mod tiles;
 
 pub use payload::{
     MemberPhase, PAYLOAD_VERSION, PayloadError, PlanVelocities, ShardMessage, ShardReport,
-    StartPositions, VehicleReport, WeightedSum, decode, encode,
+    StartPositions, VehicleReport, WeightedSum, decode, encode, encode_into_batch, split_batch,
 };
 pub use plan::{DEFAULT_START_LEAD, DEFAULT_TILE_M, ShardPlan, ShardPlanError, Watch};
 pub use tiles::{Tile, TileInterest};

@@ -201,6 +201,52 @@ pub fn decode(bytes: &[u8]) -> Result<ShardMessage, PayloadError> {
     Ok(message)
 }
 
+/// Appends `message`'s payload to a batch: its length (`u16`, little-endian), then the
+/// payload as [`encode`] writes it. A batch carries one shard's vehicle states of one
+/// tick in one publication (`watch = "all"`: every shard reads all of them).
+pub fn encode_into_batch(message: &ShardMessage, batch: &mut Vec<u8>) {
+    let at = batch.len();
+    batch.extend_from_slice(&[0, 0]);
+    encode(message, batch);
+    match u16::try_from(batch.len() - at - 2) {
+        Ok(n) => batch[at..at + 2].copy_from_slice(&n.to_le_bytes()),
+        // A payload is some fifty bytes; one that does not fit its length is left out.
+        Err(_) => batch.truncate(at),
+    }
+}
+
+/// The payloads of a batch ([`encode_into_batch`]) in order.
+///
+/// # Errors
+/// [`PayloadError::Malformed`] where a length runs past the end (the payloads before it
+/// are still given); the iteration stops there.
+pub fn split_batch(batch: &[u8]) -> impl Iterator<Item = Result<&[u8], PayloadError>> {
+    let mut rest = batch;
+    std::iter::from_fn(move || {
+        if rest.is_empty() {
+            return None;
+        }
+        let Some((len, body)) = rest.split_first_chunk::<2>() else {
+            let left = rest.len();
+            rest = &[];
+            return Some(Err(PayloadError::Malformed(format!(
+                "a batch ends in {left} byte of a length"
+            ))));
+        };
+        let n = usize::from(u16::from_le_bytes(*len));
+        if n > body.len() {
+            let left = body.len();
+            rest = &[];
+            return Some(Err(PayloadError::Malformed(format!(
+                "a batch's payload of {n} bytes has only {left} left"
+            ))));
+        }
+        let (payload, after) = body.split_at(n);
+        rest = after;
+        Some(Ok(payload))
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -246,6 +292,45 @@ mod tests {
             places_assigned: false,
             start_positions: None,
         })
+    }
+
+    #[test]
+    fn a_batch_gives_back_each_payload_in_order_and_stops_at_a_cut() {
+        let mut batch = Vec::new();
+        encode_into_batch(&vehicle(), &mut batch);
+        encode_into_batch(&shard(), &mut batch);
+        let parts: Vec<_> = split_batch(&batch).collect();
+        assert_eq!(parts.len(), 2);
+        let decoded: Vec<ShardMessage> = parts
+            .iter()
+            .map(|p| decode(p.as_ref().expect("whole")).expect("decodes"))
+            .collect();
+        assert_eq!(decoded, vec![vehicle(), shard()]);
+        // The first payload's length: the version byte and the postcard bytes.
+        let mut one = Vec::new();
+        encode(&vehicle(), &mut one);
+        assert_eq!(
+            usize::from(u16::from_le_bytes([batch[0], batch[1]])),
+            one.len()
+        );
+        // Cut inside the second payload: the first still comes, then the error.
+        let cut = &batch[..batch.len() - 3];
+        let parts: Vec<_> = split_batch(cut).collect();
+        assert_eq!(parts.len(), 2);
+        assert_eq!(parts[0].as_ref().ok(), Some(&one.as_slice()));
+        let err = parts[1]
+            .as_ref()
+            .err()
+            .map(ToString::to_string)
+            .unwrap_or_default();
+        assert!(err.contains("has only"), "{err}");
+        // A single stray byte where a length should be.
+        let stray: Vec<_> = split_batch(&[7]).collect();
+        assert!(matches!(
+            stray.as_slice(),
+            [Err(PayloadError::Malformed(_))]
+        ));
+        assert_eq!(split_batch(&[]).count(), 0);
     }
 
     #[test]
