@@ -81,7 +81,7 @@ pub use setup::{
     SAFETY_GAMMA, SafetySetup, SetpointKind, SwarmSetup, TargetVelocity,
 };
 use slot::{Member, VehicleSlot};
-pub use status::{StopReason, SwarmFailure, SwarmPhase};
+pub use status::{NotFlying, StopReason, SwarmFailure, SwarmPhase};
 
 /// Largest speed (m/s) a start velocity or target velocity may have, and the speed
 /// limit the planner assumes for a vehicle that states none.

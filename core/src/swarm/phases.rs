@@ -7,6 +7,7 @@ use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
 use super::VehicleIndex;
+use super::status::NotFlying;
 use super::{EndAction, LossPolicy, PlanDecision, StopReason, Swarm, SwarmFailure, SwarmPhase};
 use crate::consensus::{formation_error_m, predicted_final_velocity};
 use crate::vehicle::Phase;
@@ -242,14 +243,17 @@ impl Swarm {
         if !(failed || timed_out) {
             return false;
         }
-        let not_flying: Vec<(u8, String)> = self
+        let not_flying: Vec<NotFlying> = self
             .indices()
             .filter_map(|i| {
                 let cfg = &self.setup.links[i];
                 if !self.is_known(i) {
                     // Another shard's, not watched here: its shard's report speaks for it.
-                    return (!self.others_flying(now))
-                        .then(|| (cfg.system_id, "its shard not all flying".to_owned()));
+                    return (!self.others_flying(now)).then(|| NotFlying {
+                        system_id: cfg.system_id,
+                        network: cfg.network.clone(),
+                        phase: "its shard not all flying".to_owned(),
+                    });
                 }
                 let phase = self.vehicle_phase(i);
                 let state = self.law.states[i];
@@ -266,7 +270,11 @@ impl Swarm {
                         None => phase.name().to_owned(),
                     }
                 };
-                Some((cfg.system_id, name))
+                Some(NotFlying {
+                    system_id: cfg.system_id,
+                    network: cfg.network.clone(),
+                    phase: name,
+                })
             })
             .collect();
         let failure = SwarmFailure::Handshake {
