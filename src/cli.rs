@@ -38,6 +38,11 @@ pub enum Command {
     /// summary and write a run directory.
     #[cfg(feature = "emulator")]
     Demo(DemoArgs),
+    /// Fly a sweep's lockstep flights (a grid of settings over a scenario, replicates
+    /// seeded) on every core, a row each in DIR/results.parquet; `sweep merge DIR...
+    /// --out DIR` joins the parts of a split sweep (docs/sweeps.md).
+    #[cfg(feature = "emulator")]
+    Sweep(SweepArgs),
     /// Write a new MAVLink 2 signing key (64 hex characters, mode 0600) to FILE; an
     /// existing file is never overwritten.
     Keygen(KeygenArgs),
@@ -164,6 +169,35 @@ pub struct DemoArgs {
     /// The live view and the mirrors (with --realtime).
     #[command(flatten)]
     pub live: LiveArgs,
+    /// Fly gains the stability analysis calls unstable (not on the command line: a
+    /// sweep's cell flown alone, `sweep --cell`, is flown as in its sweep).
+    #[arg(skip)]
+    pub unstable_gains: bool,
+}
+
+/// Arguments of `ringswarm sweep`.
+#[derive(Debug, Args)]
+pub struct SweepArgs {
+    /// The sweep's spec (SPEC.toml), or `merge` and the parts' directories.
+    #[arg(required = true, value_name = "SPEC.toml | merge DIR...")]
+    pub args: Vec<std::path::PathBuf>,
+    /// The sweep's directory (manifest.json, flights.jsonl, results.parquet); with
+    /// --cell, the flight's run directory; with merge, where the parts are joined.
+    #[arg(long)]
+    pub out: std::path::PathBuf,
+    /// Fly this part of a split sweep: K/N flies every N-th flight from the K-th.
+    #[arg(long, value_name = "K/N")]
+    pub part: Option<String>,
+    /// Split the sweep in N parts and fly the one a batch scheduler's task is given
+    /// (SLURM_ARRAY_TASK_ID, or a Kubernetes Indexed Job's JOB_COMPLETION_INDEX).
+    #[arg(long, value_name = "N")]
+    pub parts: Option<u64>,
+    /// Fly one flight, C (replicate 0) or C.R, with its full run directory in --out.
+    #[arg(long, value_name = "ID")]
+    pub cell: Option<String>,
+    /// Flights flown at once (default: the machine's cores).
+    #[arg(long)]
+    pub jobs: Option<usize>,
 }
 
 /// Arguments of `ringswarm fly`.

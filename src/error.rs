@@ -120,3 +120,29 @@ pub fn flight_result(summary: &crate::record::metrics::Summary) -> anyhow::Resul
     }
     Ok(())
 }
+
+/// The exit code `fly` and `demo` give a finished flight: 0, or that of [`GaveUp`],
+/// [`GuardStopped`], [`SeparationStopped`] or [`FenceStopped`] (as [`flight_result`]).
+pub fn exit_code(summary: &crate::record::metrics::Summary) -> u8 {
+    match flight_result(summary) {
+        Ok(()) => 0,
+        Err(e) => code_of(&e),
+    }
+}
+
+/// The process exit code for an error: that of [`GaveUp`], [`GuardStopped`],
+/// [`FenceStopped`] or [`SeparationStopped`], 2 for anything else (a usage error, a
+/// value refused, a file that cannot be read).
+pub fn code_of(err: &anyhow::Error) -> u8 {
+    if err.is::<GaveUp>() {
+        GaveUp::EXIT_CODE
+    } else if err.is::<GuardStopped>() {
+        GuardStopped::EXIT_CODE
+    } else if err.is::<FenceStopped>() {
+        FenceStopped::EXIT_CODE
+    } else if err.is::<SeparationStopped>() {
+        SeparationStopped::EXIT_CODE
+    } else {
+        2
+    }
+}

@@ -52,4 +52,6 @@ pub mod plot;
 pub mod record;
 pub mod report;
 pub mod security;
+#[cfg(feature = "emulator")]
+pub mod sweep;
 pub mod view;

@@ -15,20 +15,30 @@ use std::process::ExitCode;
 use clap::Parser;
 use ringswarm::cli::{Cli, Command};
 use ringswarm::cmd;
-use ringswarm::error::{FenceStopped, GaveUp, GuardStopped, SeparationStopped};
 use tracing_subscriber::EnvFilter;
 use tracing_subscriber::filter::LevelFilter;
 
 fn main() -> ExitCode {
+    let cli = Cli::parse();
+    // A sweep flies thousands of flights: their swarm events (what a single flight
+    // prints) would bury its progress. They are in each flight's row, and `sweep --cell`
+    // prints them for one; RUST_LOG still shows them.
+    #[cfg(feature = "emulator")]
+    let quiet = matches!(&cli.command, Command::Sweep(a) if a.cell.is_none());
+    #[cfg(not(feature = "emulator"))]
+    let quiet = false;
+    let mut filter = EnvFilter::builder()
+        .with_default_directive(LevelFilter::WARN.into())
+        .from_env_lossy();
+    if quiet && std::env::var_os("RUST_LOG").is_none() {
+        if let Ok(directive) = "ringswarm_core::swarm::events=error".parse() {
+            filter = filter.add_directive(directive);
+        }
+    }
     tracing_subscriber::fmt()
-        .with_env_filter(
-            EnvFilter::builder()
-                .with_default_directive(LevelFilter::WARN.into())
-                .from_env_lossy(),
-        )
+        .with_env_filter(filter)
         .with_writer(std::io::stderr)
         .init();
-    let cli = Cli::parse();
     let result = match cli.command {
         Command::Analyze(args) => cmd::analyze::run(&args),
         Command::Plan(args) => cmd::plan::run(&args),
@@ -37,6 +47,8 @@ fn main() -> ExitCode {
         Command::Fly(args) => cmd::fly::run(&args).map(|()| true),
         #[cfg(feature = "emulator")]
         Command::Demo(args) => cmd::demo::run(&args).map(|()| true),
+        #[cfg(feature = "emulator")]
+        Command::Sweep(args) => cmd::sweep::run(&args).map(|()| true),
         Command::Keygen(args) => cmd::keygen::run(&args.file).map(|()| true),
         Command::SignSetup(args) => cmd::sign_setup::run(&args).map(|()| true),
         Command::View(args) => cmd::view::run(&args).map(|()| true),
@@ -46,17 +58,7 @@ fn main() -> ExitCode {
         Ok(false) => ExitCode::from(1),
         Err(err) => {
             eprintln!("error: {err:#}");
-            if err.downcast_ref::<GaveUp>().is_some() {
-                ExitCode::from(GaveUp::EXIT_CODE)
-            } else if err.downcast_ref::<GuardStopped>().is_some() {
-                ExitCode::from(GuardStopped::EXIT_CODE)
-            } else if err.downcast_ref::<FenceStopped>().is_some() {
-                ExitCode::from(FenceStopped::EXIT_CODE)
-            } else if err.downcast_ref::<SeparationStopped>().is_some() {
-                ExitCode::from(SeparationStopped::EXIT_CODE)
-            } else {
-                ExitCode::from(2)
-            }
+            ExitCode::from(ringswarm::error::code_of(&err))
         }
     }
 }

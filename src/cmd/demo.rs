@@ -112,8 +112,13 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
              (replay its run directory with `ringswarm view RUN_DIR`)"
         );
     }
-    let mut run =
-        Lockstep::from_config(&config).map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
+    let stability = if args.unstable_gains {
+        crate::config::Stability::Unchecked
+    } else {
+        crate::config::Stability::Required
+    };
+    let mut run = Lockstep::from_config_with(&config, stability)
+        .map_err(|e| anyhow::anyhow!("scenario {name}:\n{e}"))?;
     crate::config::warn_if_too_fast(run.swarm().setup(), config.gains.time_scale);
     let limit = SimTime::ZERO
         + run

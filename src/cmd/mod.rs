@@ -10,4 +10,6 @@ pub mod plan;
 pub mod sign_setup;
 #[cfg(feature = "emulator")]
 pub mod sitl;
+#[cfg(feature = "emulator")]
+pub mod sweep;
 pub mod view;

@@ -31,7 +31,7 @@ pub(crate) use problems::show;
 pub use shards::{
     DistributedSection, ShardLayout, ShardSection, ShardVehicle, WatchName, endpoint_problem,
 };
-pub use validate::{MAX_DISTANCE_M, MAX_DURATION_S, MAX_GAIN, MAX_SPEED_MPS};
+pub use validate::{MAX_DISTANCE_M, MAX_DURATION_S, MAX_GAIN, MAX_SPEED_MPS, Stability};
 
 /// The whole file.
 #[derive(Debug, Clone, Deserialize)]

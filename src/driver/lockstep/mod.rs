@@ -175,7 +175,19 @@ impl Lockstep {
     /// # Errors
     /// The config's problems (all of them), or a vehicle the emulator refuses.
     pub fn from_config(config: &crate::config::Config) -> Result<Self, String> {
-        let setup = config.validate()?;
+        Self::from_config_with(config, crate::config::Stability::Required)
+    }
+
+    /// [`Self::from_config`], unstable gains refused or flown as `stability` says
+    /// (`ringswarm sweep` maps where the swarm stops converging).
+    ///
+    /// # Errors
+    /// As [`Self::from_config`].
+    pub fn from_config_with(
+        config: &crate::config::Config,
+        stability: crate::config::Stability,
+    ) -> Result<Self, String> {
+        let setup = config.validate_with(stability)?;
         let (world, vehicle_configs) = config.emulator()?;
         let faults = config.lockstep_faults()?;
         let vehicles = vehicle_configs
