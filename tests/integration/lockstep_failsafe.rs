@@ -285,7 +285,10 @@ fn a_vehicle_never_heard_is_named_after_the_handshake_timeout_and_the_others_lan
         panic!("no failure")
     };
     assert_eq!(not_flying.len(), 1);
-    assert_eq!((not_flying[0].system_id, not_flying[0].phase.as_str()), (4, "discovering"));
+    assert_eq!(
+        (not_flying[0].system_id, not_flying[0].phase.as_str()),
+        (4, "discovering")
+    );
     assert_eq!(
         run.swarm().failure().unwrap().to_string(),
         "handshake not complete after 5.0 s: vehicle 4 not flying (never heard); the vehicles that flew were landed"

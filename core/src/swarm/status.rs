@@ -81,7 +81,12 @@ impl NotFlying {
 impl fmt::Display for NotFlying {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match &self.network {
-            Some(net) => write!(f, "vehicle {} on {net} not flying ({})", self.system_id, self.what()),
+            Some(net) => write!(
+                f,
+                "vehicle {} on {net} not flying ({})",
+                self.system_id,
+                self.what()
+            ),
             None => write!(f, "vehicle {} not flying ({})", self.system_id, self.what()),
         }
     }
