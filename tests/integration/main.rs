@@ -28,6 +28,7 @@ mod paper_examples;
 mod properties;
 mod scenario_table;
 mod scenarios;
+mod sweep;
 mod udp_loop;
 mod vehicle_handshake;
 mod web_view;
