@@ -3,6 +3,9 @@
 //! `cargo bench --bench lockstep` prints two tables: the speed of each case, then where
 //! the time goes in three of them next to the floor of the work they cannot avoid.
 //! `-- WORD …` keeps the cases whose name contains one of the words (`-- paper`).
+//! `-- sweep` prints the speed of `ringswarm sweep` instead: paper-sim1-sized flights
+//! (six vehicles, 60 s of consensus, no landing) a second, on one thread and on every
+//! core, next to the lockstep floor of one such flight.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -300,6 +303,10 @@ fn main() {
     .filter(|c| words.is_empty() || words.iter().any(|w| c.name.contains(w.as_str())))
     .collect();
 
+    if words.iter().any(|w| w == "sweep") {
+        sweep_table(full);
+        return;
+    }
     if words.is_empty() || words.iter().any(|w| "safety".contains(w.as_str())) {
         safety_table();
         if !words.is_empty() && cases.is_empty() {
@@ -353,6 +360,67 @@ fn main() {
             per(phases.delivery),
             total / floor,
             per(recorded.wall.saturating_sub(plain.wall)),
+        );
+    }
+}
+
+/// `ringswarm sweep`'s speed: 40 replicates of paper-sim1 (the sweep's own flight: to the
+/// end of the duration, no run directory) on 1 thread and on every core, in flights a
+/// second, next to the floor of one flight (physics, law and codec, as in the table of
+/// where the time goes) and what that floor allows on this machine's cores.
+fn sweep_table(seconds: f64) {
+    use rayon::prelude::*;
+    use ringswarm::sweep::{Sweep, fly, config_of};
+    let spec = "[sweep]\nscenario = \"paper-sim1\"\nseed = 1\nreplicates = 40\n";
+    let sweep = Sweep::from_toml(spec).expect("spec");
+    let base: toml::Table =
+        toml::from_str(include_str!("../config/paper-sim1.toml")).expect("paper-sim1");
+    let flights: Vec<_> = (0..sweep.flights()).filter_map(|i| sweep.flight(i)).collect();
+    let configs: Vec<Config> = flights
+        .iter()
+        .map(|f| config_of(&base, &sweep, f).expect("flight").1)
+        .collect();
+    let cores = ringswarm::driver::cores();
+    let case = Case {
+        name: "paper-sim1",
+        toml: include_str!("../config/paper-sim1.toml").to_string(),
+        seconds,
+        breakdown: false,
+    };
+    let setup = configs[0].validate().expect("scenario");
+    let vehicle_ms = 6.0 * seconds * 1e3;
+    let rate_hz = 1.0 / setup.control_interval.as_secs_f64();
+    let physics_s = physics_ns_per_step() * vehicle_ms / 1e9;
+    let law_s = law_ns_per_tick(&setup) * rate_hz * seconds / 1e9;
+    let codec_s = codec_ns(&traffic(&case)) / 1e9;
+    let floor_s = physics_s + law_s + codec_s;
+    println!(
+        "floor of one flight ({seconds} simulated s, six vehicles): physics {physics_s:.4} s, law {law_s:.4} s, codec {codec_s:.4} s; sum {floor_s:.4} s\n"
+    );
+    println!("| threads | flights | wall s | flights/s | s per flight per thread | floor: s per flight per core | flights/s the floor allows | total / floor |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for threads in [1, cores] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        let start = Instant::now();
+        let ended: usize = pool.install(|| {
+            configs
+                .par_iter()
+                .map(|c| usize::from(fly(c).expect("flies").exit_code == 0))
+                .sum()
+        });
+        let wall = start.elapsed().as_secs_f64();
+        assert_eq!(ended, configs.len(), "a flight did not end with exit 0");
+        let n = configs.len() as f64;
+        println!(
+            "| {threads} | {} | {wall:.2} | {:.1} | {:.3} | {floor_s:.3} | {:.1} | {:.2} |",
+            configs.len(),
+            n / wall,
+            wall * threads as f64 / n,
+            threads as f64 / floor_s,
+            wall * threads as f64 / n / floor_s,
         );
     }
 }
