@@ -30,10 +30,11 @@ fn main() -> ExitCode {
     let mut filter = EnvFilter::builder()
         .with_default_directive(LevelFilter::WARN.into())
         .from_env_lossy();
-    if quiet && std::env::var_os("RUST_LOG").is_none() {
-        if let Ok(directive) = "ringswarm_core::swarm::events=error".parse() {
-            filter = filter.add_directive(directive);
-        }
+    if quiet
+        && std::env::var_os("RUST_LOG").is_none()
+        && let Ok(directive) = "ringswarm_core::swarm::events=error".parse()
+    {
+        filter = filter.add_directive(directive);
     }
     tracing_subscriber::fmt()
         .with_env_filter(filter)

@@ -53,7 +53,8 @@ pub type PlotResult = Result<(), String>;
 const FONT: &str = "sans-serif";
 const SIZE: (u32, u32) = (1100, 700);
 
-fn register_font() {
+/// Registers the embedded font once (every figure's text is drawn with it).
+pub fn register_font() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
         if plotters::style::register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_err()

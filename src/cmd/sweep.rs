@@ -159,12 +159,20 @@ fn fly_part(
         .num_threads(jobs.unwrap_or_else(crate::driver::cores).max(1))
         .build()
         .context("start the sweep's threads")?;
-    // Every flight's settings checked before the first flies.
-    pool.install(|| {
+    // Every flight's settings checked before the first flies; the first refused (in
+    // flight order) named, and how many were.
+    let refused: Vec<String> = pool.install(|| {
         todo.par_iter()
-            .try_for_each(|f| sweep::config_of(base, sweep, f).map(|_| ()))
-    })
-    .map_err(|e| anyhow::anyhow!("{e}"))?;
+            .filter_map(|f| sweep::config_of(base, sweep, f).err())
+            .collect()
+    });
+    if let Some(first) = refused.first() {
+        bail!(
+            "{first}\n({} of the {} flights to fly are refused; none flew)",
+            refused.len(),
+            todo.len()
+        );
+    }
     let total = (0..sweep.flights()).filter(|i| part.has(*i)).count() as u64;
     eprintln!(
         "sweep: {} flights ({} cells × {} replicates){}; {} done before, {} to fly",
@@ -207,6 +215,11 @@ fn fly_part(
     let results = out.join("results.parquet");
     sweep::parquet::write(&results, &manifest.axes, &rows)
         .with_context(|| format!("write {}", results.display()))?;
+    if part == Part::WHOLE {
+        for m in &sweep.maps {
+            draw_map(out, sweep, base, m, &rows)?;
+        }
+    }
     let failed = rows.iter().filter(|r| r.exit_code != 0).count();
     println!(
         "{} flights in {secs:.1} s ({:.1} flights/s); {} ended other than exit 0; {}",
@@ -215,6 +228,94 @@ fn fly_part(
         failed,
         results.display()
     );
+    Ok(())
+}
+
+/// One `[[map]]`: `DIR/map-<metric>.png` and `.svg`, `DIR/map-<metric>.json` (the
+/// cells, the theory's boundary, the flown one and whether they agree), and the worst
+/// cells and the agreement printed.
+fn draw_map(
+    out: &Path,
+    sweep: &Sweep,
+    base: &toml::Table,
+    m: &sweep::map::MapSpec,
+    rows: &[FlightRow],
+) -> anyhow::Result<()> {
+    use sweep::map;
+    let grid = map::grid(m, sweep, rows).map_err(anyhow::Error::msg)?;
+    let theory = match m.theory {
+        Some(map::Theory::Stability) => {
+            Some(map::stability_boundary(base, sweep, m, &grid).map_err(anyhow::Error::msg)?)
+        }
+        None => None,
+    };
+    let name: String = m
+        .metric
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect();
+    let stem = out.join(format!("map-{name}"));
+    sweep::draw::heat_map(&stem, m, &grid, theory.as_deref()).map_err(anyhow::Error::msg)?;
+    println!(
+        "{} of {} over {} × {}: {}",
+        m.reduce.name(),
+        m.metric,
+        m.x,
+        m.y,
+        stem.with_extension("png").display()
+    );
+    println!("| {} | {} | {} |", m.x, m.y, m.metric);
+    println!("|---|---|---|");
+    for (x, y, v) in map::worst(&grid, 5) {
+        println!("| {x} | {y} | {v} |");
+    }
+    let mut sorted_ys = grid.ys.clone();
+    sorted_ys.sort_by(f64::total_cmp);
+    let flown = map::flown_boundary(&grid, m.good_at_most);
+    let mut columns = Vec::new();
+    for (i, x) in grid.xs.iter().enumerate() {
+        let theory_y = theory.as_ref().and_then(|t| t[i]);
+        let flown_y = flown[i].map(|j| sorted_ys[j]);
+        let agrees = match (theory_y, flown[i]) {
+            (Some(t), Some(j)) => Some(map::agrees(&sorted_ys, j, t)),
+            _ => None,
+        };
+        if theory.is_some() {
+            println!(
+                "{} = {x}: theory's boundary {}, cells with {} <= {} from {} up: {}",
+                m.x,
+                theory_y.map_or("outside the map".to_owned(), |t| format!("{t:.4}")),
+                m.metric,
+                m.good_at_most,
+                flown_y.map_or("nowhere".to_owned(), |y| y.to_string()),
+                match agrees {
+                    Some(true) => "agree within one cell",
+                    Some(false) => "DISAGREE",
+                    None => "-",
+                }
+            );
+        }
+        columns.push(serde_json::json!({
+            "x": x,
+            "values": grid.values[i],
+            "theory_boundary": theory_y,
+            "flown_boundary": flown_y,
+            "agree_within_one_cell": agrees,
+        }));
+    }
+    let json = serde_json::json!({
+        "x": m.x, "y": m.y, "metric": m.metric, "reduce": m.reduce.name(),
+        "ys": grid.ys, "columns": columns,
+    });
+    let path = stem.with_extension("json");
+    std::fs::write(&path, serde_json::to_string_pretty(&json)? + "\n")
+        .with_context(|| format!("write {}", path.display()))?;
     Ok(())
 }
 

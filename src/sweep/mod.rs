@@ -6,10 +6,14 @@
 //! - [`flight`]: one flight, flown to the end of its duration without a run directory.
 //! - [`rows`]: a flight's row, the journal it is kept in, and its columns.
 //! - [`parquet`]: the rows as `results.parquet`.
+//! - [`map`]: a metric over two axes, the worst cells, and the theory's boundary.
+//! - [`draw`]: a map as a heat map.
 //! - [`part`]: which flights a part of a split sweep flies (`--part K/N`).
 
+pub mod draw;
 pub mod flight;
 pub mod keys;
+pub mod map;
 pub mod parquet;
 pub mod part;
 pub mod rows;

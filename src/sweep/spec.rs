@@ -59,6 +59,9 @@ pub struct SpecFile {
     /// The axes, crossed in this order.
     #[serde(default)]
     pub axis: Vec<AxisSpec>,
+    /// Maps of a metric over two axes, drawn when the sweep ends.
+    #[serde(default)]
+    pub map: Vec<super::map::MapSpec>,
 }
 
 /// `[sweep]`.
@@ -130,6 +133,8 @@ pub struct Sweep {
     pub set: Vec<(String, toml::Value)>,
     /// The axes, crossed in order (the last fastest).
     pub axes: Vec<Axis>,
+    /// The maps to draw.
+    pub maps: Vec<super::map::MapSpec>,
 }
 
 /// One flight of a sweep.
@@ -202,7 +207,11 @@ impl Sweep {
             replicates: file.sweep.replicates,
             set,
             axes,
+            maps: file.map,
         };
+        for m in &sweep.maps {
+            super::map::check(m, &sweep).map_err(SpecError)?;
+        }
         let flights = sweep.cells().checked_mul(sweep.replicates);
         if flights.is_none_or(|f| f > MAX_FLIGHTS) {
             return err(format!(
@@ -580,11 +589,9 @@ mod tests {
                 .unwrap_err()
                 .contains("replicates must be at least 1")
         );
-        let huge = format!(
-            "[sweep]\nscenario = \"x\"\nreplicates = 1000\n[[axis]]\nkey = \"a\"\nfrom = 0.0\nto = 1.0\ncount = 100000\n"
-        );
+        let huge = "[sweep]\nscenario = \"x\"\nreplicates = 1000\n[[axis]]\nkey = \"a\"\nfrom = 0.0\nto = 1.0\ncount = 100000\n";
         assert!(
-            sweep(&huge)
+            sweep(huge)
                 .unwrap_err()
                 .contains("more than 10000000 flights")
         );

@@ -74,3 +74,53 @@ def test_duckdb_reads_a_row_per_flight_with_the_journals_numbers(tmp_path):
         assert np.allclose((r[7], r[8]), expected, rtol=0, atol=1e-12), (r, expected)
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["flights"] == 6 and manifest["axes"] == ["gains.k", "gains.beta"] and manifest["part"] == "1/1"
+
+
+MAP_SPEC = """
+[sweep]
+scenario = "paper-sim1"
+seed = 2
+
+[set]
+"swarm.duration_s" = 4.0
+
+[[axis]]
+key = "gains.k"
+values = [1.0, 5.0]
+
+[[axis]]
+key = "gains.beta"
+from = 0.3
+to = 3.0
+count = 5
+scale = "log"
+
+[[map]]
+x = "gains.k"
+y = "gains.beta"
+metric = "exit_code"
+reduce = "max"
+theory = "stability"
+"""
+
+
+def test_a_maps_theory_boundary_is_where_numpys_closed_loop_crosses_zero(tmp_path):
+    from ringswarm_ref import closed_loop_abscissa
+
+    spec = tmp_path / "spec.toml"
+    spec.write_text(MAP_SPEC)
+    out = tmp_path / "sweep"
+    done = subprocess.run([BIN, "sweep", str(spec), "--out", str(out)], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (out / "map-exit_code.png").stat().st_size > 10_000
+    assert (out / "map-exit_code.svg").read_text().startswith("<svg")
+    m = json.loads((out / "map-exit_code.json").read_text())
+    assert m["x"] == "gains.k" and m["y"] == "gains.beta" and len(m["ys"]) == 5
+    for column in m["columns"]:
+        k, beta = column["x"], column["theory_boundary"]
+        # paper-sim1: six vehicles (m = 3), alpha = 1, no time scale.
+        assert closed_loop_abscissa(3, k, 1.0, beta * (1 - 1e-6)) > 0, (k, beta)
+        assert closed_loop_abscissa(3, k, 1.0, beta * (1 + 1e-6)) < 0, (k, beta)
+        assert len(column["values"]) == 5
+    # The printed lines name each k's boundary.
+    assert "gains.k = 5: theory's boundary" in done.stdout
