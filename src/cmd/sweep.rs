@@ -238,7 +238,7 @@ fn draw_map(
     out: &Path,
     sweep: &Sweep,
     base: &toml::Table,
-    m: &sweep::map::MapSpec,
+    m: &sweep::spec::MapSpec,
     rows: &[FlightRow],
 ) -> anyhow::Result<()> {
     use sweep::map;

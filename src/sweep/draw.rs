@@ -8,7 +8,8 @@ use std::path::Path;
 use plotters::prelude::*;
 use plotters::style::colors::colormaps::{ColorMap, ViridisRGB};
 
-use super::map::{Grid, MapSpec};
+use super::map::Grid;
+use super::spec::MapSpec;
 
 const SIZE: (u32, u32) = (900, 700);
 

@@ -16,87 +16,12 @@
 //! good_at_most = 0.0       # a cell is good when its number is at most this (default 0)
 //! ```
 
-use serde::Deserialize;
-
 use super::keys;
 use super::rows::{Cell, FlightRow, flatten};
-use super::spec::Sweep;
+use super::spec::{MapSpec, Sweep, check_map};
+pub use super::spec::{Reduce, Theory};
 use crate::config::Config;
 use crate::consensus::{CouplingGains, RingDigraph, analyze};
-
-/// `[[map]]` as written.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct MapSpec {
-    /// The axis across.
-    pub x: String,
-    /// The axis up.
-    pub y: String,
-    /// The number mapped.
-    pub metric: String,
-    /// How a cell's flights become one number.
-    #[serde(default)]
-    pub reduce: Reduce,
-    /// A theory drawn over the map.
-    #[serde(default)]
-    pub theory: Option<Theory>,
-    /// A cell counts as good (for the flown boundary the theory is held against) when
-    /// its reduced metric is at most this (default 0: for `exit_code`, every flight ran
-    /// its duration out).
-    #[serde(default)]
-    pub good_at_most: f64,
-}
-
-/// How a cell's flights become one number.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Reduce {
-    /// Their mean.
-    #[default]
-    Mean,
-    /// The largest.
-    Max,
-    /// The smallest.
-    Min,
-    /// The median (the mean of the middle two for an even count).
-    Median,
-}
-
-impl Reduce {
-    /// Its name in the spec.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Mean => "mean",
-            Self::Max => "max",
-            Self::Min => "min",
-            Self::Median => "median",
-        }
-    }
-
-    fn of(self, v: &mut [f64]) -> Option<f64> {
-        if v.is_empty() {
-            return None;
-        }
-        v.sort_by(f64::total_cmp);
-        let n = v.len();
-        Some(match self {
-            Self::Mean => v.iter().sum::<f64>() / n as f64,
-            Self::Max => v[n - 1],
-            Self::Min => v[0],
-            Self::Median if n % 2 == 1 => v[n / 2],
-            Self::Median => 0.5 * (v[n / 2 - 1] + v[n / 2]),
-        })
-    }
-}
-
-/// A theory a map can draw.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Theory {
-    /// The closed-loop stability boundary (`analyze`): for each x, the y above which the
-    /// ring with the flight's gains is stable.
-    Stability,
-}
 
 /// A map's cells: `values[i][j]` for `xs[i]`, `ys[j]` (`None`: no flight had the metric).
 #[derive(Debug, Clone, PartialEq)]
@@ -124,36 +49,12 @@ pub fn metric_of(row: &FlightRow, metric: &str) -> Option<f64> {
     }
 }
 
-/// Checks `spec` against the sweep's axes before any flight.
-///
-/// # Errors
-/// An x or y that is not an axis, or the same axis twice, named.
-pub fn check(spec: &MapSpec, sweep: &Sweep) -> Result<(), String> {
-    for (which, key) in [("x", &spec.x), ("y", &spec.y)] {
-        if !sweep.axes.iter().any(|a| a.key == *key) {
-            let axes: Vec<&str> = sweep.axes.iter().map(|a| a.key.as_str()).collect();
-            return Err(format!(
-                "map of {}: {which} = \"{key}\" is not an axis (axes: {})",
-                spec.metric,
-                axes.join(", ")
-            ));
-        }
-    }
-    if spec.x == spec.y {
-        return Err(format!(
-            "map of {}: x and y are both {}",
-            spec.metric, spec.x
-        ));
-    }
-    Ok(())
-}
-
 /// The map's cells from the sweep's rows.
 ///
 /// # Errors
 /// An x or y that is not an axis.
 pub fn grid(spec: &MapSpec, sweep: &Sweep, rows: &[FlightRow]) -> Result<Grid, String> {
-    check(spec, sweep)?;
+    check_map(spec, sweep)?;
     let place = |key: &str| sweep.axes.iter().position(|a| a.key == key).unwrap_or(0);
     let (xa, ya) = (place(&spec.x), place(&spec.y));
     let xs = sweep.axes[xa].values.clone();
@@ -383,7 +284,7 @@ mod tests {
     fn a_map_of_an_axis_the_sweep_does_not_have_is_refused_by_name() {
         let mut m = spec("exit_code", Reduce::Max);
         m.y = "gains.alpha".to_owned();
-        let e = check(&m, &sweep()).unwrap_err();
+        let e = check_map(&m, &sweep()).unwrap_err();
         assert_eq!(
             e,
             "map of exit_code: y = \"gains.alpha\" is not an axis (axes: gains.k, gains.beta)"

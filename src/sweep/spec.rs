@@ -61,7 +61,7 @@ pub struct SpecFile {
     pub axis: Vec<AxisSpec>,
     /// Maps of a metric over two axes, drawn when the sweep ends.
     #[serde(default)]
-    pub map: Vec<super::map::MapSpec>,
+    pub map: Vec<MapSpec>,
 }
 
 /// `[sweep]`.
@@ -111,6 +111,105 @@ pub struct AxisSpec {
     pub std: Option<f64>,
 }
 
+/// `[[map]]` as written.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapSpec {
+    /// The axis across.
+    pub x: String,
+    /// The axis up.
+    pub y: String,
+    /// The number mapped.
+    pub metric: String,
+    /// How a cell's flights become one number.
+    #[serde(default)]
+    pub reduce: Reduce,
+    /// A theory drawn over the map.
+    #[serde(default)]
+    pub theory: Option<Theory>,
+    /// A cell counts as good (for the flown boundary the theory is held against) when
+    /// its reduced metric is at most this (default 0: for `exit_code`, every flight ran
+    /// its duration out).
+    #[serde(default)]
+    pub good_at_most: f64,
+}
+
+/// How a cell's flights become one number.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Reduce {
+    /// Their mean.
+    #[default]
+    Mean,
+    /// The largest.
+    Max,
+    /// The smallest.
+    Min,
+    /// The median (the mean of the middle two for an even count).
+    Median,
+}
+
+impl Reduce {
+    /// Its name in the spec.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Mean => "mean",
+            Self::Max => "max",
+            Self::Min => "min",
+            Self::Median => "median",
+        }
+    }
+
+    /// The values reduced (sorted in place); `None` for none.
+    pub fn of(self, v: &mut [f64]) -> Option<f64> {
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        Some(match self {
+            Self::Mean => v.iter().sum::<f64>() / n as f64,
+            Self::Max => v[n - 1],
+            Self::Min => v[0],
+            Self::Median if n % 2 == 1 => v[n / 2],
+            Self::Median => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+        })
+    }
+}
+
+/// A theory a map can draw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Theory {
+    /// The closed-loop stability boundary (`analyze`): for each x, the y above which the
+    /// ring with the flight's gains is stable.
+    Stability,
+}
+
+/// Checks `spec` against the sweep's axes before any flight.
+///
+/// # Errors
+/// An x or y that is not an axis, or the same axis twice, named.
+pub fn check_map(spec: &MapSpec, sweep: &Sweep) -> Result<(), String> {
+    for (which, key) in [("x", &spec.x), ("y", &spec.y)] {
+        if !sweep.axes.iter().any(|a| a.key == *key) {
+            let axes: Vec<&str> = sweep.axes.iter().map(|a| a.key.as_str()).collect();
+            return Err(format!(
+                "map of {}: {which} = \"{key}\" is not an axis (axes: {})",
+                spec.metric,
+                axes.join(", ")
+            ));
+        }
+    }
+    if spec.x == spec.y {
+        return Err(format!(
+            "map of {}: x and y are both {}",
+            spec.metric, spec.x
+        ));
+    }
+    Ok(())
+}
+
 /// One axis: its key and its values.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Axis {
@@ -134,7 +233,7 @@ pub struct Sweep {
     /// The axes, crossed in order (the last fastest).
     pub axes: Vec<Axis>,
     /// The maps to draw.
-    pub maps: Vec<super::map::MapSpec>,
+    pub maps: Vec<MapSpec>,
 }
 
 /// One flight of a sweep.
@@ -210,7 +309,7 @@ impl Sweep {
             maps: file.map,
         };
         for m in &sweep.maps {
-            super::map::check(m, &sweep).map_err(SpecError)?;
+            check_map(m, &sweep).map_err(SpecError)?;
         }
         let flights = sweep.cells().checked_mul(sweep.replicates);
         if flights.is_none_or(|f| f > MAX_FLIGHTS) {
