@@ -370,12 +370,14 @@ fn main() {
 /// where the time goes) and what that floor allows on this machine's cores.
 fn sweep_table(seconds: f64) {
     use rayon::prelude::*;
-    use ringswarm::sweep::{Sweep, fly, config_of};
+    use ringswarm::sweep::{Sweep, config_of, fly};
     let spec = "[sweep]\nscenario = \"paper-sim1\"\nseed = 1\nreplicates = 40\n";
     let sweep = Sweep::from_toml(spec).expect("spec");
     let base: toml::Table =
         toml::from_str(include_str!("../config/paper-sim1.toml")).expect("paper-sim1");
-    let flights: Vec<_> = (0..sweep.flights()).filter_map(|i| sweep.flight(i)).collect();
+    let flights: Vec<_> = (0..sweep.flights())
+        .filter_map(|i| sweep.flight(i))
+        .collect();
     let configs: Vec<Config> = flights
         .iter()
         .map(|f| config_of(&base, &sweep, f).expect("flight").1)
@@ -397,7 +399,9 @@ fn sweep_table(seconds: f64) {
     println!(
         "floor of one flight ({seconds} simulated s, six vehicles): physics {physics_s:.4} s, law {law_s:.4} s, codec {codec_s:.4} s; sum {floor_s:.4} s\n"
     );
-    println!("| threads | flights | wall s | flights/s | s per flight per thread | floor: s per flight per core | flights/s the floor allows | total / floor |");
+    println!(
+        "| threads | flights | wall s | flights/s | s per flight per thread | floor: s per flight per core | flights/s the floor allows | total / floor |"
+    );
     println!("|---|---|---|---|---|---|---|---|");
     for threads in [1, cores] {
         let pool = rayon::ThreadPoolBuilder::new()
