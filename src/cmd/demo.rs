@@ -164,6 +164,9 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         )
         .map_err(|e| anyhow::anyhow!("plots: {e}"))?;
     }
+    if let Err(e) = crate::view::mcap::write(&out, epoch_us) {
+        eprintln!("flight.mcap not written: {e}");
+    }
     if let Some(bar) = &observer.bar {
         bar.finish();
     }

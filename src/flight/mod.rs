@@ -115,6 +115,7 @@ pub async fn fly_over_udp(
         );
     }
     observer.recorder.set_mirrors(mirrors);
+    let epoch_us = observer.recorder.epoch_us();
     let (summary, trace) = observer
         .recorder
         .finish(&swarm, now, wall.elapsed().as_secs_f64())
@@ -122,6 +123,9 @@ pub async fn fly_over_udp(
     if let Err(e) = crate::plot::write_all(out, &trace, &crate::plot::PlotInfo::new(&swarm, "fly"))
     {
         eprintln!("plots not written: {e}");
+    }
+    if let Err(e) = crate::view::mcap::write(out, epoch_us) {
+        eprintln!("flight.mcap not written: {e}");
     }
     Ok(summary)
 }

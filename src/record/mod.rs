@@ -8,6 +8,9 @@
 //!                           for the swarm; network empty on own sockets), level (warning
 //!                           or info), event (quoted text)
 //! <dir>/summary.json        the flight's figures (see [`metrics::Summary`])
+//! <dir>/flight.mcap         the flight for Foxglove: the swarm's states, the events and
+//!                           the summary as JSON messages (`view::mcap`; written by the
+//!                           commands once the flight has ended)
 //! <dir>/setup.json          what the flight was asked (see [`RunSetup`]): each vehicle's
 //!                           system id, network, CSV and place in the formation; what a
 //!                           replay (`ringswarm view`) needs besides the CSVs
@@ -260,6 +263,11 @@ impl Recorder {
     /// The directory.
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    /// When the flight started (Unix µs).
+    pub fn epoch_us(&self) -> u64 {
+        self.epoch_us
     }
 
     /// The tracker (for live status).

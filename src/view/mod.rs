@@ -1,9 +1,11 @@
 //! The live view and the replay in a browser: what the swarm looks like at an instant
 //! ([`state`]), a run directory replayed ([`replay`]), a distributed swarm watched from its shards'
-//! messages ([`distributed`]) and the web server ([`server`]).
+//! messages ([`distributed`]), the web server ([`server`]), and the run directory as one
+//! MCAP file for Foxglove ([`mcap`]).
 //! See `docs/live-view.md` for the page and the API.
 
 pub mod distributed;
+pub mod mcap;
 pub mod replay;
 pub mod server;
 pub mod state;

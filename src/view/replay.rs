@@ -127,6 +127,11 @@ impl Replay {
         &self.setup
     }
 
+    /// The events, in time.
+    pub fn events(&self) -> &[EventView] {
+        &self.events
+    }
+
     /// The time of the last row or event (s).
     pub fn duration_s(&self) -> f64 {
         self.duration_s
@@ -243,7 +248,9 @@ fn intern(names: &mut Vec<String>, name: &str) -> Result<u8, String> {
     Ok((names.len() - 1) as u8)
 }
 
-/// The rows of a vehicle CSV (`record::CSV_HEADER`), one every [`REPLAY_PERIOD_S`] at most.
+/// The rows of a vehicle CSV (`record::CSV_HEADER`): of the rows in each period
+/// `((k − 1)·P, k·P]` ([`REPLAY_PERIOD_S`] = P), the last, so that the state at `k·P` is
+/// the newest row at or before it, exactly as the CSV has it; the file's last row is kept.
 fn parse_rows(text: &str, names: &mut Vec<String>) -> Result<Vec<Row>, String> {
     let mut lines = text.lines().enumerate();
     match lines.next() {
@@ -255,57 +262,71 @@ fn parse_rows(text: &str, names: &mut Vec<String>) -> Result<Vec<Row>, String> {
         }
         None => return Err("empty file".into()),
     }
+    let period = |t_s: f64| (t_s / REPLAY_PERIOD_S - 1e-9).ceil() as i64;
     let mut rows: Vec<Row> = Vec::new();
+    // The last row seen, parsed only once the next one is in a later period.
+    let mut pending: Option<(usize, &str, f64)> = None;
     for (i, line) in lines {
         let line_no = i + 1;
-        let mut fields = line.split(',');
-        let mut next = |name: &str| {
-            fields
-                .next()
-                .ok_or_else(|| format!("line {line_no}: no column {name}"))
-        };
-        let number = |name: &str, text: &str| -> Result<f64, String> {
-            text.parse::<f64>()
-                .map_err(|_| format!("line {line_no}: column {name} is not a number: \"{text}\""))
-        };
-        let t_s = number("t_s", next("t_s")?)?;
+        let t = line.split(',').next().unwrap_or("");
+        let t_s = t
+            .parse::<f64>()
+            .map_err(|_| format!("line {line_no}: column t_s is not a number: \"{t}\""))?;
         if !t_s.is_finite() {
             return Err(format!("line {line_no}: t_s is not finite"));
         }
-        if let Some(last) = rows.last() {
-            if t_s < last.t_s {
+        if let Some((before_no, before, before_s)) = pending {
+            if t_s < before_s {
                 return Err(format!("line {line_no}: t_s {t_s} goes back in time"));
             }
-            if t_s - last.t_s < REPLAY_PERIOD_S - 1e-9 {
-                continue;
+            if period(t_s) > period(before_s) {
+                rows.push(parse_row(before_no, before, before_s, names)?);
             }
         }
-        let swarm_phase = intern(names, next("swarm_phase")?)?;
-        let link_phase = intern(names, next("link_phase")?)?;
-        let mut values = [0i32; 6];
-        for (value, name) in values
-            .iter_mut()
-            .zip(["x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps"])
-        {
-            let x = number(name, next(name)?)?;
-            *value = fixed(x)
-                .ok_or_else(|| format!("line {line_no}: column {name} is out of range: {x}"))?;
-        }
-        // Attitude, command and setpoint columns are not replayed.
-        let age = fields
-            .nth(9)
-            .ok_or_else(|| format!("line {line_no}: no column last_heard_age_ms"))?;
-        let age_ms = number("last_heard_age_ms", age)? as f32;
-        rows.push(Row {
-            t_s,
-            swarm_phase,
-            link_phase,
-            pos_enu: [values[0], values[1], values[2]],
-            vel_enu: [values[3], values[4], values[5]],
-            age_ms,
-        });
+        pending = Some((line_no, line, t_s));
+    }
+    if let Some((line_no, line, t_s)) = pending {
+        rows.push(parse_row(line_no, line, t_s, names)?);
     }
     Ok(rows)
+}
+
+/// One row of a vehicle CSV, line `line_no`, whose time `t_s` is already read.
+fn parse_row(line_no: usize, line: &str, t_s: f64, names: &mut Vec<String>) -> Result<Row, String> {
+    let mut fields = line.split(',').skip(1);
+    let mut next = |name: &str| {
+        fields
+            .next()
+            .ok_or_else(|| format!("line {line_no}: no column {name}"))
+    };
+    let number = |name: &str, text: &str| -> Result<f64, String> {
+        text.parse::<f64>()
+            .map_err(|_| format!("line {line_no}: column {name} is not a number: \"{text}\""))
+    };
+    let swarm_phase = intern(names, next("swarm_phase")?)?;
+    let link_phase = intern(names, next("link_phase")?)?;
+    let mut values = [0i32; 6];
+    for (value, name) in values
+        .iter_mut()
+        .zip(["x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps"])
+    {
+        let x = number(name, next(name)?)?;
+        *value = fixed(x)
+            .ok_or_else(|| format!("line {line_no}: column {name} is out of range: {x}"))?;
+    }
+    // Attitude, command and setpoint columns are not replayed.
+    let age = fields
+        .nth(9)
+        .ok_or_else(|| format!("line {line_no}: no column last_heard_age_ms"))?;
+    let age_ms = number("last_heard_age_ms", age)? as f32;
+    Ok(Row {
+        t_s,
+        swarm_phase,
+        link_phase,
+        pos_enu: [values[0], values[1], values[2]],
+        vel_enu: [values[3], values[4], values[5]],
+        age_ms,
+    })
 }
 
 /// The events of `events.csv` (`t_s,system_id,network,level,event`, the event quoted).
@@ -392,15 +413,16 @@ mod tests {
         };
         let mut text = format!("{}\n", crate::record::CSV_HEADER);
         for i in 0..30 {
-            // 250 Hz rows: every 4 ms.
+            // 250 Hz rows: every 4 ms (written to 0.1 ms, as the recorder does).
             text += &row(f64::from(i) * 0.004, f64::from(i));
         }
         let mut names = Vec::new();
         let rows = parse_rows(&text, &mut names).expect("parses");
-        // 0, 0.052 and 0.104 s: the first row at least 50 ms after the last kept.
+        // The last row of each 50 ms period ending at 0, 0.05, 0.1 and 0.15 s: 0, 0.048,
+        // 0.1 and the file's last, 0.116.
         let times: Vec<f64> = rows.iter().map(|r| r.t_s).collect();
-        assert_eq!(times, vec![0.0, 0.052, 0.104]);
-        assert_eq!(rows[1].pos_enu_m(), Vector3::new(13.0, 2.0, 3.0));
+        assert_eq!(times, vec![0.0, 0.048, 0.1, 0.116]);
+        assert_eq!(rows[1].pos_enu_m(), Vector3::new(12.0, 2.0, 3.0));
         assert_eq!(rows[1].vel_enu_mps(), Vector3::new(0.5, 0.0, 0.0));
         assert_eq!(rows[1].age_ms, 12.5);
         assert_eq!(names, vec!["consensus", "flying"]);

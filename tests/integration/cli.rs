@@ -754,3 +754,96 @@ fn a_link_fault_out_of_range_is_named_on_every_path_never_a_panic() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `flight.mcap` holds what the run directory holds: one `/swarm` message per replay
+/// period from the flight's start time, every event of `events.csv` on `/log`, and
+/// `summary.json` on `/summary`; a vehicle's position in `/swarm` is its CSV row's.
+#[test]
+fn demo_writes_a_flight_mcap_that_holds_the_run_directory() {
+    let dir = std::env::temp_dir().join(format!("ringswarm-cli-mcap-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let demo = ringswarm(&[
+        "demo",
+        "--scenario",
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/fixtures/ground-diamond.toml"
+        ),
+        "--no-plots",
+        "--out",
+        dir.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(demo.status.code(), Some(0), "{}", stderr(&demo));
+    let bytes = std::fs::read(dir.join("flight.mcap")).expect("flight.mcap");
+    let mut swarm = Vec::new();
+    let mut logs = Vec::new();
+    let mut summaries = Vec::new();
+    for message in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+        let message = message.expect("a message");
+        assert_eq!(message.channel.message_encoding, "json");
+        let schema = message.channel.schema.as_ref().expect("a schema");
+        assert_eq!(schema.encoding, "jsonschema");
+        let value: serde_json::Value = serde_json::from_slice(&message.data).expect("JSON");
+        match message.channel.topic.as_str() {
+            "/swarm" => swarm.push((message.log_time, value)),
+            "/log" => logs.push((message.log_time, value)),
+            "/summary" => summaries.push(value),
+            other => panic!("unexpected topic {other}"),
+        }
+    }
+    // /swarm: every 50 ms from the flight's start to its last row.
+    let csv = std::fs::read_to_string(dir.join("vehicle-1.csv")).expect("vehicle-1.csv");
+    let rows: Vec<Vec<f64>> = csv
+        .lines()
+        .skip(1)
+        .map(|line| {
+            line.split(',')
+                .map(|field| field.parse().unwrap_or(f64::NAN))
+                .collect()
+        })
+        .collect();
+    let events = std::fs::read_to_string(dir.join("events.csv")).expect("events.csv");
+    let event_times: Vec<f64> = events
+        .lines()
+        .skip(1)
+        .map(|line| line.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    let last_s = rows
+        .iter()
+        .map(|r| r[0])
+        .chain(event_times.iter().copied())
+        .fold(0.0_f64, f64::max);
+    assert_eq!(swarm.len() as f64, (last_s / 0.05 + 1e-9).floor() + 1.0);
+    let start_ns = swarm[0].0;
+    for (i, (time_ns, state)) in swarm.iter().enumerate() {
+        assert_eq!(*time_ns - start_ns, i as u64 * 50_000_000);
+        assert!((state["t_s"].as_f64().unwrap() - i as f64 * 0.05).abs() < 1e-9);
+        assert_eq!(state["vehicles"].as_array().unwrap().len(), 4);
+    }
+    // Vehicle 1 at 4 s: its last CSV row at or before 4 s (ENU, 10⁻⁴ m resolution).
+    let row = rows.iter().rfind(|r| r[0] <= 4.0 + 1e-9).expect("a row");
+    let state = &swarm[80].1;
+    assert_eq!(state["t_s"].as_f64().unwrap(), 4.0);
+    let position = &state["vehicles"][0]["position_enu_m"];
+    for (axis, column) in [(0, 3), (1, 4), (2, 5)] {
+        let got = position[axis].as_f64().unwrap();
+        assert!(
+            (got - row[column]).abs() <= 1e-4,
+            "axis {axis}: {got} vs {}",
+            row[column]
+        );
+    }
+    // /log: one message per event, in time, from the same start.
+    assert_eq!(logs.len(), event_times.len());
+    for ((time_ns, log), t_s) in logs.iter().zip(&event_times) {
+        let offset_s = (*time_ns - start_ns) as f64 * 1e-9;
+        assert!((offset_s - t_s).abs() < 1e-6, "{offset_s} vs {t_s}");
+        assert!(log["level"] == 2 || log["level"] == 3);
+        assert!(!log["message"].as_str().unwrap().is_empty());
+    }
+    // /summary: summary.json, once.
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summaries, vec![summary]);
+    let _ = std::fs::remove_dir_all(&dir);
+}

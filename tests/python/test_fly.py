@@ -149,6 +149,42 @@ def test_the_coordinator_heartbeat_is_in_the_tlog_at_one_hertz_per_link(run_dir)
     assert rate == pytest.approx(N * 1.0, rel=0.1), f"{rate:.2f} heartbeats/s for {N} links"
 
 
+def test_flight_mcap_reads_with_the_formats_own_reader_and_ends_in_the_formation(run_dir):
+    """flight.mcap, read with the MCAP project's Python reader: the three channels with
+    JSON schemas, one /swarm state per 50 ms, every event on /log at its CSV time, and
+    summary.json on /summary; the last /swarm state puts each vehicle where its CSV
+    does (ENU, 0.1 mm)."""
+    from mcap.reader import make_reader
+
+    with open(run_dir / "flight.mcap", "rb") as f:
+        reader = make_reader(f)
+        topics = {}
+        for schema, channel, message in reader.iter_messages():
+            assert channel.message_encoding == "json"
+            assert schema.encoding == "jsonschema"
+            json.loads(schema.data)
+            topics.setdefault(channel.topic, []).append((message.log_time, json.loads(message.data)))
+    assert set(topics) == {"/swarm", "/log", "/summary"}
+    swarm = topics["/swarm"]
+    start_ns = swarm[0][0]
+    steps = [t - start_ns for t, _ in swarm]
+    assert steps == [i * 50_000_000 for i in range(len(swarm))]
+    with open(run_dir / "events.csv") as f:
+        events = list(csv.DictReader(f))
+    assert len(topics["/log"]) == len(events)
+    for (t_ns, log), event in zip(topics["/log"], events):
+        assert (t_ns - start_ns) * 1e-9 == pytest.approx(float(event["t_s"]), abs=1e-6)
+        assert log["level"] == (3 if event["level"] == "warning" else 2)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert topics["/summary"] == [(topics["/summary"][0][0], summary)]
+    t_last, last = swarm[-1]
+    for i in range(N):
+        with open(run_dir / f"vehicle-{i + 1}.csv") as f:
+            rows = [r for r in csv.DictReader(f) if float(r["t_s"]) <= last["t_s"] + 1e-9]
+        want = [float(rows[-1][k]) for k in ("x_m", "y_m", "z_m")]
+        assert last["vehicles"][i]["position_enu_m"] == pytest.approx(want, abs=1e-4)
+
+
 def test_sigterm_lands_the_swarm_and_writes_the_run_directory(tmp_path):
     """What `timeout`, systemd and `docker stop` send: `fly` lands every vehicle and
     writes its run directory, as for Ctrl-C, and exits 0 once they are down."""
