@@ -247,8 +247,12 @@ fn draw_map(
         Some(map::Theory::Stability) => {
             Some(map::stability_boundary(base, sweep, m, &grid).map_err(anyhow::Error::msg)?)
         }
+        Some(map::Theory::Gate) => {
+            Some(map::gate_boundary(base, sweep, m, &grid).map_err(anyhow::Error::msg)?)
+        }
         None => None,
     };
+    let above = m.theory.is_none_or(map::Theory::good_above);
     let name: String = m
         .metric
         .chars()
@@ -277,23 +281,30 @@ fn draw_map(
     }
     let mut sorted_ys = grid.ys.clone();
     sorted_ys.sort_by(f64::total_cmp);
-    let flown = map::flown_boundary(&grid, m.good_at_most);
+    let flown = if above {
+        map::flown_boundary(&grid, m.good_at_most)
+    } else {
+        map::flown_boundary_below(&grid, m.good_at_most)
+    };
     let mut columns = Vec::new();
     for (i, x) in grid.xs.iter().enumerate() {
         let theory_y = theory.as_ref().and_then(|t| t[i]);
         let flown_y = flown[i].map(|j| sorted_ys[j]);
         let agrees = match (theory_y, flown[i]) {
-            (Some(t), Some(j)) => Some(map::agrees(&sorted_ys, j, t)),
+            (Some(t), Some(j)) if above => Some(map::agrees(&sorted_ys, j, t)),
+            (Some(t), Some(j)) => Some(map::agrees_below(&sorted_ys, j, t)),
             _ => None,
         };
         if theory.is_some() {
             println!(
-                "{} = {x}: theory's boundary {}, cells with {} <= {} from {} up: {}",
+                "{} = {x}: theory's boundary {}, cells with {} <= {} {} {} {}: {}",
                 m.x,
                 theory_y.map_or("outside the map".to_owned(), |t| format!("{t:.4}")),
                 m.metric,
                 m.good_at_most,
+                if above { "from" } else { "up to" },
                 flown_y.map_or("nowhere".to_owned(), |y| y.to_string()),
+                if above { "up" } else { "from the bottom" },
                 match agrees {
                     Some(true) => "agree within one cell",
                     Some(false) => "DISAGREE",
@@ -306,6 +317,7 @@ fn draw_map(
             "values": grid.values[i],
             "theory_boundary": theory_y,
             "flown_boundary": flown_y,
+            "good": if above { "above" } else { "below" },
             "agree_within_one_cell": agrees,
         }));
     }

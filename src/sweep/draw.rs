@@ -9,7 +9,7 @@ use plotters::prelude::*;
 use plotters::style::colors::colormaps::{ColorMap, ViridisRGB};
 
 use super::map::Grid;
-use super::spec::MapSpec;
+use super::spec::{MapSpec, Theory};
 
 const SIZE: (u32, u32) = (900, 700);
 
@@ -158,7 +158,7 @@ fn draw<DB: DrawingBackend>(
         chart
             .draw_series(LineSeries::new(points.clone(), RED.stroke_width(3)))
             .map_err(e)?
-            .label("theory: closed-loop stability boundary (analyze)")
+            .label(spec.theory.map_or("theory", Theory::label))
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(3)));
         chart
             .draw_series(points.iter().map(|p| Circle::new(*p, 4, RED.filled())))

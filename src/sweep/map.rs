@@ -3,7 +3,8 @@
 //! did worst, and, where the project has a theory of it, the theory's boundary in the
 //! same plane: `theory = "stability"` is the closed-loop stability boundary `analyze`
 //! computes (the eigenvalues of the double-integrator ring with the flight's `k`, `α`,
-//! `β` and `time_scale`), found along y for each x. Pure.
+//! `β` and `time_scale`), found along y for each x; `theory = "gate"` is the bandwidth
+//! gate's delay limit along `emulator.latency_ms` (good below it). Pure.
 //!
 //! ```toml
 //! [[map]]
@@ -12,7 +13,7 @@
 //! metric = "exit_code"     # any number of the row: a summary field by its column name
 //!                          # (`formation_error_m`, `timing.late_ticks`), `exit_code`, `wall_s`
 //! reduce = "max"           # mean (default), max, min, median
-//! theory = "stability"     # optional
+//! theory = "stability"     # optional: "stability", or "gate" (y = "emulator.latency_ms")
 //! good_at_most = 0.0       # a cell is good when its number is at most this (default 0)
 //! ```
 
@@ -21,7 +22,7 @@ use super::rows::{Cell, FlightRow, flatten};
 use super::spec::{MapSpec, Sweep, check_map};
 pub use super::spec::{Reduce, Theory};
 use crate::config::Config;
-use crate::consensus::{CouplingGains, RingDigraph, analyze};
+use crate::consensus::{CouplingGains, HOP_PRODUCT, RingDigraph, analyze};
 
 /// A map's cells: `values[i][j]` for `xs[i]`, `ys[j]` (`None`: no flight had the metric).
 #[derive(Debug, Clone, PartialEq)]
@@ -102,6 +103,33 @@ pub fn worst(grid: &Grid, n: usize) -> Vec<(f64, f64, f64)> {
     all
 }
 
+/// The config of the flight with `x` and `y` set (the other axes at their first value).
+///
+/// # Errors
+/// A file that does not parse as a config.
+fn config_at(
+    base: &toml::Table,
+    sweep: &Sweep,
+    spec: &MapSpec,
+    x: f64,
+    y: f64,
+) -> Result<Config, String> {
+    let mut doc = base.clone();
+    for (key, value) in &sweep.set {
+        keys::set(&mut doc, key, value)?;
+    }
+    for a in &sweep.axes {
+        if let Some(v) = a.values.first() {
+            keys::set(&mut doc, &a.key, &keys::number(*v))?;
+        }
+    }
+    keys::set(&mut doc, &spec.x, &keys::number(x))?;
+    keys::set(&mut doc, &spec.y, &keys::number(y))?;
+    toml::Value::Table(doc)
+        .try_into()
+        .map_err(|e: toml::de::Error| e.to_string())
+}
+
 /// Whether the ring of the flight with `x` and `y` set (the other axes at their first
 /// value) is stable, as `analyze` judges it.
 ///
@@ -114,20 +142,7 @@ pub fn stable_at(
     x: f64,
     y: f64,
 ) -> Result<bool, String> {
-    let mut doc = base.clone();
-    for (key, value) in &sweep.set {
-        keys::set(&mut doc, key, value)?;
-    }
-    for a in &sweep.axes {
-        if let Some(v) = a.values.first() {
-            keys::set(&mut doc, &a.key, &keys::number(*v))?;
-        }
-    }
-    keys::set(&mut doc, &spec.x, &keys::number(x))?;
-    keys::set(&mut doc, &spec.y, &keys::number(y))?;
-    let config: Config = toml::Value::Table(doc)
-        .try_into()
-        .map_err(|e: toml::de::Error| e.to_string())?;
+    let config = config_at(base, sweep, spec, x, y)?;
     let g = &config.gains;
     let c = g.time_scale;
     let ring = RingDigraph::for_agents(config.vehicle.len(), g.k).map_err(|e| e.to_string())?;
@@ -187,6 +202,58 @@ pub fn stability_boundary(
         out.push(boundary);
     }
     Ok(out)
+}
+
+/// For each x of `grid`, the one-way latency (ms) the bandwidth gate allows the flight
+/// at x: [`HOP_PRODUCT`] over the law's fastest mode with its gains (time scale
+/// applied), or `None` when that lies outside the map's y range.
+///
+/// # Errors
+/// A file that does not parse as a config, or gains the gate refuses.
+pub fn gate_boundary(
+    base: &toml::Table,
+    sweep: &Sweep,
+    spec: &MapSpec,
+    grid: &Grid,
+) -> Result<Vec<Option<f64>>, String> {
+    let lo = grid.ys.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = grid.ys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let y0 = grid.ys.first().copied().unwrap_or(0.0);
+    grid.xs
+        .iter()
+        .map(|&x| {
+            let omega = config_at(base, sweep, spec, x, y0)?
+                .bandwidth_check()?
+                .fastest_mode_per_s;
+            let limit_ms = 1e3 * HOP_PRODUCT / omega;
+            Ok((lo..=hi).contains(&limit_ms).then_some(limit_ms))
+        })
+        .collect()
+}
+
+/// Where a flown boundary lies for each x, for a theory good below it: the greatest
+/// index j of `ys` (in ascending order of y) up to which every cell from the bottom has
+/// the metric at most `ok`; `None` when the bottom cell is not good.
+pub fn flown_boundary_below(grid: &Grid, ok: f64) -> Vec<Option<usize>> {
+    let mut order: Vec<usize> = (0..grid.ys.len()).collect();
+    order.sort_by(|a, b| grid.ys[*a].total_cmp(&grid.ys[*b]));
+    grid.values
+        .iter()
+        .map(|col| {
+            let good = |j: usize| col[j].is_some_and(|v| v <= ok);
+            let run = order.iter().take_while(|&&j| good(j)).count();
+            (run > 0).then(|| run - 1)
+        })
+        .collect()
+}
+
+/// [`agrees`] for a theory good below its boundary: the flown boundary lies between the
+/// last good rank `j` and the next; the theory's y agrees when it lies between the y one
+/// rank below `j` and the y two ranks above it.
+pub fn agrees_below(sorted_ys: &[f64], j: usize, y_theory: f64) -> bool {
+    let below = j.checked_sub(1).map_or(f64::NEG_INFINITY, |b| sorted_ys[b]);
+    let above = sorted_ys.get(j + 2).copied().unwrap_or(f64::INFINITY);
+    below <= y_theory && y_theory <= above
 }
 
 /// Where a flown boundary lies for each x: the least index j of `ys` (in ascending
@@ -300,6 +367,76 @@ mod tests {
         assert!(agrees(&ys, 2, 4.0));
         assert!(!agrees(&ys, 3, 0.9));
         assert!(!agrees(&ys, 1, 2.5));
+    }
+
+    #[test]
+    fn the_gate_limit_of_paper_sim1_is_its_hop_product_over_the_fastest_mode() {
+        // paper-sim1: m = 3, k = 5, alpha = 1, beta = 5. The fastest eigenvalue of L is
+        // the root 2 + k = 7 of mu^2 - (2 + k) mu + (1 - 1) = 0 (l = 0); the fastest mode
+        // the root of s^2 + 35 s + 7: (35 + sqrt(1197)) / 2 = 34.799 1/s. At time scale c
+        // every mode scales by c, so the limit 3.5 / omega by 1 / c.
+        let s = Sweep::from_toml(
+            "[sweep]\nscenario = \"paper-sim1\"\n\
+             [[axis]]\nkey = \"gains.time_scale\"\nvalues = [1.0, 0.5, 0.25]\n\
+             [[axis]]\nkey = \"emulator.latency_ms\"\nvalues = [0.0, 100.0, 300.0]\n",
+        )
+        .unwrap();
+        let base: toml::Table =
+            toml::from_str(include_str!("../../config/paper-sim1.toml")).unwrap();
+        let m = MapSpec {
+            x: "gains.time_scale".into(),
+            y: "emulator.latency_ms".into(),
+            metric: "exit_code".into(),
+            reduce: Reduce::Max,
+            theory: Some(Theory::Gate),
+            good_at_most: 0.0,
+        };
+        let g = Grid {
+            xs: vec![1.0, 0.5, 0.25],
+            ys: vec![0.0, 100.0, 300.0],
+            values: vec![vec![None; 3]; 3],
+        };
+        let omega = (35.0 + 1197f64.sqrt()) / 2.0;
+        let b = gate_boundary(&base, &s, &m, &g).unwrap();
+        assert!((b[0].unwrap() - 3500.0 / omega).abs() < 1e-6, "{b:?}");
+        assert!((b[1].unwrap() - 7000.0 / omega).abs() < 1e-6, "{b:?}");
+        // 402 ms: above the map.
+        assert_eq!(b[2], None);
+        // The gate along any other y is refused by name.
+        let wrong = MapSpec {
+            y: "gains.time_scale".into(),
+            x: "emulator.latency_ms".into(),
+            ..m
+        };
+        assert_eq!(
+            check_map(&wrong, &s).unwrap_err(),
+            "map of exit_code: theory = \"gate\" is drawn along y = \"emulator.latency_ms\", not \"gains.time_scale\""
+        );
+    }
+
+    #[test]
+    fn below_a_boundary_the_run_from_the_bottom_counts_and_agreement_allows_one_cell() {
+        // ys out of order: ranks 0..4 are 0, 50, 100, 150, 200.
+        let g = Grid {
+            xs: vec![0.0, 1.0, 2.0],
+            ys: vec![100.0, 0.0, 200.0, 50.0, 150.0],
+            values: vec![
+                // good at 0, 50, 100; bad at 150; good again at 200: the run ends at 100.
+                vec![Some(0.0), Some(0.0), Some(0.0), Some(0.0), Some(4.0)],
+                // bad at the bottom: nowhere.
+                vec![Some(0.0), Some(4.0), Some(0.0), Some(0.0), Some(0.0)],
+                // good everywhere: the top.
+                vec![Some(0.0); 5],
+            ],
+        };
+        assert_eq!(flown_boundary_below(&g, 0.0), vec![Some(2), None, Some(4)]);
+        let ys = [0.0, 50.0, 100.0, 150.0, 200.0];
+        // Flown: last good at rank 2 (100); the failure starts by 150. Within one cell:
+        // from 50 to 200.
+        assert!(agrees_below(&ys, 2, 50.0));
+        assert!(agrees_below(&ys, 2, 200.0));
+        assert!(!agrees_below(&ys, 2, 49.0));
+        assert!(!agrees_below(&ys, 2, 201.0));
     }
 
     #[test]

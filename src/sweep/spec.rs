@@ -184,7 +184,33 @@ pub enum Theory {
     /// The closed-loop stability boundary (`analyze`): for each x, the y above which the
     /// ring with the flight's gains is stable.
     Stability,
+    /// The bandwidth gate's delay limit (`analyze`'s gate): for each x, the one-way
+    /// latency `HOP_PRODUCT / ω` (ω the law's fastest mode with the flight's gains) below
+    /// which the gate lets the swarm fly; y must be `emulator.latency_ms`.
+    Gate,
 }
+
+impl Theory {
+    /// Whether the theory's good side is above its boundary (stability: gains above it
+    /// converge) or below it (the gate: latencies below it fly).
+    pub fn good_above(self) -> bool {
+        match self {
+            Self::Stability => true,
+            Self::Gate => false,
+        }
+    }
+
+    /// What its line is, for a legend.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Stability => "theory: closed-loop stability boundary (analyze)",
+            Self::Gate => "theory: the bandwidth gate's delay limit (3.5 / fastest mode)",
+        }
+    }
+}
+
+/// The axis the gate's delay limit is drawn along.
+pub const GATE_AXIS: &str = "emulator.latency_ms";
 
 /// Checks `spec` against the sweep's axes before any flight.
 ///
@@ -200,6 +226,12 @@ pub fn check_map(spec: &MapSpec, sweep: &Sweep) -> Result<(), String> {
                 axes.join(", ")
             ));
         }
+    }
+    if spec.theory == Some(Theory::Gate) && spec.y != GATE_AXIS {
+        return Err(format!(
+            "map of {}: theory = \"gate\" is drawn along y = \"{GATE_AXIS}\", not \"{}\"",
+            spec.metric, spec.y
+        ));
     }
     if spec.x == spec.y {
         return Err(format!(

@@ -239,3 +239,32 @@ fn a_key_or_value_the_config_refuses_stops_the_sweep_before_any_flight() {
     }
     std::fs::remove_dir_all(&root).unwrap();
 }
+
+/// Every shipped sweep (`sweeps/*.toml`): its maps name its axes, and every flight's
+/// settings make a config the lockstep driver accepts (no flight flown).
+#[test]
+fn every_shipped_sweep_sets_only_keys_the_config_accepts() {
+    use ringswarm::sweep::{Sweep, config_of, spec::check_map};
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut specs: Vec<PathBuf> = std::fs::read_dir(root.join("sweeps"))
+        .expect("sweeps/")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    specs.sort();
+    assert!(specs.len() >= 2, "{specs:?}");
+    for path in specs {
+        let text = std::fs::read_to_string(&path).expect("spec");
+        let sweep = Sweep::from_toml(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let scenario = root.join("config").join(format!("{}.toml", sweep.scenario));
+        let base: toml::Table =
+            toml::from_str(&std::fs::read_to_string(&scenario).expect("scenario")).expect("toml");
+        for m in &sweep.maps {
+            check_map(m, &sweep).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        }
+        for i in 0..sweep.flights() {
+            let flight = sweep.flight(i).expect("a flight");
+            config_of(&base, &sweep, &flight).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        }
+    }
+}
