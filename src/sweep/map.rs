@@ -35,6 +35,22 @@ pub struct Grid {
     pub values: Vec<Vec<Option<f64>>>,
 }
 
+impl Grid {
+    /// The least and the greatest y.
+    fn y_range(&self) -> (f64, f64) {
+        let lo = self.ys.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = self.ys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        (lo, hi)
+    }
+
+    /// The indices of `ys` in ascending order of y.
+    fn y_order(&self) -> Vec<usize> {
+        let mut order: Vec<usize> = (0..self.ys.len()).collect();
+        order.sort_by(|a, b| self.ys[*a].total_cmp(&self.ys[*b]));
+        order
+    }
+}
+
 /// A row's number under `metric`: `exit_code`, `wall_s`, or a summary column (a yes/no
 /// as 1 or 0); `None` when the flight has none.
 pub fn metric_of(row: &FlightRow, metric: &str) -> Option<f64> {
@@ -166,8 +182,7 @@ pub fn stability_boundary(
     spec: &MapSpec,
     grid: &Grid,
 ) -> Result<Vec<Option<f64>>, String> {
-    let lo = grid.ys.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = grid.ys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (lo, hi) = grid.y_range();
     let geometric = lo > 0.0 && hi / lo > 10.0;
     let at = |t: f64| {
         if geometric {
@@ -216,8 +231,7 @@ pub fn gate_boundary(
     spec: &MapSpec,
     grid: &Grid,
 ) -> Result<Vec<Option<f64>>, String> {
-    let lo = grid.ys.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = grid.ys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (lo, hi) = grid.y_range();
     let y0 = grid.ys.first().copied().unwrap_or(0.0);
     grid.xs
         .iter()
@@ -235,8 +249,7 @@ pub fn gate_boundary(
 /// index j of `ys` (in ascending order of y) up to which every cell from the bottom has
 /// the metric at most `ok`; `None` when the bottom cell is not good.
 pub fn flown_boundary_below(grid: &Grid, ok: f64) -> Vec<Option<usize>> {
-    let mut order: Vec<usize> = (0..grid.ys.len()).collect();
-    order.sort_by(|a, b| grid.ys[*a].total_cmp(&grid.ys[*b]));
+    let order = grid.y_order();
     grid.values
         .iter()
         .map(|col| {
@@ -260,8 +273,7 @@ pub fn agrees_below(sorted_ys: &[f64], j: usize, y_theory: f64) -> bool {
 /// order of y) from which every cell up has the metric at most `ok` (for `exit_code`:
 /// 0, no guard, fence or separation stop); `None` when no such run reaches the top.
 pub fn flown_boundary(grid: &Grid, ok: f64) -> Vec<Option<usize>> {
-    let mut order: Vec<usize> = (0..grid.ys.len()).collect();
-    order.sort_by(|a, b| grid.ys[*a].total_cmp(&grid.ys[*b]));
+    let order = grid.y_order();
     grid.values
         .iter()
         .map(|col| {
