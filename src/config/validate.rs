@@ -258,6 +258,7 @@ impl Config {
                 telemetry_interval: timing.control_interval,
                 attitude_interval: timing.attitude_interval,
                 link_timeout: timing.link_timeout,
+                max_attempts: s.command_attempts,
                 own_ids: (s.gcs_system_id, s.gcs_component_id),
                 retake_offboard: s.retake_offboard,
                 state_timeout: timing.state_timeout,
@@ -309,6 +310,13 @@ impl Config {
             100.0,
             60_000.0,
             " ms",
+        );
+        p.within(
+            "swarm.command_attempts",
+            f64::from(s.command_attempts),
+            1.0,
+            50.0,
+            " (sends of a command before its link fails)",
         );
         let handshake_ok = p.within(
             "swarm.handshake_timeout_s",

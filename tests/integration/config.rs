@@ -331,7 +331,7 @@ fn a_nan_offset_is_refused_by_its_index() {
 fn timeouts_are_checked_against_the_rates() {
     let text = with(
         "link_timeout_ms = 1500",
-        "handshake_timeout_s = 0.5\nstate_timeout_ms = 5\nlink_timeout_ms = 99",
+        "handshake_timeout_s = 0.5\nstate_timeout_ms = 5\nlink_timeout_ms = 99\ncommand_attempts = 0",
     );
     let err = Config::from_toml(&text).unwrap().validate().unwrap_err();
     for needle in [
@@ -339,18 +339,24 @@ fn timeouts_are_checked_against_the_rates() {
         // 250 Hz: three control periods are 12 ms.
         "swarm.state_timeout_ms must be a finite number in [12, 99] ms (three control periods up to swarm.link_timeout_ms), got 5",
         "swarm.link_timeout_ms must be a finite number in [100, 60000] ms, got 99",
+        "swarm.command_attempts must be a finite number in [1, 50] (sends of a command before its link fails), got 0",
     ] {
         assert!(err.lines().any(|l| l == needle), "{needle}\nnot in:\n{err}");
     }
-    // The defaults: 30 s, 300 ms, no retake.
+    // The defaults: 30 s, 300 ms, 10 sends of a command, no retake.
     let setup = Config::from_toml(&with("k = 5.0", "k = 5.0"))
         .unwrap()
         .validate()
         .unwrap();
     assert_eq!(setup.handshake_timeout, std::time::Duration::from_secs(30));
-    assert!(setup.links.iter().all(|l| l.state_timeout
-        == std::time::Duration::from_millis(300)
-        && !l.retake_offboard));
+    assert!(
+        setup
+            .links
+            .iter()
+            .all(|l| l.state_timeout == std::time::Duration::from_millis(300)
+                && l.max_attempts == 10
+                && !l.retake_offboard)
+    );
 }
 
 /// Every shipped scenario flies gains its airframes can follow at its control rate (the

@@ -58,6 +58,20 @@ pub struct ResponseFit {
     sxy: [f64; MAX_DELAY_STEPS + 1],
     syy: f64,
     samples: u64,
+    /// The fit of the sums as they were at `samples` report pairs: the safety filter asks
+    /// for it for every vehicle on every tick, and the sums change only with a new pair.
+    cache: FitCache,
+}
+
+/// The last fit and the pair count it was made at; equal to any other (it only remembers
+/// what the sums already determine).
+#[derive(Debug, Clone, Default)]
+struct FitCache(std::cell::Cell<Option<(u64, Option<AttitudeResponse>)>>);
+
+impl PartialEq for FitCache {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 impl ResponseFit {
@@ -72,6 +86,7 @@ impl ResponseFit {
             sxy: [0.0; MAX_DELAY_STEPS + 1],
             syy: 0.0,
             samples: 0,
+            cache: FitCache::default(),
         }
     }
 
@@ -132,6 +147,18 @@ impl ResponseFit {
         if self.samples < MIN_SAMPLES {
             return None;
         }
+        if let Some((at, fit)) = self.cache.0.get()
+            && at == self.samples
+        {
+            return fit;
+        }
+        let fit = self.fit_now();
+        self.cache.0.set(Some((self.samples, fit)));
+        fit
+    }
+
+    /// The least-squares fit of the sums as they are.
+    fn fit_now(&self) -> Option<AttitudeResponse> {
         let n = 2.0 * self.samples as f64;
         let mut best: Option<(f64, usize, f64)> = None;
         for j in 0..=MAX_DELAY_STEPS {
@@ -199,6 +226,21 @@ mod tests {
         assert!((1.0 / fit.time_constant_s - rate).abs() < 1e-6, "{fit:?}");
         assert!((fit.response_s - (0.12 + 1.0 / rate)).abs() < 1e-6);
         assert_eq!(fit.samples, 2999);
+    }
+
+    #[test]
+    fn the_cached_fit_follows_every_new_pair() {
+        let mut fit = simulate(3, 0.1, 400);
+        let before = fit.fit().expect("a fit");
+        assert_eq!(fit.fit(), Some(before));
+        // A pair that moves the sums: the next answer is the new least squares, not the old.
+        let (theta0, t0, _) = fit.last.expect("a report");
+        let theta = [theta0[0] + 0.01, theta0[1]];
+        fit.tick(Some((theta, t0 + 0.02)), [theta0[0] + 0.05, theta0[1]], true);
+        let after = fit.fit().expect("a fit");
+        assert_eq!(after.samples, before.samples + 1);
+        assert_eq!(Some(after), fit.fit_now());
+        assert_ne!(after.time_constant_s, before.time_constant_s);
     }
 
     #[test]
