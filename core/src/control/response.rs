@@ -30,7 +30,16 @@ pub const MAX_RATE_RPS: f64 = 2.0;
 /// for the same reason.
 pub const MAX_ERROR_RAD: f64 = 0.3;
 
-const HISTORY: usize = MAX_DELAY_STEPS + 8;
+/// How many ticks apart a report pair's first report and the pair's end may be, plus the
+/// longest delay: the commands a pair can be fitted against.
+const SPAN: usize = MAX_DELAY_STEPS + 8;
+/// The commands kept: `SPAN` rounded up to a power of two, so that a tick's slot is a mask.
+const HISTORY: usize = SPAN.next_power_of_two();
+
+/// The slot of tick `k` in the command history.
+fn slot(k: u64) -> usize {
+    (k & (HISTORY as u64 - 1)) as usize
+}
 
 /// The fitted response.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -50,7 +59,7 @@ pub struct AttitudeResponse {
 pub struct ResponseFit {
     step_s: f64,
     tick: u64,
-    /// Commanded (roll, pitch) of the latest ticks (rad), by `tick % HISTORY`.
+    /// Commanded (roll, pitch) of the latest ticks (rad), by [`slot`].
     commanded: [[f64; 2]; HISTORY],
     /// The previous report: its (roll, pitch) (rad), arrival (s) and tick.
     last: Option<([f64; 2], f64, u64)>,
@@ -58,8 +67,9 @@ pub struct ResponseFit {
     sxy: [f64; MAX_DELAY_STEPS + 1],
     syy: f64,
     samples: u64,
-    /// The fit of the sums as they were at `samples` report pairs: the safety filter asks
-    /// for it for every vehicle on every tick, and the sums change only with a new pair.
+    /// The fit of the sums as they were at `samples` report pairs: the safety filter and
+    /// the fence ask for it for every vehicle on every tick, and the sums change only
+    /// with a new pair.
     cache: FitCache,
 }
 
@@ -108,17 +118,17 @@ impl ResponseFit {
                 self.last = None;
             }
         }
-        self.commanded[(self.tick % HISTORY as u64) as usize] = commanded;
+        self.commanded[slot(self.tick)] = commanded;
         self.tick += 1;
     }
 
     fn fuse(&mut self, theta: [f64; 2], at_s: f64, theta0: [f64; 2], t0: f64, k0: u64) {
         let dt = at_s - t0;
         // A report pair further apart than the history covers says nothing exact.
-        if !(dt > 0.0 && dt < 0.5) || self.tick - k0 + MAX_DELAY_STEPS as u64 >= HISTORY as u64 {
+        if !(dt > 0.0 && dt < 0.5) || self.tick - k0 + MAX_DELAY_STEPS as u64 >= SPAN as u64 {
             return;
         }
-        let k_now = (k0 % HISTORY as u64) as usize;
+        let k_now = slot(k0);
         let linear = (0..2).all(|axis| {
             ((theta[axis] - theta0[axis]) / dt).abs() <= MAX_RATE_RPS
                 && (self.commanded[k_now][axis] - theta0[axis]).abs() <= MAX_ERROR_RAD
@@ -133,7 +143,7 @@ impl ResponseFit {
                 let Some(k) = k0.checked_sub(j as u64) else {
                     break;
                 };
-                let x = self.commanded[(k % HISTORY as u64) as usize][axis] - theta0[axis];
+                let x = self.commanded[slot(k)][axis] - theta0[axis];
                 self.sxx[j] += x * x;
                 self.sxy[j] += x * y;
             }
@@ -232,11 +242,15 @@ mod tests {
     fn the_cached_fit_follows_every_new_pair() {
         let mut fit = simulate(3, 0.1, 400);
         let before = fit.fit().expect("a fit");
-        assert_eq!(fit.fit(), Some(before));
-        // A pair that moves the sums: the next answer is the new least squares, not the old.
+        assert_eq!(Some(before), fit.fit_now());
+        // A pair that moves the sums: the next answer is the new least squares.
         let (theta0, t0, _) = fit.last.expect("a report");
         let theta = [theta0[0] + 0.01, theta0[1]];
-        fit.tick(Some((theta, t0 + 0.02)), [theta0[0] + 0.05, theta0[1]], true);
+        fit.tick(
+            Some((theta, t0 + 0.02)),
+            [theta0[0] + 0.05, theta0[1]],
+            true,
+        );
         let after = fit.fit().expect("a fit");
         assert_eq!(after.samples, before.samples + 1);
         assert_eq!(Some(after), fit.fit_now());

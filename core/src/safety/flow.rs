@@ -48,6 +48,9 @@ impl Group {
     }
 }
 
+/// Up to this many vehicles every pair is looked at, without the grid.
+const ALL_PAIRS_UP_TO: usize = 16;
+
 /// The sweep's buffers, kept between ticks.
 #[derive(Debug, Clone, Default)]
 pub struct FlowSweep {
@@ -97,6 +100,9 @@ impl FlowSweep {
                     .map_or(Vector3::repeat(f64::NAN), |v| v.component_mul(&scale));
                 Some((p.component_mul(&scale), v))
             }));
+        if self.scaled.len() <= ALL_PAIRS_UP_TO {
+            return self.all_pairs(limit);
+        }
         let cell_m = if cell_m.is_finite() {
             cell_m.max(0.01)
         } else {
@@ -187,6 +193,28 @@ impl FlowSweep {
             });
         }
         self.pairs.sort_unstable();
+        Found {
+            pairs: &self.pairs,
+            closest: best.pair.map(|(i, j)| (i, j, best.d2.sqrt())),
+        }
+    }
+
+    /// Every pair of the scaled vehicles looked at: for a few vehicles, cheaper than the
+    /// grid and the same answer.
+    fn all_pairs(&mut self, limit: impl Fn(f64) -> f64) -> Found<'_> {
+        self.pairs.clear();
+        let mut best = Closest::default();
+        for (i, a) in self.scaled.iter().enumerate() {
+            let Some((pi, vi)) = a else { continue };
+            for (j, b) in self.scaled.iter().enumerate().skip(i + 1) {
+                let Some((pj, vj)) = b else { continue };
+                let d2 = (pi - pj).norm_squared();
+                best.offer(i, j, d2);
+                if d2 < limit((vi - vj).norm()).powi(2) {
+                    self.pairs.push((i, j));
+                }
+            }
+        }
         Found {
             pairs: &self.pairs,
             closest: best.pair.map(|(i, j)| (i, j, best.d2.sqrt())),
@@ -336,5 +364,41 @@ mod tests {
         assert!(found.pairs.is_empty());
         let n = nearest.expect("known");
         assert_eq!(found.closest.map(|c| (c.0, c.1)), Some((n.0, n.1)));
+    }
+
+    #[test]
+    fn a_few_vehicles_looked_at_pair_by_pair_give_the_pairs_of_all_pairs() {
+        // Sixteen and fewer take the pair-by-pair path: the same pairs and closest pair as
+        // brute force, with a vehicle unknown, one velocity unknown and one not finite.
+        let mut next = super::super::tests::uniform(7);
+        for n in [2, 6, ALL_PAIRS_UP_TO] {
+            let mut positions: Vec<Option<Vector3<f64>>> = (0..n)
+                .map(|_| Some(Vector3::new(30.0 * next(), 30.0 * next(), 5.0 * next())))
+                .collect();
+            let mut velocities: Vec<Option<Vector3<f64>>> = (0..n)
+                .map(|_| Some(Vector3::new(6.0 * next() - 3.0, 6.0 * next() - 3.0, next())))
+                .collect();
+            if n > 2 {
+                positions[1] = None;
+                velocities[2] = None;
+                velocities[n - 1] = Some(Vector3::new(f64::NAN, 0.0, 0.0));
+            }
+            let limit = |v: f64| 4.0 + 2.0 * v;
+            let (pairs, nearest) = brute(&positions, &velocities, 0.5, limit, 12.0);
+            let mut sweep = FlowSweep::default();
+            let found = sweep.sweep(&positions, &velocities, 0.5, limit, 12.0, 3.0);
+            assert_eq!(found.pairs, pairs.as_slice(), "{n} vehicles");
+            if n == ALL_PAIRS_UP_TO {
+                // Some pairs kept and some left out: both sides of the limit are checked.
+                assert!(
+                    !pairs.is_empty() && pairs.len() < n * (n - 1) / 2,
+                    "{pairs:?}"
+                );
+            }
+            let (i, j, d) = found.closest.expect("known");
+            let m = nearest.expect("known");
+            assert_eq!((i, j), (m.0, m.1), "{n} vehicles");
+            assert!((d - m.2).abs() < 1e-12);
+        }
     }
 }

@@ -518,6 +518,10 @@ impl Vehicle {
             self.ap_landed_disarm(t);
             return;
         }
+        if !(self.modes.armed() && self.modes.landed()) {
+            // Nothing to disarm (and the step is not worth the two durations below).
+            return;
+        }
         // COM_DISARM_LAND: negative never disarms; COM_DISARM_PRFLT: zero or less never.
         let after_landing =
             (self.tuning.disarm_land_s >= 0.0).then(|| tuning::seconds(self.tuning.disarm_land_s));
