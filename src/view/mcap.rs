@@ -4,6 +4,7 @@
 //! | topic | schema | what | when |
 //! |---|---|---|---|
 //! | `/swarm` | `ringswarm.SwarmState` | the swarm as the replay shows it: phase, formation and altitude errors, the mean and predicted velocities, the closest pair, and each vehicle's position and velocity (ENU, common frame), its place in the formation, link phase and telemetry age | every [`REPLAY_PERIOD_S`], or a multiple of it that keeps the file under [`MAX_VEHICLE_SAMPLES`] |
+//! | `/setpoints` | `ringswarm.Setpoints` | what the coordinator sent each vehicle: the law's commanded acceleration (ENU, m/s²), the attitude setpoint's roll and pitch (body FRD to NED, rad) and the normalised thrust, from its CSV row | with `/swarm` |
 //! | `/log` | `foxglove.Log` | every event of `events.csv` (Foxglove's Log panel): level 2 info, 3 warning; `name` the vehicle (`vehicle 3 on n1`) or `swarm` | as they happened |
 //! | `/summary` | `ringswarm.Summary` | `summary.json` | once, at the flight's end |
 //!
@@ -67,6 +68,121 @@ fn swarm_schema() -> serde_json::Value {
             }}}
         }
     })
+}
+
+/// `ringswarm.Setpoints`' JSON schema.
+fn setpoints_schema() -> serde_json::Value {
+    let number = json!({"type": ["number", "null"]});
+    json!({
+        "title": "ringswarm.Setpoints",
+        "description": "What the coordinator sent each vehicle at one instant (its last row at or before it)",
+        "type": "object",
+        "properties": {
+            "t_s": {"type": "number", "description": "seconds since the flight started"},
+            "vehicles": {"type": "array", "items": {"type": "object", "properties": {
+                "sysid": {"type": "integer"},
+                "network": {"type": ["string", "null"]},
+                "t_s": {"type": "number", "description": "the row's own time"},
+                "command_enu_mps2": {"type": "array", "items": number, "minItems": 3, "maxItems": 3,
+                    "description": "the law's commanded acceleration, ENU (m/s²)"},
+                "roll_setpoint_rad": number,
+                "pitch_setpoint_rad": number,
+                "thrust_norm": number
+            }}}
+        }
+    })
+}
+
+/// The CSV columns `/setpoints` carries, in the order of [`SetpointRow::values`].
+const SETPOINT_COLUMNS: [&str; 6] = [
+    "cmd_ax_mps2",
+    "cmd_ay_mps2",
+    "cmd_az_mps2",
+    "sp_roll_rad",
+    "sp_pitch_rad",
+    "sp_thrust_norm",
+];
+
+/// A vehicle's row as `/setpoints` shows it.
+#[derive(Debug, Clone, Copy)]
+struct SetpointRow {
+    t_s: f64,
+    /// [`SETPOINT_COLUMNS`]' values (NaN where the CSV has none).
+    values: [f64; 6],
+}
+
+/// Each of a vehicle CSV's rows that is the last at or before `step · period_ms` ms, for
+/// `step` in `0..=steps` (`None` before its first row).
+fn setpoint_track(
+    path: &Path,
+    period_ms: u64,
+    steps: u64,
+) -> Result<Vec<Option<SetpointRow>>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or("").split(',').collect();
+    let mut columns = [0_usize; 6];
+    for (slot, name) in columns.iter_mut().zip(SETPOINT_COLUMNS) {
+        *slot = header
+            .iter()
+            .position(|h| *h == name)
+            .ok_or_else(|| format!("{}: no column {name}", path.display()))?;
+    }
+    let parse = |line: &str, t_s: f64| {
+        let fields: Vec<&str> = line.split(',').collect();
+        let values = columns.map(|c| {
+            fields
+                .get(c)
+                .and_then(|f| f.parse::<f64>().ok())
+                .unwrap_or(f64::NAN)
+        });
+        SetpointRow { t_s, values }
+    };
+    let mut track = Vec::with_capacity(usize::try_from(steps + 1).unwrap_or(0));
+    let mut last: Option<(&str, f64)> = None;
+    for line in lines {
+        let Some(t_s) = line.split(',').next().and_then(|t| t.parse::<f64>().ok()) else {
+            continue;
+        };
+        // Every step this row is past closes with the row before it.
+        while (track.len() as u64) <= steps
+            && t_s > (track.len() as u64 * period_ms) as f64 / 1e3 + 1e-9
+        {
+            track.push(last.map(|(l, t)| parse(l, t)));
+        }
+        last = Some((line, t_s));
+    }
+    while (track.len() as u64) <= steps {
+        track.push(last.map(|(l, t)| parse(l, t)));
+    }
+    Ok(track)
+}
+
+/// `/setpoints` at step `step`.
+fn setpoints_message(
+    t_s: f64,
+    step: usize,
+    vehicles: &[crate::record::RunVehicle],
+    tracks: &[Vec<Option<SetpointRow>>],
+) -> serde_json::Value {
+    let rows: Vec<serde_json::Value> = vehicles
+        .iter()
+        .zip(tracks)
+        .filter_map(|(v, track)| {
+            let row = track.get(step).copied().flatten()?;
+            let [ax, ay, az, roll, pitch, thrust] = row.values;
+            Some(json!({
+                "sysid": v.sysid,
+                "network": v.network,
+                "t_s": row.t_s,
+                "command_enu_mps2": [ax, ay, az],
+                "roll_setpoint_rad": roll,
+                "pitch_setpoint_rad": pitch,
+                "thrust_norm": thrust,
+            }))
+        })
+        .collect();
+    json!({"t_s": t_s, "vehicles": rows})
 }
 
 /// `foxglove.Log`'s JSON schema (Foxglove's well-known log message).
@@ -155,6 +271,8 @@ pub fn write(dir: &Path, epoch_us: u64) -> Result<(), String> {
         out.add_channel(id, topic, "json", &BTreeMap::new())
     };
     let swarm = channel("ringswarm.SwarmState", "/swarm", swarm_schema()).map_err(mcap_err)?;
+    let setpoints =
+        channel("ringswarm.Setpoints", "/setpoints", setpoints_schema()).map_err(mcap_err)?;
     let log = channel("foxglove.Log", "/log", log_schema()).map_err(mcap_err)?;
     let summary_channel =
         channel("ringswarm.Summary", "/summary", summary_schema()).map_err(mcap_err)?;
@@ -165,6 +283,11 @@ pub fn write(dir: &Path, epoch_us: u64) -> Result<(), String> {
     // Whole milliseconds, so that each time is the one a CSV row written at it parses to.
     let period_ms = (period_s * 1e3).round() as u64;
     let steps = (replay.duration_s() * 1e3 / period_ms as f64 + 1e-9).floor() as u64;
+    let vehicles = &replay.setup().vehicles;
+    let tracks = vehicles
+        .iter()
+        .map(|v| setpoint_track(&dir.join(&v.csv), period_ms, steps))
+        .collect::<Result<Vec<_>, String>>()?;
     let mut next_event = 0;
     let mut sequence = 0_u32;
     let mut put = |out: &mut mcap::Writer<BufWriter<std::fs::File>>,
@@ -199,6 +322,9 @@ pub fn write(dir: &Path, epoch_us: u64) -> Result<(), String> {
         state.events.clear();
         let data = serde_json::to_vec(&state).map_err(|e| e.to_string())?;
         put(&mut out, swarm, ns(t_s), &data)?;
+        let sent = setpoints_message(t_s, step as usize, vehicles, &tracks);
+        let data = serde_json::to_vec(&sent).map_err(|e| e.to_string())?;
+        put(&mut out, setpoints, ns(t_s), &data)?;
     }
     for (i, e) in events.iter().enumerate().skip(next_event) {
         put(&mut out, log, ns(e.t_s), &log_message(e, i, ns(e.t_s)))?;

@@ -757,7 +757,8 @@ fn a_link_fault_out_of_range_is_named_on_every_path_never_a_panic() {
 
 /// `flight.mcap` holds what the run directory holds: one `/swarm` message per replay
 /// period from the flight's start time, every event of `events.csv` on `/log`, and
-/// `summary.json` on `/summary`; a vehicle's position in `/swarm` is its CSV row's.
+/// `summary.json` on `/summary`; a vehicle's position in `/swarm` and its commands in
+/// `/setpoints` are its CSV row's.
 #[test]
 fn demo_writes_a_flight_mcap_that_holds_the_run_directory() {
     let dir = std::env::temp_dir().join(format!("ringswarm-cli-mcap-{}", std::process::id()));
@@ -776,6 +777,7 @@ fn demo_writes_a_flight_mcap_that_holds_the_run_directory() {
     assert_eq!(demo.status.code(), Some(0), "{}", stderr(&demo));
     let bytes = std::fs::read(dir.join("flight.mcap")).expect("flight.mcap");
     let mut swarm = Vec::new();
+    let mut setpoints = Vec::new();
     let mut logs = Vec::new();
     let mut summaries = Vec::new();
     for message in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
@@ -786,6 +788,7 @@ fn demo_writes_a_flight_mcap_that_holds_the_run_directory() {
         let value: serde_json::Value = serde_json::from_slice(&message.data).expect("JSON");
         match message.channel.topic.as_str() {
             "/swarm" => swarm.push((message.log_time, value)),
+            "/setpoints" => setpoints.push((message.log_time, value)),
             "/log" => logs.push((message.log_time, value)),
             "/summary" => summaries.push(value),
             other => panic!("unexpected topic {other}"),
@@ -833,6 +836,26 @@ fn demo_writes_a_flight_mcap_that_holds_the_run_directory() {
             row[column]
         );
     }
+    // /setpoints: at the same times, vehicle 1's commands at 4 s are that row's.
+    assert_eq!(setpoints.len(), swarm.len());
+    for ((a, _), (b, _)) in setpoints.iter().zip(&swarm) {
+        assert_eq!(a, b);
+    }
+    let sent = &setpoints[80].1["vehicles"][0];
+    assert_eq!(sent["sysid"], 1);
+    assert_eq!(sent["t_s"].as_f64().unwrap(), row[0]);
+    let command = &sent["command_enu_mps2"];
+    let got = [
+        command[0].as_f64().unwrap(),
+        command[1].as_f64().unwrap(),
+        command[2].as_f64().unwrap(),
+        sent["roll_setpoint_rad"].as_f64().unwrap(),
+        sent["pitch_setpoint_rad"].as_f64().unwrap(),
+        sent["thrust_norm"].as_f64().unwrap(),
+    ];
+    assert_eq!(got, [row[12], row[13], row[14], row[15], row[16], row[17]]);
+    // The vertical command holds the vehicle up: a thrust well above zero.
+    assert!(got[5] > 0.1, "{got:?}");
     // /log: one message per event, in time, from the same start.
     assert_eq!(logs.len(), event_times.len());
     for ((time_ns, log), t_s) in logs.iter().zip(&event_times) {

@@ -150,10 +150,11 @@ def test_the_coordinator_heartbeat_is_in_the_tlog_at_one_hertz_per_link(run_dir)
 
 
 def test_flight_mcap_reads_with_the_formats_own_reader_and_ends_in_the_formation(run_dir):
-    """flight.mcap, read with the MCAP project's Python reader: the three channels with
-    JSON schemas, one /swarm state per 50 ms, every event on /log at its CSV time, and
-    summary.json on /summary; the last /swarm state puts each vehicle where its CSV
-    does (ENU, 0.1 mm)."""
+    """flight.mcap, read with the MCAP project's Python reader: the four channels with
+    JSON schemas, one /swarm state and one /setpoints message per 50 ms, every event on
+    /log at its CSV time, and summary.json on /summary; the last /swarm state puts each
+    vehicle where its CSV does (ENU, 0.1 mm), the last /setpoints gives its CSV row's
+    commands."""
     from mcap.reader import make_reader
 
     with open(run_dir / "flight.mcap", "rb") as f:
@@ -164,7 +165,8 @@ def test_flight_mcap_reads_with_the_formats_own_reader_and_ends_in_the_formation
             assert schema.encoding == "jsonschema"
             json.loads(schema.data)
             topics.setdefault(channel.topic, []).append((message.log_time, json.loads(message.data)))
-    assert set(topics) == {"/swarm", "/log", "/summary"}
+    assert set(topics) == {"/swarm", "/setpoints", "/log", "/summary"}
+    assert [t for t, _ in topics["/setpoints"]] == [t for t, _ in topics["/swarm"]]
     swarm = topics["/swarm"]
     start_ns = swarm[0][0]
     steps = [t - start_ns for t, _ in swarm]
@@ -183,6 +185,11 @@ def test_flight_mcap_reads_with_the_formats_own_reader_and_ends_in_the_formation
             rows = [r for r in csv.DictReader(f) if float(r["t_s"]) <= last["t_s"] + 1e-9]
         want = [float(rows[-1][k]) for k in ("x_m", "y_m", "z_m")]
         assert last["vehicles"][i]["position_enu_m"] == pytest.approx(want, abs=1e-4)
+        sent = topics["/setpoints"][-1][1]["vehicles"][i]
+        assert sent["sysid"] == i + 1
+        want = [float(rows[-1][k]) for k in ("cmd_ax_mps2", "cmd_ay_mps2", "cmd_az_mps2")]
+        assert sent["command_enu_mps2"] == want
+        assert sent["thrust_norm"] == float(rows[-1]["sp_thrust_norm"])
 
 
 def test_sigterm_lands_the_swarm_and_writes_the_run_directory(tmp_path):
