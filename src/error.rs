@@ -94,6 +94,18 @@ impl SeparationStopped {
     pub const EXIT_CODE: u8 = 6;
 }
 
+/// The landing ended without vehicles that were lost and not heard again in the 30 s
+/// after it was ordered; they were left to their own failsafes. `fly` and `demo` exit
+/// with [`VehiclesLost::EXIT_CODE`].
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("{0}")]
+pub struct VehiclesLost(pub String);
+
+impl VehiclesLost {
+    /// The process exit code for it.
+    pub const EXIT_CODE: u8 = 7;
+}
+
 /// A finished flight's outcome as the process sees it: [`GaveUp`] when the swarm gave up
 /// before its flight, [`GuardStopped`] when the divergence guard ended the consensus.
 ///
@@ -110,6 +122,13 @@ pub fn flight_result(summary: &crate::record::metrics::Summary) -> anyhow::Resul
         return Err(SeparationStopped(
             "two vehicles came too close and the safety action ended the consensus (events.csv names them)".to_owned(),
         )
+        .into());
+    }
+    if !summary.left_lost.is_empty() {
+        return Err(VehiclesLost(format!(
+            "the landing ended without {}: lost, and left to their own failsafes (events.csv)",
+            summary.left_lost.join(", ")
+        ))
         .into());
     }
     if summary.stop_reason.as_deref() == Some("fence") {
@@ -131,7 +150,7 @@ pub fn exit_code(summary: &crate::record::metrics::Summary) -> u8 {
 }
 
 /// The process exit code for an error: that of [`GaveUp`], [`GuardStopped`],
-/// [`FenceStopped`] or [`SeparationStopped`], 2 for anything else (a usage error, a
+/// [`FenceStopped`], [`SeparationStopped`] or [`VehiclesLost`], 2 for anything else (a usage error, a
 /// value refused, a file that cannot be read).
 pub fn code_of(err: &anyhow::Error) -> u8 {
     if err.is::<GaveUp>() {
@@ -142,6 +161,8 @@ pub fn code_of(err: &anyhow::Error) -> u8 {
         FenceStopped::EXIT_CODE
     } else if err.is::<SeparationStopped>() {
         SeparationStopped::EXIT_CODE
+    } else if err.is::<VehiclesLost>() {
+        VehiclesLost::EXIT_CODE
     } else {
         2
     }

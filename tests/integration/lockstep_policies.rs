@@ -197,3 +197,56 @@ fn at_the_end_of_the_duration_every_vehicle_lands_where_it_is_and_disarms() {
         assert!(drift < 0.01, "vehicle {} landed {drift} m away", i + 1);
     }
 }
+
+/// Every vehicle silenced for good during consensus: the swarm holds, lands at the end
+/// of the duration, and the landing stops waiting for the lost vehicles
+/// `LOST_LANDING_WAIT` after it was ordered, naming them, instead of landing forever;
+/// each vehicle's own failsafe has it by then.
+#[test]
+fn a_landing_held_up_only_by_lost_vehicles_ends_without_them_and_names_them() {
+    let mut run = build("duration_s = 10.0\n", 100.0);
+    for i in 0..6 {
+        run.silence(i, secs(5.0), secs(1e6));
+    }
+    let mut landing_at = None;
+    let mut finished_at = None;
+    run.run_until(secs(60.0), |r| {
+        if landing_at.is_none()
+            && let SwarmPhase::Landing(since) = r.swarm().phase()
+        {
+            landing_at = Some(since);
+        }
+        if finished_at.is_none() && r.swarm().is_finished() {
+            finished_at = Some(r.now());
+        }
+    });
+    let landing = landing_at.expect("never landed");
+    // Consensus started at 1.3 s and ran its 10 s (held from 5.3 s on): landing at 11.3 s.
+    let started = run
+        .swarm()
+        .consensus_started()
+        .expect("consensus")
+        .as_secs_f64();
+    assert!((landing.as_secs_f64() - (started + 10.0)).abs() < 0.01);
+    let finished = finished_at.expect("never finished");
+    let waited = finished.saturating_since(landing);
+    assert!(
+        waited >= ringswarm::swarm::LOST_LANDING_WAIT
+            && waited < ringswarm::swarm::LOST_LANDING_WAIT + std::time::Duration::from_millis(5),
+        "finished {waited:?} after the landing"
+    );
+    let names: Vec<String> = (1..=6).map(|id| format!("vehicle {id}")).collect();
+    assert_eq!(run.swarm().left_lost(), names.as_slice());
+    assert!(run.swarm().links().all(|l| l.phase() == Phase::Lost));
+    // Each vehicle's own offboard-loss failsafe took it long before.
+    assert!(run.vehicles().iter().all(|v| v.status().failsafe));
+    let event = run
+        .swarm()
+        .events()
+        .iter()
+        .find(|e| e.text.starts_with("landing ended without"))
+        .expect("the event");
+    assert!(event.text.starts_with(
+        "landing ended without vehicle 1, vehicle 2, vehicle 3, vehicle 4, vehicle 5, vehicle 6: lost"
+    ));
+}

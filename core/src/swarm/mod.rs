@@ -73,6 +73,7 @@ pub use events::{MAX_KEPT_EVENTS, REPEAT_WINDOW, SwarmEvent};
 pub use guard::{DivergenceGuard, GuardLimits, GuardTrip};
 pub use io::{LISTEN_LAG_FLOOR, MAX_TICK_DEFER};
 use model::FlownModel;
+pub use phases::LOST_LANDING_WAIT;
 pub use places::AssignJob;
 pub use safety::SafetyStats;
 use scheduler::LinkScheduler;
@@ -140,6 +141,9 @@ pub struct Swarm {
     scheduler: LinkScheduler,
     log: EventLog,
     failure: Option<SwarmFailure>,
+    /// The vehicles still lost when the landing stopped waiting for them
+    /// ([`LOST_LANDING_WAIT`]): left to their own failsafes.
+    left_lost: Option<Vec<String>>,
     mean_velocity_integral: Vector2<f64>,
     all_flying_since: Option<SimTime>,
     first_consensus: Option<SimTime>,
@@ -248,6 +252,7 @@ impl Swarm {
             scheduler: LinkScheduler::new(n),
             log: EventLog::default(),
             failure: None,
+            left_lost: None,
             mean_velocity_integral: Vector2::zeros(),
             all_flying_since: None,
             first_consensus: None,
@@ -331,11 +336,18 @@ impl Swarm {
     }
 
     /// Whether every vehicle has landed and disarmed (or was never armed), or can no
-    /// longer be reached (failed).
+    /// longer be reached (failed, or lost for [`LOST_LANDING_WAIT`] of the landing).
     pub fn is_finished(&self) -> bool {
         matches!(self.phase, SwarmPhase::Landing(_))
-            && self
-                .links()
-                .all(|l| matches!(l.phase(), Phase::Done | Phase::Failed | Phase::Overridden))
+            && (self.left_lost.is_some()
+                || self
+                    .links()
+                    .all(|l| matches!(l.phase(), Phase::Done | Phase::Failed | Phase::Overridden)))
+    }
+
+    /// The vehicles (`vehicle 3`, `vehicle 3 on n1`) the landing stopped waiting for,
+    /// lost [`LOST_LANDING_WAIT`] after it was ordered; empty when none.
+    pub fn left_lost(&self) -> &[String] {
+        self.left_lost.as_deref().unwrap_or_default()
     }
 }

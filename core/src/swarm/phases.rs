@@ -26,6 +26,12 @@ pub const PLAN_ALTITUDE_WAIT: Duration = Duration::from_secs(30);
 /// planned velocity (m/s).
 pub const RETARGET_AGENT_TOLERANCE_MPS: f64 = 0.5;
 
+/// How long a landing waits for vehicles that are lost (silent for the link timeout):
+/// one heard again in that time is told to land; after it, if every other vehicle is
+/// down, failed or taken over, the flight ends without them, named, and they are left to
+/// their own failsafes (PX4's data-link-loss action, ArduPilot's GCS failsafe).
+pub const LOST_LANDING_WAIT: Duration = Duration::from_secs(30);
+
 impl Swarm {
     /// Every vehicle within [`PLAN_ALTITUDE_M`] of the commanded altitude and slower than
     /// [`PLAN_CLIMB_MPS`] vertically.
@@ -79,6 +85,11 @@ impl Swarm {
                 if over(self.first_consensus.or(self.first_law)) =>
             {
                 self.end(now)
+            }
+            SwarmPhase::Landing(since)
+                if self.left_lost.is_none() && now >= since + LOST_LANDING_WAIT =>
+            {
+                self.leave_the_lost(now, since);
             }
             _ => {}
         }
@@ -384,6 +395,40 @@ impl Swarm {
             format!("{trip}: the swarm brakes and holds")
         };
         self.stop_law(now, StopReason::Guard(trip), land, text);
+    }
+
+    /// A landing ordered at `since` that only lost vehicles hold up: they are named and
+    /// left to their own failsafes, and the flight ends.
+    fn leave_the_lost(&mut self, now: SimTime, since: SimTime) {
+        let mut lost = Vec::new();
+        for (i, link) in self.slots.iter().enumerate() {
+            let Some(link) = link.link() else { continue };
+            match link.phase() {
+                Phase::Done | Phase::Failed | Phase::Overridden => {}
+                Phase::Lost => {
+                    let cfg = &self.setup.links[i];
+                    lost.push(match &cfg.network {
+                        Some(net) => format!("vehicle {} on {net}", cfg.system_id),
+                        None => format!("vehicle {}", cfg.system_id),
+                    });
+                }
+                // One still landing, or heard again: the landing goes on.
+                _ => return,
+            }
+        }
+        if lost.is_empty() {
+            return;
+        }
+        self.log.push(
+            now,
+            true,
+            format!(
+                "landing ended without {}: lost and not heard again in the {:.0} s since the landing was ordered; left to their own failsafes",
+                lost.join(", "),
+                now.saturating_since(since).as_secs_f64()
+            ),
+        );
+        self.left_lost = Some(lost);
     }
 
     fn end(&mut self, now: SimTime) {
