@@ -282,9 +282,9 @@ fn draw_map(
     let mut sorted_ys = grid.ys.clone();
     sorted_ys.sort_by(f64::total_cmp);
     let flown = if above {
-        map::flown_boundary(&grid, m.good_at_most)
+        map::flown_boundary(&grid, m.good_at_most, m.require_exit_0)
     } else {
-        map::flown_boundary_below(&grid, m.good_at_most)
+        map::flown_boundary_below(&grid, m.good_at_most, m.require_exit_0)
     };
     let mut columns = Vec::new();
     for (i, x) in grid.xs.iter().enumerate() {
@@ -297,11 +297,12 @@ fn draw_map(
         };
         if theory.is_some() {
             println!(
-                "{} = {x}: theory's boundary {}, cells with {} <= {} {} {} {}: {}",
+                "{} = {x}: theory's boundary {}, cells with {} <= {}{} {} {} {}: {}",
                 m.x,
                 theory_y.map_or("outside the map".to_owned(), |t| format!("{t:.4}")),
                 m.metric,
                 m.good_at_most,
+                if m.require_exit_0 { " and exit 0" } else { "" },
                 if above { "from" } else { "up to" },
                 flown_y.map_or("nowhere".to_owned(), |y| y.to_string()),
                 if above { "up" } else { "from the bottom" },
@@ -323,6 +324,7 @@ fn draw_map(
     }
     let json = serde_json::json!({
         "x": m.x, "y": m.y, "metric": m.metric, "reduce": m.reduce.name(),
+        "good_at_most": m.good_at_most, "require_exit_0": m.require_exit_0,
         "ys": grid.ys, "columns": columns,
     });
     let path = stem.with_extension("json");

@@ -5,6 +5,7 @@ use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
 use serde::Serialize;
 
+use super::growth::GrowthFit;
 use crate::swarm::VehicleIndex;
 use crate::swarm::timing::TimingReport;
 use crate::swarm::{Swarm, SwarmPhase};
@@ -84,6 +85,8 @@ pub struct RunTracker {
     z: Vec<f64>,
     /// A copy of the positions for the separation sweep, which reorders it.
     sweep: Vec<Vector3<f64>>,
+    /// The formation error's growth over the last consensus.
+    growth: GrowthFit,
 }
 
 impl RunTracker {
@@ -98,6 +101,7 @@ impl RunTracker {
             places: Vec::with_capacity(n),
             z: Vec::with_capacity(n),
             sweep: Vec::with_capacity(n),
+            growth: GrowthFit::default(),
         }
     }
 
@@ -135,8 +139,13 @@ impl RunTracker {
             altitude_error_m: altitude_error_m(&self.z, setup.altitude_m),
         };
         self.latest = Some(snapshot);
-        if matches!(swarm.phase(), SwarmPhase::Consensus(_)) {
+        if let SwarmPhase::Consensus(since) = swarm.phase() {
             self.last_consensus = Some(snapshot);
+            self.growth.observe(
+                since.as_secs_f64(),
+                snapshot.t_s,
+                snapshot.formation_error_m,
+            );
         }
     }
 
@@ -153,6 +162,12 @@ impl RunTracker {
     /// The latest snapshot.
     pub fn latest(&self) -> Option<Snapshot> {
         self.latest
+    }
+
+    /// The formation error's growth rate over the last consensus (1/s; see
+    /// [`super::growth`]).
+    pub fn formation_growth_per_s(&self) -> Option<f64> {
+        self.growth.rate_per_s()
     }
 }
 
@@ -184,6 +199,11 @@ pub struct Summary {
     pub velocity_error_fraction: Option<f64>,
     /// Formation error at the end of consensus (m).
     pub formation_error_m: Option<f64>,
+    /// How fast the formation error grew over the later half of the last consensus
+    /// (1/s, the slope of its logarithm until it fell below 0.01 m): negative when the
+    /// formation closes; for a ring within its envelopes, the closed loop's spectral
+    /// abscissa (`analyze`). `null` with less than a second of it above 0.01 m.
+    pub formation_growth_per_s: Option<f64>,
     /// Altitude error at the end of consensus (m).
     pub altitude_error_m: Option<f64>,
     /// Smallest separation while flying (m); `null` if never known.
@@ -207,6 +227,10 @@ pub struct Summary {
     pub stop_reason: Option<String>,
     /// What the divergence guard saw when it ended the consensus, if it did.
     pub guard: Option<String>,
+    /// The vehicles the landing stopped waiting for, lost 30 s after it was ordered and
+    /// left to their own failsafes (`vehicle 3`, `vehicle 3 on n1`); `fly` and `demo`
+    /// exit 7 when there are any.
+    pub left_lost: Vec<String>,
     /// What the coordinator learnt about each vehicle, at the end.
     pub models: Vec<ModelReport>,
     /// Warnings in `events.csv`.
@@ -240,6 +264,7 @@ impl Summary {
             achieved_final_velocity: achieved.map(|v| [v.x, v.y]),
             velocity_error_fraction,
             formation_error_m: end.map(|s| s.formation_error_m),
+            formation_growth_per_s: tracker.formation_growth_per_s(),
             altitude_error_m: end.map(|s| s.altitude_error_m),
             min_separation_m: Some(tracker.min_separation_m()).filter(|m| m.is_finite()),
             saturated_fraction: swarm.saturated_fraction(),
@@ -251,6 +276,7 @@ impl Summary {
             failure: swarm.failure().map(ToString::to_string),
             stop_reason: swarm.stop_reason().map(|r| r.name().to_owned()),
             guard: swarm.guard_trip().map(|t| t.to_string()),
+            left_lost: swarm.left_lost().to_vec(),
             models: ModelReport::of(swarm),
             warnings: swarm.events().iter().filter(|e| e.warning).count(),
             warnings_repeated: swarm.repeated_warnings(),

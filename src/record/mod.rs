@@ -21,6 +21,7 @@
 //! first one is kept, recording stops, and [`Recorder::finish`] reports it.
 
 mod fixed;
+pub mod growth;
 pub mod metrics;
 pub mod rows;
 mod sink;

@@ -15,6 +15,7 @@
 //! reduce = "max"           # mean (default), max, min, median
 //! theory = "stability"     # optional: "stability", or "gate" (y = "emulator.latency_ms")
 //! good_at_most = 0.0       # a cell is good when its number is at most this (default 0)
+//! require_exit_0 = false   # and, when true, every flight of it exited 0
 //! ```
 
 use super::keys;
@@ -33,6 +34,8 @@ pub struct Grid {
     pub ys: Vec<f64>,
     /// The reduced metric per cell.
     pub values: Vec<Vec<Option<f64>>>,
+    /// Per cell, whether every flight of it exited 0 (ran its duration out).
+    pub exited_0: Vec<Vec<bool>>,
 }
 
 impl Grid {
@@ -48,6 +51,12 @@ impl Grid {
         let mut order: Vec<usize> = (0..self.ys.len()).collect();
         order.sort_by(|a, b| self.ys[*a].total_cmp(&self.ys[*b]));
         order
+    }
+
+    /// Whether cell (`i`, `j`) is good: it has the metric, at most `ok`, and, with
+    /// `require_exit_0`, every flight of it exited 0.
+    pub fn good(&self, i: usize, j: usize, ok: f64, require_exit_0: bool) -> bool {
+        self.values[i][j].is_some_and(|v| v <= ok) && (!require_exit_0 || self.exited_0[i][j])
     }
 }
 
@@ -77,6 +86,7 @@ pub fn grid(spec: &MapSpec, sweep: &Sweep, rows: &[FlightRow]) -> Result<Grid, S
     let xs = sweep.axes[xa].values.clone();
     let ys = sweep.axes[ya].values.clone();
     let mut samples = vec![vec![Vec::new(); ys.len()]; xs.len()];
+    let mut exited_0 = vec![vec![true; ys.len()]; xs.len()];
     for row in rows {
         let (Some(x), Some(y)) = (row.values.get(xa), row.values.get(ya)) else {
             continue;
@@ -87,6 +97,7 @@ pub fn grid(spec: &MapSpec, sweep: &Sweep, rows: &[FlightRow]) -> Result<Grid, S
         ) else {
             continue;
         };
+        exited_0[i][j] &= row.exit_code == 0;
         if let Some(v) = metric_of(row, &spec.metric).filter(|v| v.is_finite()) {
             samples[i][j].push(v);
         }
@@ -99,7 +110,12 @@ pub fn grid(spec: &MapSpec, sweep: &Sweep, rows: &[FlightRow]) -> Result<Grid, S
                 .collect()
         })
         .collect();
-    Ok(Grid { xs, ys, values })
+    Ok(Grid {
+        xs,
+        ys,
+        values,
+        exited_0,
+    })
 }
 
 /// The `n` cells with the largest values: (x, y, value), largest first.
@@ -247,13 +263,13 @@ pub fn gate_boundary(
 
 /// Where a flown boundary lies for each x, for a theory good below it: the greatest
 /// index j of `ys` (in ascending order of y) up to which every cell from the bottom has
-/// the metric at most `ok`; `None` when the bottom cell is not good.
-pub fn flown_boundary_below(grid: &Grid, ok: f64) -> Vec<Option<usize>> {
+/// the metric at most `ok` (and, with `require_exit_0`, every flight exited 0); `None`
+/// when the bottom cell is not good.
+pub fn flown_boundary_below(grid: &Grid, ok: f64, require_exit_0: bool) -> Vec<Option<usize>> {
     let order = grid.y_order();
-    grid.values
-        .iter()
-        .map(|col| {
-            let good = |j: usize| col[j].is_some_and(|v| v <= ok);
+    (0..grid.xs.len())
+        .map(|i| {
+            let good = |j: usize| grid.good(i, j, ok, require_exit_0);
             let run = order.iter().take_while(|&&j| good(j)).count();
             (run > 0).then(|| run - 1)
         })
@@ -271,13 +287,13 @@ pub fn agrees_below(sorted_ys: &[f64], j: usize, y_theory: f64) -> bool {
 
 /// Where a flown boundary lies for each x: the least index j of `ys` (in ascending
 /// order of y) from which every cell up has the metric at most `ok` (for `exit_code`:
-/// 0, no guard, fence or separation stop); `None` when no such run reaches the top.
-pub fn flown_boundary(grid: &Grid, ok: f64) -> Vec<Option<usize>> {
+/// 0, no guard, fence or separation stop), and with `require_exit_0` every flight
+/// exited 0; `None` when no such run reaches the top.
+pub fn flown_boundary(grid: &Grid, ok: f64, require_exit_0: bool) -> Vec<Option<usize>> {
     let order = grid.y_order();
-    grid.values
-        .iter()
-        .map(|col| {
-            let good = |j: usize| col[j].is_some_and(|v| v <= ok);
+    (0..grid.xs.len())
+        .map(|i| {
+            let good = |j: usize| grid.good(i, j, ok, require_exit_0);
             let run = order.iter().rev().take_while(|&&j| good(j)).count();
             (run > 0).then(|| order.len() - run)
         })
@@ -328,6 +344,7 @@ mod tests {
             reduce,
             theory: None,
             good_at_most: 0.0,
+            require_exit_0: false,
         }
     }
 
@@ -354,7 +371,13 @@ mod tests {
         let codes = grid(&spec("exit_code", Reduce::Max), &s, &rows).unwrap();
         assert_eq!(codes.values[0], vec![Some(4.0), Some(0.0), Some(0.0)]);
         // beta = 1 is the first rank from which every cell up flew to its end.
-        assert_eq!(flown_boundary(&codes, 0.0), vec![Some(1), Some(1)]);
+        assert_eq!(flown_boundary(&codes, 0.0, false), vec![Some(1), Some(1)]);
+        // Formation error at most 60 everywhere; with exit 0 required, beta = 0.5 (exit
+        // 4 in both replicates) is not good, whatever its error.
+        let fe = grid(&spec("formation_error_m", Reduce::Max), &s, &rows).unwrap();
+        assert_eq!(fe.exited_0[0], vec![false, true, true]);
+        assert_eq!(flown_boundary(&fe, 60.0, false), vec![Some(0), Some(0)]);
+        assert_eq!(flown_boundary(&fe, 60.0, true), vec![Some(1), Some(1)]);
         let none = grid(&spec("no_such", Reduce::Mean), &s, &rows).unwrap();
         assert_eq!(none.values[0][0], None);
     }
@@ -402,11 +425,13 @@ mod tests {
             reduce: Reduce::Max,
             theory: Some(Theory::Gate),
             good_at_most: 0.0,
+            require_exit_0: false,
         };
         let g = Grid {
             xs: vec![1.0, 0.5, 0.25],
             ys: vec![0.0, 100.0, 300.0],
             values: vec![vec![None; 3]; 3],
+            exited_0: vec![vec![true; 3]; 3],
         };
         let omega = (35.0 + 1197f64.sqrt()) / 2.0;
         let b = gate_boundary(&base, &s, &m, &g).unwrap();
@@ -440,8 +465,20 @@ mod tests {
                 // good everywhere: the top.
                 vec![Some(0.0); 5],
             ],
+            exited_0: vec![vec![true; 5]; 3],
         };
-        assert_eq!(flown_boundary_below(&g, 0.0), vec![Some(2), None, Some(4)]);
+        assert_eq!(
+            flown_boundary_below(&g, 0.0, false),
+            vec![Some(2), None, Some(4)]
+        );
+        // The same with exit 0 required, and the top-ranked cell of the last column
+        // (y = 150) ended early: the run from the bottom ends at 100 there too.
+        let mut h = g.clone();
+        h.exited_0[2][4] = false;
+        assert_eq!(
+            flown_boundary_below(&h, 0.0, true),
+            vec![Some(2), None, Some(2)]
+        );
         let ys = [0.0, 50.0, 100.0, 150.0, 200.0];
         // Flown: last good at rank 2 (100); the failure starts by 150. Within one cell:
         // from 50 to 200.
@@ -462,6 +499,7 @@ mod tests {
             xs: vec![1.0, 5.0],
             ys: vec![0.05, 3.0],
             values: vec![vec![None; 2]; 2],
+            exited_0: vec![vec![true; 2]; 2],
         };
         let b = stability_boundary(&base, &s, &m, &g).unwrap();
         for (x, y) in g.xs.iter().zip(&b) {

@@ -132,6 +132,12 @@ pub struct MapSpec {
     /// its duration out).
     #[serde(default)]
     pub good_at_most: f64,
+    /// A cell counts as good only when, besides, every flight of it exited 0: ran its
+    /// duration out, not ended by the divergence guard, the fence or the separation
+    /// (default false). For a metric measured over the consensus, such as the formation
+    /// error's growth, a flight cut short is not one that converged.
+    #[serde(default)]
+    pub require_exit_0: bool,
 }
 
 /// How a cell's flights become one number.

@@ -10,6 +10,7 @@ mod ardupilot;
 mod cli;
 mod config;
 mod config_random;
+mod formation_growth;
 mod fuzz_smoke;
 mod lockstep_dense;
 mod lockstep_failsafe;
