@@ -1,7 +1,8 @@
 //! A map drawn as a heat map (PNG and SVG): one rectangle per cell of the grid, in the
 //! axes' ranks (the values written on the ticks), coloured on the viridis scale
 //! (log10 when the values are positive and span more than two decades), grey where no
-//! flight had the metric; the theory's boundary drawn over it in red.
+//! flight had the metric, crossed where a map that requires exit 0 has a flight that did
+//! not; the theory's boundary drawn over it in red.
 
 use std::path::Path;
 
@@ -147,7 +148,27 @@ fn draw<DB: DrawingBackend>(
                     fill.filled(),
                 )))
                 .map_err(e)?;
+            if spec.require_exit_0 && !grid.exited_0[i][j] {
+                let (x, y) = (r as f64, q as f64);
+                for (a, b) in [((-0.3, -0.3), (0.3, 0.3)), ((-0.3, 0.3), (0.3, -0.3))] {
+                    chart
+                        .draw_series(std::iter::once(PathElement::new(
+                            vec![(x + a.0, y + a.1), (x + b.0, y + b.1)],
+                            BLACK.mix(0.6).stroke_width(1),
+                        )))
+                        .map_err(e)?;
+                }
+            }
         }
+    }
+    if spec.require_exit_0 {
+        chart
+            .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+            .map_err(e)?
+            .label("crossed: a flight did not exit 0 (not good)")
+            .legend(|(x, y)| {
+                PathElement::new(vec![(x, y - 5), (x + 10, y + 5)], BLACK.stroke_width(1))
+            });
     }
     if let Some(boundary) = boundary {
         let points: Vec<(f64, f64)> = xo
@@ -163,6 +184,8 @@ fn draw<DB: DrawingBackend>(
         chart
             .draw_series(points.iter().map(|p| Circle::new(*p, 4, RED.filled())))
             .map_err(e)?;
+    }
+    if boundary.is_some() || spec.require_exit_0 {
         chart
             .configure_series_labels()
             .position(SeriesLabelPosition::UpperLeft)
@@ -191,7 +214,14 @@ fn draw<DB: DrawingBackend>(
         })
         .axis_desc_style(("sans-serif", 14))
         .label_style(("sans-serif", 12))
-        .y_label_formatter(&|v| fmt(*v))
+        // A tick a rounding error away from zero is zero.
+        .y_label_formatter(&|v| {
+            fmt(if v.abs() < 1e-9 * (shi - slo) {
+                0.0
+            } else {
+                *v
+            })
+        })
         .draw()
         .map_err(e)?;
     let steps = 100;
