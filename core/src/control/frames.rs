@@ -32,9 +32,65 @@ pub fn euler_ned_frd(q: &UnitQuaternion<f64>) -> (f64, f64, f64) {
     q.euler_angles()
 }
 
+/// Roll and pitch (rad) of [`euler_ned_frd`], to the last bit, without the yaw: only the
+/// rotation matrix's third row (and, at ±90° pitch, the first row's two entries) is
+/// formed, as nalgebra forms it, and one `atan2` is saved. The attitude response fit
+/// converts two attitudes per vehicle on every control tick.
+pub fn roll_pitch_ned_frd(q: &UnitQuaternion<f64>) -> (f64, f64) {
+    let (i, j, k, w) = (q.i, q.j, q.k, q.w);
+    let (ww, ii, jj, kk) = (w * w, i * i, j * j, k * k);
+    let wj = w * j * 2.0;
+    let ik = i * k * 2.0;
+    let wi = w * i * 2.0;
+    let jk = j * k * 2.0;
+    let m20 = ik - wj;
+    if m20.abs() < 1.0 {
+        let pitch = -m20.asin();
+        let cos = pitch.cos();
+        let roll = ((wi + jk) / cos).atan2((ww - ii - jj + kk) / cos);
+        return (roll, pitch);
+    }
+    let (ij, wk) = (i * j * 2.0, w * k * 2.0);
+    let (m01, m02) = (ij - wk, wj + ik);
+    if m20 <= -1.0 {
+        (m01.atan2(m02), std::f64::consts::FRAC_PI_2)
+    } else {
+        (-m01.atan2(-m02), -std::f64::consts::FRAC_PI_2)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn roll_and_pitch_alone_are_eulers_to_the_bit() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let mut attitudes: Vec<UnitQuaternion<f64>> = (0..100_000)
+            .map(|_| {
+                UnitQuaternion::from_euler_angles(
+                    rng.random_range(-3.2..3.2),
+                    rng.random_range(-1.6..1.6),
+                    rng.random_range(-3.2..3.2),
+                )
+            })
+            .collect();
+        // Straight up and straight down (the matrix entry reaches ±1) and level.
+        for pitch in [
+            std::f64::consts::FRAC_PI_2,
+            -std::f64::consts::FRAC_PI_2,
+            0.0,
+        ] {
+            for roll in [0.0, 0.4, -2.0] {
+                attitudes.push(UnitQuaternion::from_euler_angles(roll, pitch, 0.7));
+            }
+        }
+        for q in attitudes {
+            let (roll, pitch, _) = euler_ned_frd(&q);
+            assert_eq!(roll_pitch_ned_frd(&q), (roll, pitch), "{:?}", q.coords);
+        }
+    }
 
     #[test]
     fn north_is_positive_x_in_ned() {

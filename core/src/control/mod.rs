@@ -21,7 +21,7 @@ pub use attitude::{
 pub use disturbance::{DISTURBANCE_LIMIT_MPS2, DisturbanceObserver};
 pub use drag::DragKf;
 pub use envelope::{Envelope, SaturationMode, SaturationSummary, saturate, saturate_with};
-pub use frames::{enu_to_ned, euler_ned_frd, ned_to_enu, quaternion_to_wxyz};
+pub use frames::{enu_to_ned, euler_ned_frd, ned_to_enu, quaternion_to_wxyz, roll_pitch_ned_frd};
 pub use hover::HoverThrustEkf;
 pub use response::{AttitudeResponse, ResponseFit};
 pub use vehicle::{GRAVITY_MPS2, VehicleModel};

@@ -33,6 +33,8 @@ pub const MAX_ERROR_RAD: f64 = 0.3;
 /// How many ticks apart a report pair's first report and the pair's end may be, plus the
 /// longest delay: the commands a pair can be fitted against.
 const SPAN: usize = MAX_DELAY_STEPS + 8;
+/// The delays tried, zero included (an exclusive bound: the loops over them vectorise).
+const DELAYS: usize = MAX_DELAY_STEPS + 1;
 /// The commands kept: `SPAN` rounded up to a power of two, so that a tick's slot is a mask.
 const HISTORY: usize = SPAN.next_power_of_two();
 
@@ -63,8 +65,8 @@ pub struct ResponseFit {
     commanded: [[f64; 2]; HISTORY],
     /// The previous report: its (roll, pitch) (rad), arrival (s) and tick.
     last: Option<([f64; 2], f64, u64)>,
-    sxx: [f64; MAX_DELAY_STEPS + 1],
-    sxy: [f64; MAX_DELAY_STEPS + 1],
+    sxx: [f64; DELAYS],
+    sxy: [f64; DELAYS],
     syy: f64,
     samples: u64,
     /// The fit of the sums as they were at `samples` report pairs: the safety filter and
@@ -92,8 +94,8 @@ impl ResponseFit {
             tick: 0,
             commanded: [[0.0; 2]; HISTORY],
             last: None,
-            sxx: [0.0; MAX_DELAY_STEPS + 1],
-            sxy: [0.0; MAX_DELAY_STEPS + 1],
+            sxx: [0.0; DELAYS],
+            sxy: [0.0; DELAYS],
             syy: 0.0,
             samples: 0,
             cache: FitCache::default(),
@@ -136,16 +138,20 @@ impl ResponseFit {
         if !linear {
             return;
         }
+        // The delays that reach back no further than the first tick.
+        let delays = (k0.min(MAX_DELAY_STEPS as u64) + 1) as usize;
         for axis in 0..2 {
             let y = (theta[axis] - theta0[axis]) / dt;
             self.syy += y * y;
-            for j in 0..=MAX_DELAY_STEPS {
-                let Some(k) = k0.checked_sub(j as u64) else {
-                    break;
-                };
-                let x = self.commanded[slot(k)][axis] - theta0[axis];
-                self.sxx[j] += x * x;
-                self.sxy[j] += x * y;
+            // The commands each delay pairs with, gathered first so that the sums below
+            // are straight loops over arrays.
+            let mut x = [0.0; DELAYS];
+            for (j, x) in x.iter_mut().enumerate() {
+                *x = self.commanded[slot(k0.wrapping_sub(j as u64))][axis] - theta0[axis];
+            }
+            for j in 0..delays {
+                self.sxx[j] += x[j] * x[j];
+                self.sxy[j] += x[j] * y;
             }
         }
         self.samples += 1;
@@ -170,18 +176,33 @@ impl ResponseFit {
     /// The least-squares fit of the sums as they are.
     fn fit_now(&self) -> Option<AttitudeResponse> {
         let n = 2.0 * self.samples as f64;
-        let mut best: Option<(f64, usize, f64)> = None;
-        for j in 0..=MAX_DELAY_STEPS {
-            if self.sxx[j] / n < MIN_EXCITATION_RAD2 {
-                continue;
-            }
+        // Every delay's quotients first, in a straight loop the compiler vectorises (the
+        // fit runs for every vehicle on every tick that brings a report pair), then the
+        // choice.
+        let mut rates = [0.0; DELAYS];
+        let mut residuals = [0.0; DELAYS];
+        let mut admissible = [false; DELAYS];
+        for j in 0..DELAYS {
             let rate = self.sxy[j] / self.sxx[j];
-            let residual = self.syy - self.sxy[j] * rate;
-            if rate > 0.0 && rate.is_finite() && best.is_none_or(|(r, _, _)| residual < r) {
-                best = Some((residual, j, rate));
+            rates[j] = rate;
+            residuals[j] = self.syy - self.sxy[j] * rate;
+            admissible[j] =
+                self.sxx[j] / n >= MIN_EXCITATION_RAD2 && rate > 0.0 && rate.is_finite();
+        }
+        // The first admissible delay, then any with a smaller residual.
+        let mut best = usize::MAX;
+        let mut best_residual = 0.0;
+        for j in 0..DELAYS {
+            if admissible[j] && (best == usize::MAX || residuals[j] < best_residual) {
+                best = j;
+                best_residual = residuals[j];
             }
         }
-        let (_, j, rate) = best?;
+        if best == usize::MAX {
+            return None;
+        }
+        let j = best;
+        let rate = rates[j];
         let delay_s = j as f64 * self.step_s;
         Some(AttitudeResponse {
             delay_s,

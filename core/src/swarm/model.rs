@@ -20,7 +20,7 @@ use ringswarm_wire::time::SimTime;
 
 use crate::control::{
     AttitudeResponse, DISTURBANCE_LIMIT_MPS2, DisturbanceObserver, DragKf, GRAVITY_MPS2,
-    HoverThrustEkf, ResponseFit, VehicleModel, euler_ned_frd,
+    HoverThrustEkf, ResponseFit, VehicleModel, roll_pitch_ned_frd,
 };
 
 /// What drives a vehicle horizontally on one tick, as far as the coordinator can tell.
@@ -213,10 +213,10 @@ impl FlownModel {
         if new.is_some() {
             self.last_attitude = new;
         }
-        let (sp_roll, sp_pitch, _) = euler_ned_frd(commanded);
+        let (sp_roll, sp_pitch) = roll_pitch_ned_frd(commanded);
         self.response.tick(
             new.map(|q| {
-                let (roll, pitch, _) = euler_ned_frd(&q);
+                let (roll, pitch) = roll_pitch_ned_frd(&q);
                 ([roll, pitch], now_s)
             }),
             [sp_roll, sp_pitch],

@@ -17,6 +17,8 @@ pub(super) struct Routing {
     pub(super) addresses: Vec<SocketAddr>,
     /// And back.
     vehicle_at: HashMap<SocketAddr, usize>,
+    /// Whether every vehicle has an address of its own.
+    unique: bool,
     /// The coordinator socket vehicle `j` sends to.
     pub(super) socket_of: Vec<usize>,
     /// Reused: the pieces of one datagram.
@@ -37,9 +39,12 @@ impl Routing {
                 })
             })
             .collect();
+        let vehicle_at: HashMap<SocketAddr, usize> =
+            addresses.iter().enumerate().map(|(j, a)| (*a, j)).collect();
         Self {
             router: Router::new(plan),
-            vehicle_at: addresses.iter().enumerate().map(|(j, a)| (*a, j)).collect(),
+            unique: vehicle_at.len() == addresses.len(),
+            vehicle_at,
             addresses,
             socket_of: plan.routes.iter().map(|r| r.socket).collect(),
             pieces: Vec::new(),
@@ -49,6 +54,11 @@ impl Routing {
     /// The vehicle a datagram for link `i` reaches, if the router has an address for it.
     pub(super) fn vehicle_reached_by(&self, i: VehicleIndex) -> Option<usize> {
         let (_, to) = self.router.destination(i)?;
+        // Link i usually reaches vehicle i: checked before the map, which is hashed on
+        // every datagram the coordinator sends (when no two vehicles share an address).
+        if self.unique && self.addresses.get(i.get()) == Some(&to) {
+            return Some(i.get());
+        }
         self.vehicle_at.get(&to).copied()
     }
 }
