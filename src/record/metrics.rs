@@ -31,7 +31,7 @@ pub fn min_separation_m(pos_m: &[Vector3<f64>]) -> f64 {
 /// [`min_separation_m`] of `pos_m`, which it reorders: a sweep along the axis of widest
 /// spread, sorted, comparing each point only with those closer along that axis than the
 /// best distance so far (O(N log N) for a spread-out swarm, not N²/2 distances).
-fn min_separation_in_place(pos_m: &mut [Vector3<f64>]) -> f64 {
+pub fn min_separation_in_place(pos_m: &mut [Vector3<f64>]) -> f64 {
     let spread = |axis: usize| {
         let (lo, hi) = pos_m
             .iter()
@@ -206,8 +206,13 @@ pub struct Summary {
     pub formation_growth_per_s: Option<f64>,
     /// Altitude error at the end of consensus (m).
     pub altitude_error_m: Option<f64>,
-    /// Smallest separation while flying (m); `null` if never known.
+    /// Smallest separation while flying (m); `null` if never known. The distance between
+    /// the states the coordinator holds, whose ages differ on a lossy link.
     pub min_separation_m: Option<f64>,
+    /// Smallest distance between two emulated vehicles' true positions while flying (m),
+    /// when the emulator is in the same process (`sweep`); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub true_min_separation_m: Option<f64>,
     /// Fraction of consensus ticks with a saturated command.
     pub saturated_fraction: f64,
     /// When consensus first started (s).
@@ -267,6 +272,7 @@ impl Summary {
             formation_growth_per_s: tracker.formation_growth_per_s(),
             altitude_error_m: end.map(|s| s.altitude_error_m),
             min_separation_m: Some(tracker.min_separation_m()).filter(|m| m.is_finite()),
+            true_min_separation_m: None,
             saturated_fraction: swarm.saturated_fraction(),
             consensus_started_s: swarm.consensus_started().map(SimTime::as_secs_f64),
             consensus_ended_s: end.map(|s| s.t_s),

@@ -99,18 +99,28 @@ pub fn fly(config: &Config) -> Result<Flown, String> {
         + OVERRUN;
     let mut tracker = RunTracker::new(run.swarm().vehicle_count());
     let mut last_tick = u64::MAX;
-    let mut observe = |swarm: &Swarm, now: SimTime| {
+    let mut truth = Vec::with_capacity(run.vehicles().len());
+    let mut true_min_m = f64::INFINITY;
+    let mut observe = |run: &Lockstep| {
+        let swarm = run.swarm();
         if swarm.control_ticks() != last_tick {
             last_tick = swarm.control_ticks();
-            tracker.observe(swarm, now);
+            tracker.observe(swarm, run.now());
+            if !matches!(swarm.phase(), SwarmPhase::Landing(_)) {
+                truth.clear();
+                truth.extend(run.vehicles().iter().map(|v| v.status().pos_world_ned_m));
+                true_min_m =
+                    true_min_m.min(crate::record::metrics::min_separation_in_place(&mut truth));
+            }
         }
     };
     while run.now() < limit && flying(run.swarm()) {
         let next = run.now() + Duration::from_millis(100);
-        run.run_observed(next, &mut observe);
+        run.run_until(next, &mut observe);
     }
     let wall_s = wall.elapsed().as_secs_f64();
-    let summary = Summary::new(run.swarm(), &tracker, run.now(), wall_s);
+    let mut summary = Summary::new(run.swarm(), &tracker, run.now(), wall_s);
+    summary.true_min_separation_m = Some(true_min_m).filter(|m| m.is_finite());
     let exit_code = crate::error::exit_code(&summary);
     Ok(Flown {
         summary,

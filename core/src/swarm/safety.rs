@@ -156,6 +156,16 @@ impl Swarm {
                 age_s = age_s.max(hop_s + period_s + UNMEASURED_RESPONSE_S);
             }
         }
+        // Each position put at one instant, the newest report's arrival: on a lossy or
+        // jittery link the reports of two vehicles can differ in age by several periods,
+        // and at the swarm's common speed that shifts the one against the other by metres
+        // (14 m/s and 100 ms: 1.4 m), which the barrier's reach, grown by the pair's
+        // relative speed over the age, does not cover.
+        let newest = self
+            .indices()
+            .filter(|&i| self.law.states[i].is_some())
+            .filter_map(|i| self.slots[i].link().and_then(|l| l.state().last_position))
+            .max();
         self.safety.agents.clear();
         self.safety.xy.clear();
         for i in self.indices() {
@@ -168,9 +178,16 @@ impl Swarm {
             let envelope = &self.setup.envelope;
             let u_z = envelope.limit_vertical(self.law.commands[i].z, model);
             let limit = envelope.horizontal_limit_mps2(u_z, model);
+            let behind_s = match (
+                newest,
+                self.slots[i].link().and_then(|l| l.state().last_position),
+            ) {
+                (Some(newest), Some(at)) => newest.saturating_since(at).as_secs_f64(),
+                _ => 0.0,
+            };
             self.safety.agents.push(Agent {
                 side: self.law.states[i].map(|s| Side {
-                    pos_m: s.pos_enu_m,
+                    pos_m: s.pos_enu_m + s.vel_enu_mps * behind_s,
                     vel_mps: s.vel_enu_mps,
                     accel_z_mps2: if controlled { self.slots[i].u_z } else { 0.0 },
                 }),
