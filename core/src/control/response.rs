@@ -149,9 +149,10 @@ impl ResponseFit {
             for (j, x) in x.iter_mut().enumerate() {
                 *x = self.commanded[slot(k0.wrapping_sub(j as u64))][axis] - theta0[axis];
             }
-            for j in 0..delays {
-                self.sxx[j] += x[j] * x[j];
-                self.sxy[j] += x[j] * y;
+            let sums = self.sxx.iter_mut().zip(self.sxy.iter_mut());
+            for ((sxx, sxy), x) in sums.zip(&x).take(delays) {
+                *sxx += x * x;
+                *sxy += x * y;
             }
         }
         self.samples += 1;
