@@ -125,8 +125,21 @@ impl RunTracker {
         let setup = swarm.setup();
         let airborne = !matches!(swarm.phase(), SwarmPhase::Landing(_));
         if airborne {
+            // Each position carried to the newest report's arrival by its velocity, as
+            // the safety filter puts them: reports of different ages (a lossy or jittery
+            // link) would otherwise show the pair where it never was.
+            let newest = swarm.indices().filter_map(|i| swarm.state_time(i)).max();
             self.sweep.clear();
-            self.sweep.extend_from_slice(&self.pos);
+            for i in swarm.indices() {
+                let Some(s) = swarm.common_state(i) else {
+                    return;
+                };
+                let behind_s = match (newest, swarm.state_time(i)) {
+                    (Some(newest), Some(at)) => newest.saturating_since(at).as_secs_f64(),
+                    _ => 0.0,
+                };
+                self.sweep.push(s.pos_enu_m + s.vel_enu_mps * behind_s);
+            }
             let min = min_separation_in_place(&mut self.sweep);
             self.min_separation_m = self.min_separation_m.min(min);
         }
@@ -207,7 +220,8 @@ pub struct Summary {
     /// Altitude error at the end of consensus (m).
     pub altitude_error_m: Option<f64>,
     /// Smallest separation while flying (m); `null` if never known. The distance between
-    /// the states the coordinator holds, whose ages differ on a lossy link.
+    /// the states the coordinator holds, each carried to the newest one's arrival by its
+    /// velocity (on a lossy link their ages differ).
     pub min_separation_m: Option<f64>,
     /// Smallest distance between two emulated vehicles' true positions while flying (m),
     /// when the emulator is in the same process (`sweep`); absent otherwise.

@@ -172,6 +172,16 @@ impl Swarm {
         &self.law.setpoints
     }
 
+    /// When vehicle `i`'s position in [`Swarm::common_state`] came: its link's last
+    /// accepted report's arrival, or when another shard measured it.
+    pub fn state_time(&self, i: VehicleIndex) -> Option<SimTime> {
+        let slot = self.slots.get(i.0)?;
+        match slot.link() {
+            Some(link) => link.state().last_position,
+            None => slot.remote().map(|r| r.measured),
+        }
+    }
+
     /// Vehicle `i` in the common frame, once its origin and a position are known (whatever
     /// the age of its position; the control tick uses only fresh ones).
     pub fn common_state(&self, i: VehicleIndex) -> Option<CommonState> {
