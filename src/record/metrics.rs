@@ -83,7 +83,8 @@ pub struct RunTracker {
     /// Each vehicle's formation place (as configured, or assigned).
     places: Vec<Vector2<f64>>,
     z: Vec<f64>,
-    /// A copy of the positions for the separation sweep, which reorders it.
+    /// The positions carried to one instant, for the separation sweep (which reorders
+    /// them).
     sweep: Vec<Vector3<f64>>,
     /// The formation error's growth over the last consensus.
     growth: GrowthFit,
@@ -110,12 +111,20 @@ impl RunTracker {
     pub fn observe(&mut self, swarm: &Swarm, now: SimTime) {
         let n = swarm.vehicle_count();
         self.pos.clear();
+        // The separation is measured between positions carried to the newest report's
+        // arrival by their velocities, as the safety filter puts them: reports of
+        // different ages (a lossy or jittery link) would otherwise show the pair where it
+        // never was.
+        let newest = swarm.indices().filter_map(|i| swarm.state_time(i)).max();
+        self.sweep.clear();
         let mut vel = Vector2::zeros();
         for i in swarm.indices() {
             let Some(s) = swarm.common_state(i) else {
                 return;
             };
             self.pos.push(s.pos_enu_m);
+            self.sweep
+                .push(s.pos_enu_m + s.vel_enu_mps * swarm.state_behind_s(i, newest));
             vel += s.vel_enu_mps.xy() / n as f64;
         }
         self.xy.clear();
@@ -125,21 +134,6 @@ impl RunTracker {
         let setup = swarm.setup();
         let airborne = !matches!(swarm.phase(), SwarmPhase::Landing(_));
         if airborne {
-            // Each position carried to the newest report's arrival by its velocity, as
-            // the safety filter puts them: reports of different ages (a lossy or jittery
-            // link) would otherwise show the pair where it never was.
-            let newest = swarm.indices().filter_map(|i| swarm.state_time(i)).max();
-            self.sweep.clear();
-            for i in swarm.indices() {
-                let Some(s) = swarm.common_state(i) else {
-                    return;
-                };
-                let behind_s = match (newest, swarm.state_time(i)) {
-                    (Some(newest), Some(at)) => newest.saturating_since(at).as_secs_f64(),
-                    _ => 0.0,
-                };
-                self.sweep.push(s.pos_enu_m + s.vel_enu_mps * behind_s);
-            }
             let min = min_separation_in_place(&mut self.sweep);
             self.min_separation_m = self.min_separation_m.min(min);
         }

@@ -182,6 +182,16 @@ impl Swarm {
         }
     }
 
+    /// How far (s) vehicle `i`'s state is behind a state that came at `newest`: what its
+    /// position is carried forward by its velocity to put the two at one instant; 0 when
+    /// either time is unknown.
+    pub fn state_behind_s(&self, i: VehicleIndex, newest: Option<SimTime>) -> f64 {
+        match (newest, self.state_time(i)) {
+            (Some(newest), Some(at)) => newest.saturating_since(at).as_secs_f64(),
+            _ => 0.0,
+        }
+    }
+
     /// Vehicle `i` in the common frame, once its origin and a position are known (whatever
     /// the age of its position; the control tick uses only fresh ones).
     pub fn common_state(&self, i: VehicleIndex) -> Option<CommonState> {

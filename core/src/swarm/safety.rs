@@ -161,10 +161,12 @@ impl Swarm {
         // and at the swarm's common speed that shifts the one against the other by metres
         // (14 m/s and 100 ms: 1.4 m), which the barrier's reach, grown by the pair's
         // relative speed over the age, does not cover.
+        // Another shard's vehicle is already carried to now by its hop, and stays.
+        let local = |i: VehicleIndex| self.slots[i].link().is_some();
         let newest = self
             .indices()
-            .filter(|&i| self.law.states[i].is_some())
-            .filter_map(|i| self.slots[i].link().and_then(|l| l.state().last_position))
+            .filter(|&i| self.law.states[i].is_some() && local(i))
+            .filter_map(|i| self.state_time(i))
             .max();
         self.safety.agents.clear();
         self.safety.xy.clear();
@@ -178,12 +180,10 @@ impl Swarm {
             let envelope = &self.setup.envelope;
             let u_z = envelope.limit_vertical(self.law.commands[i].z, model);
             let limit = envelope.horizontal_limit_mps2(u_z, model);
-            let behind_s = match (
-                newest,
-                self.slots[i].link().and_then(|l| l.state().last_position),
-            ) {
-                (Some(newest), Some(at)) => newest.saturating_since(at).as_secs_f64(),
-                _ => 0.0,
+            let behind_s = if local(i) {
+                self.state_behind_s(i, newest)
+            } else {
+                0.0
             };
             self.safety.agents.push(Agent {
                 side: self.law.states[i].map(|s| Side {
