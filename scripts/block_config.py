@@ -12,6 +12,10 @@ With `--shards S` the vehicles are split in S contiguous shards (`fly --shard s0
 and watching every vehicle over Zenoh on loopback (tcp/127.0.0.1:7500 + s, each shard
 connecting to every shard before it).
 
+The safety filter gets `--budget-ms` of each 20 ms control period (`[safety] budget_share`;
+2 ms by default, the per-tick time the dense-swarm goal allows; the coordinator's own default
+share, 0.2, would give it 4 ms at this rate).
+
 Gains: k = 1, alpha = 1, beta = sqrt(1.25 * Yu's bound) (`ringswarm analyze -m N/2 -k 1`
 gives the bound); `--time-scale` as the bandwidth gate asks for the x500 (`fly` says it).
 
@@ -20,6 +24,8 @@ gives the bound); `--time-scale` as the bandwidth gate asks for the x500 (`fly` 
 
 import argparse
 import math
+
+CONTROL_RATE_HZ = 50.0
 
 
 def main():
@@ -31,12 +37,16 @@ def main():
     ap.add_argument("--drift", type=float, default=1.0, help="east velocity at the start (m/s)")
     ap.add_argument("--duration", type=float, default=60.0, help="seconds of consensus flight")
     ap.add_argument("--shards", type=int, default=1, help="split the block in this many shards (1: none)")
+    ap.add_argument("--budget-ms", type=float, default=2.0, help="the safety filter's time per control tick (ms, of 20)")
     a = ap.parse_args()
     n = a.side * a.side
     if a.side < 2 or n % 2:
         raise SystemExit(f"the ring needs an even number of vehicles >= 4, got {a.side} x {a.side}")
     if not (a.spacing > 0 and a.time_scale > 0 and a.yu_bound > 0):
         raise SystemExit("--spacing, --time-scale and --yu-bound must be positive")
+    period_ms = 1000.0 / CONTROL_RATE_HZ
+    if not (0 < a.budget_ms <= period_ms):
+        raise SystemExit(f"--budget-ms must be in (0, {period_ms:g}] (the control period), got {a.budget_ms}")
     if a.shards < 1 or n % a.shards:
         raise SystemExit(f"--shards must divide the {n} vehicles evenly, got {a.shards}")
     # Unsharded: networks of 250 and the rest. Sharded: each shard takes whole networks of
@@ -58,7 +68,7 @@ def main():
         "# Frames: ENU about the common reference (x east, y north, z up), metres and m/s.",
         "",
         "[swarm]",
-        "control_rate_hz = 50.0",
+        f"control_rate_hz = {CONTROL_RATE_HZ}",
         "attitude_rate_hz = 10.0",
         f"duration_s = {a.duration}",
         "link_timeout_ms = 1500",
@@ -87,6 +97,7 @@ def main():
         "",
         "[safety]",
         "horizontal_m = 3.0",
+        f"budget_share = {a.budget_ms / period_ms:g}",
         "",
         "[emulator]",
         "ground_below_m = 100.0",

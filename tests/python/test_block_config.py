@@ -23,6 +23,9 @@ def test_the_block_swap_flies_apart_with_its_places_mirrored(tmp_path):
     config.write_text(text)
     assert text.count("[[vehicle]]") == 16
     assert 'assign = "fixed"' in text
+    # The filter's 2 ms of the 20 ms period.
+    assert "control_rate_hz = 50.0" in text
+    assert "budget_share = 0.1\n" in text
     # Vehicle 1 starts at the south-west corner and is sent to the north-east one.
     assert "start_enu_m = [-6.000, -6.000, 50.0]" in text
     assert "offsets_m = [[6.000, 6.000]," in text
@@ -41,6 +44,15 @@ def test_a_block_with_an_odd_number_of_vehicles_is_refused_by_name():
     )
     assert done.returncode != 0
     assert "even number of vehicles" in done.stderr
+
+
+def test_a_filter_budget_longer_than_the_control_period_is_refused_by_name():
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "block_config.py"), "4", "--yu-bound", "10", "--time-scale", "0.5", "--budget-ms", "25"],
+        capture_output=True, text=True,
+    )
+    assert done.returncode != 0
+    assert "--budget-ms must be in (0, 20]" in done.stderr
 
 
 def test_a_sharded_block_gives_each_shard_whole_networks_of_equal_size():
