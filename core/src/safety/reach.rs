@@ -24,8 +24,6 @@
 //!
 //! Pure: no allocation, no clock.
 
-use nalgebra::Vector3;
-
 use super::{Agent, Separation, braking, limit};
 
 /// Added to every bound (m), for rounding.
@@ -99,7 +97,7 @@ impl ReachBound {
 #[cfg(test)]
 mod tests {
     use super::super::tests::sep;
-    use nalgebra::Vector2;
+    use nalgebra::{Vector2, Vector3};
 
     use super::super::{Side, pair_row};
     use super::*;
