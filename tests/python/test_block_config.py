@@ -13,6 +13,13 @@ ROOT = Path(__file__).resolve().parents[2]
 BIN = os.environ.get("RINGSWARM_BIN", str(ROOT / "target" / "debug" / "ringswarm"))
 
 
+def refused(*args):
+    """The script's standard error for `args`, which it must refuse (a non-zero exit)."""
+    done = subprocess.run([sys.executable, str(ROOT / "scripts" / "block_config.py"), *args], capture_output=True, text=True)
+    assert done.returncode != 0, done.stdout[:200]
+    return done.stderr
+
+
 def test_the_block_swap_flies_apart_with_its_places_mirrored(tmp_path):
     config = tmp_path / "block.toml"
     # Yu's bound for m = 8 at k = 1 is below 10, so beta = sqrt(12.5) keeps 25 % above it.
@@ -38,21 +45,11 @@ def test_the_block_swap_flies_apart_with_its_places_mirrored(tmp_path):
 
 
 def test_a_block_with_an_odd_number_of_vehicles_is_refused_by_name():
-    done = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "block_config.py"), "3", "--yu-bound", "10", "--time-scale", "0.5"],
-        capture_output=True, text=True,
-    )
-    assert done.returncode != 0
-    assert "even number of vehicles" in done.stderr
+    assert "even number of vehicles" in refused("3", "--yu-bound", "10", "--time-scale", "0.5")
 
 
 def test_a_filter_budget_longer_than_the_control_period_is_refused_by_name():
-    done = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "block_config.py"), "4", "--yu-bound", "10", "--time-scale", "0.5", "--budget-ms", "25"],
-        capture_output=True, text=True,
-    )
-    assert done.returncode != 0
-    assert "--budget-ms must be in (0, 20]" in done.stderr
+    assert "--budget-ms must be in (0, 20]" in refused("4", "--yu-bound", "10", "--time-scale", "0.5", "--budget-ms", "25")
 
 
 def test_a_sharded_block_gives_each_shard_whole_networks_of_equal_size():
@@ -78,9 +75,4 @@ def test_a_sharded_block_gives_each_shard_whole_networks_of_equal_size():
 
 
 def test_shards_that_do_not_divide_the_block_are_refused_by_name():
-    done = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "block_config.py"), "4", "--yu-bound", "10", "--time-scale", "0.5", "--shards", "3"],
-        capture_output=True, text=True,
-    )
-    assert done.returncode != 0
-    assert "--shards must divide the 16 vehicles evenly, got 3" in done.stderr
+    assert "--shards must divide the 16 vehicles evenly, got 3" in refused("4", "--yu-bound", "10", "--time-scale", "0.5", "--shards", "3")
