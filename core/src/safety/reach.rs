@@ -139,7 +139,7 @@ mod tests {
             ];
             let bound = ReachBound::new(&s, age, &pair).expect("usable");
             let reach = bound.distance_m(s.scaled(vi - vj).norm());
-            // A direction with a vertical part, the pair just beyond its reaches.
+            // A direction with a vertical part, the pair just beyond the bound.
             let dir = Vector3::new(next() - 0.5, next() - 0.5, 0.3 * (next() - 0.5)).normalize();
             let scaled_dir = s.scaled(dir).norm();
             let distance = reach * (1.0 + 1e-9) / scaled_dir;
@@ -156,27 +156,21 @@ mod tests {
     }
 
     #[test]
-    fn a_swarm_moving_together_looks_as_far_as_one_at_rest() {
+    fn the_bound_is_the_separation_the_age_s_growth_and_the_braking_room() {
         let s = sep();
         let at_rest = [
             agent(Vector3::zeros(), Vector3::zeros(), 0.0, 6.0, 3.0),
             agent(Vector3::new(4.0, 0.0, 0.0), Vector3::zeros(), 0.0, 6.0, 3.0),
         ];
-        let moving = at_rest.map(|mut a| {
-            a.side = a.side.map(|side| Side {
-                vel_mps: Vector3::new(5.0, -2.0, 0.0),
-                ..side
-            });
-            a
-        });
-        let rest = ReachBound::new(&s, 0.1, &at_rest).expect("usable");
-        let together = ReachBound::new(&s, 0.1, &moving).expect("usable");
-        let r0 = rest.distance_m(0.0);
-        assert_eq!(r0, together.distance_m(0.0));
-        // At rest: 3 m + 6·0.1²/2 + 0.01 + x²/(2·3) with γx³ = 2·6 + 1 + 0 + 6 = 19.
+        let bound = ReachBound::new(&s, 0.1, &at_rest).expect("usable");
+        // 3 m + A_hi·τ²/2 (A_hi = 6, τ = 0.1 s) + 0.01 + (V·τ) + (V + x)²/(2·3), with
+        // γx³ = 2·6 + 1 + 0 + 6 = 19.
         let x = 19f64.cbrt();
-        let expected = 3.0 + 0.5 * 6.0 * 0.01 + 0.01 + x * x / 6.0;
-        assert!((r0 - expected).abs() < 1e-12, "{r0} vs {expected}");
+        for v in [0.0, 2.5] {
+            let expected = 3.0 + 0.5 * 6.0 * 0.01 + 0.01 + v * 0.1 + (v + x) * (v + x) / 6.0;
+            let got = bound.distance_m(v);
+            assert!((got - expected).abs() < 1e-12, "{v}: {got} vs {expected}");
+        }
         // Nobody commanded: no bound.
         let mut idle = at_rest;
         idle.iter_mut().for_each(|a| a.controlled = false);
