@@ -63,3 +63,19 @@ pub fn ring_offsets_m(n: usize, radius_m: f64) -> Vec<nalgebra::Vector2<f64>> {
         })
         .collect()
 }
+
+/// The w-weighted mean of the emulated vehicles' true horizontal velocities (m/s, ENU):
+/// what the law keeps at its predicted final velocity.
+pub fn weighted_mean_velocity_enu(
+    vehicles: &[Vehicle],
+    ring: &ringswarm::consensus::RingDigraph,
+) -> nalgebra::Vector2<f64> {
+    let w: Vec<f64> = (0..vehicles.len()).map(|i| ring.w(i)).collect();
+    let total: f64 = w.iter().sum();
+    vehicles
+        .iter()
+        .zip(&w)
+        .map(|(v, w)| ringswarm::control::ned_to_enu(v.status().vel_ned_mps).xy() * *w)
+        .sum::<nalgebra::Vector2<f64>>()
+        / total
+}

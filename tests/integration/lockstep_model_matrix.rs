@@ -69,15 +69,7 @@ fn fly(config: &Config) -> Outcome {
         }
     }
     let swarm = run.swarm();
-    let w: Vec<f64> = (0..6).map(|i| swarm.setup().ring.w(i)).collect();
-    let total: f64 = w.iter().sum();
-    let mean = run
-        .vehicles()
-        .iter()
-        .zip(&w)
-        .map(|(v, w)| ned_to_enu(v.status().vel_ned_mps).xy() * *w)
-        .sum::<Vector2<f64>>()
-        / total;
+    let mean = crate::common::weighted_mean_velocity_enu(run.vehicles(), &swarm.setup().ring);
     let shifted: Vec<Vector2<f64>> = run
         .vehicles()
         .iter()

@@ -712,17 +712,13 @@ fn four_shards_pass_the_mirror_swap_s_jams_on_the_layer() {
         .iter()
         .map(|s| s.safety_stats().layer_climbs)
         .sum();
-    let ring = &run.shards()[0].setup().ring;
-    let (mut sum, mut total) = (Vector2::zeros(), 0.0);
-    for (i, v) in run.vehicles().iter().enumerate() {
-        sum += ring.w(i) * ringswarm::control::ned_to_enu(v.status().vel_ned_mps).xy();
-        total += ring.w(i);
-    }
+    let mean =
+        crate::common::weighted_mean_velocity_enu(run.vehicles(), &run.shards()[0].setup().ring);
     // Each shard flies its own vehicles' part of the whole block's solution, which keeps
     // Σ wᵢuᵢ: the parts, solved by four shards on states a hop apart, keep it together.
     // Measured 0.064 % off.
     let predicted = one_prediction(&run);
-    let velocity_error = (sum / total - predicted).norm() / predicted.norm();
+    let velocity_error = (mean - predicted).norm() / predicted.norm();
     eprintln!(
         "formation {formation} m, closest {min_sep} m, {climbs} climbs, top {top_m} m, velocity {velocity_error}"
     );
