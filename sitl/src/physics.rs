@@ -145,20 +145,15 @@ impl Airframe {
             thrusts.iter_mut().for_each(|t| *t -= over);
         }
         let yaw: [f64; 4] = std::array::from_fn(|i| yaw[i] * torque_frd_nm.z);
-        let yaw_scale = thrusts
-            .iter()
-            .zip(&yaw)
-            .map(|(t, y)| {
-                if *y > 0.0 {
-                    (max - t) / y
-                } else if *y < 0.0 {
-                    t / -y
-                } else {
-                    1.0
-                }
-            })
-            .fold(1.0_f64, f64::min)
-            .max(0.0);
+        // The share of the yaw each motor has room for: up to `max` when its yaw adds
+        // thrust, down to zero when it takes thrust away; any share without yaw. Every
+        // quotient is formed and the unused ones dropped, so that the four divide at once.
+        let room: [f64; 4] = std::array::from_fn(|i| {
+            let (t, y) = (thrusts[i], yaw[i]);
+            let share = if y > 0.0 { (max - t) / y } else { t / -y };
+            if y == 0.0 { 1.0 } else { share }
+        });
+        let yaw_scale = room.into_iter().fold(1.0_f64, f64::min).max(0.0);
         Vector4::from_fn(|i, _| (thrusts[i] + yaw[i] * yaw_scale).clamp(0.0, max))
     }
 

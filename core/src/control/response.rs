@@ -61,8 +61,10 @@ pub struct AttitudeResponse {
 pub struct ResponseFit {
     step_s: f64,
     tick: u64,
-    /// Commanded (roll, pitch) of the latest ticks (rad), by [`slot`].
-    commanded: [[f64; 2]; HISTORY],
+    /// Commanded roll and pitch of the latest ticks (rad), per axis, each tick at its
+    /// [`slot`] and again `HISTORY` further: the commands of a pair's delays are then one
+    /// contiguous run, read backwards from the first report's tick.
+    commanded: [[f64; 2 * HISTORY]; 2],
     /// The previous report: its (roll, pitch) (rad), arrival (s) and tick.
     last: Option<([f64; 2], f64, u64)>,
     sxx: [f64; DELAYS],
@@ -92,7 +94,7 @@ impl ResponseFit {
         Self {
             step_s,
             tick: 0,
-            commanded: [[0.0; 2]; HISTORY],
+            commanded: [[0.0; 2 * HISTORY]; 2],
             last: None,
             sxx: [0.0; DELAYS],
             sxy: [0.0; DELAYS],
@@ -120,7 +122,11 @@ impl ResponseFit {
                 self.last = None;
             }
         }
-        self.commanded[slot(self.tick)] = commanded;
+        let at = slot(self.tick);
+        for (history, command) in self.commanded.iter_mut().zip(commanded) {
+            history[at] = command;
+            history[at + HISTORY] = command;
+        }
         self.tick += 1;
     }
 
@@ -133,7 +139,7 @@ impl ResponseFit {
         let k_now = slot(k0);
         let linear = (0..2).all(|axis| {
             ((theta[axis] - theta0[axis]) / dt).abs() <= MAX_RATE_RPS
-                && (self.commanded[k_now][axis] - theta0[axis]).abs() <= MAX_ERROR_RAD
+                && (self.commanded[axis][k_now] - theta0[axis]).abs() <= MAX_ERROR_RAD
         });
         if !linear {
             return;
@@ -143,11 +149,13 @@ impl ResponseFit {
         for axis in 0..2 {
             let y = (theta[axis] - theta0[axis]) / dt;
             self.syy += y * y;
-            // The commands each delay pairs with, gathered first so that the sums below
-            // are straight loops over arrays.
+            // The commands each delay pairs with (delay j: tick k₀ − j, at `newest − j`),
+            // gathered first so that the sums below are straight loops over arrays.
+            let newest = k_now + HISTORY;
+            let window = &self.commanded[axis][newest + 1 - DELAYS..=newest];
             let mut x = [0.0; DELAYS];
-            for (j, x) in x.iter_mut().enumerate() {
-                *x = self.commanded[slot(k0.wrapping_sub(j as u64))][axis] - theta0[axis];
+            for (x, command) in x.iter_mut().zip(window.iter().rev()) {
+                *x = command - theta0[axis];
             }
             let sums = self.sxx.iter_mut().zip(self.sxy.iter_mut());
             for ((sxx, sxy), x) in sums.zip(&x).take(delays) {
@@ -187,8 +195,9 @@ impl ResponseFit {
             let rate = self.sxy[j] / self.sxx[j];
             rates[j] = rate;
             residuals[j] = self.syy - self.sxy[j] * rate;
+            // Without short-circuits, so that the loop stays branch-free.
             admissible[j] =
-                self.sxx[j] / n >= MIN_EXCITATION_RAD2 && rate > 0.0 && rate.is_finite();
+                (self.sxx[j] / n >= MIN_EXCITATION_RAD2) & (rate > 0.0) & rate.is_finite();
         }
         // The first admissible delay, then any with a smaller residual.
         let mut best = usize::MAX;

@@ -4,7 +4,7 @@
 use mavlink::dialects::common::MavMessage;
 use mavlink::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message};
 
-use super::{MAX_FRAME_LEN, MAX_PAYLOAD_LEN, STX_V2, V2_HEADER_LEN, checksum};
+use super::{MAX_FRAME_LEN, MAX_PAYLOAD_LEN, STX_V2, V2_HEADER_LEN, X25};
 use crate::signing::Signing;
 
 /// Buffers of sent frames kept for the next ones: whoever encodes takes a buffer here and
@@ -134,7 +134,11 @@ fn encode_unsigned(header: MavHeader, msg: &MavMessage, out: &mut Vec<u8>) {
         id[2],
     ]);
     out.truncate(start + V2_HEADER_LEN + payload_len);
-    let crc = checksum(&out[start + 1..], MavMessage::extra_crc(msgid));
+    // The message's seed byte closes the checksum: appended for it (one pass over the
+    // frame), then replaced by the checksum.
+    out.push(MavMessage::extra_crc(msgid));
+    let crc = X25.checksum(&out[start + 1..]);
+    out.pop();
     out.extend_from_slice(&crc.to_le_bytes());
 }
 
