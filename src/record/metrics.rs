@@ -28,10 +28,25 @@ pub fn min_separation_m(pos_m: &[Vector3<f64>]) -> f64 {
     min_separation_in_place(&mut pos_m.to_vec())
 }
 
-/// [`min_separation_m`] of `pos_m`, which it reorders: a sweep along the axis of widest
+/// Up to this many vehicles every pair is measured: fewer operations than sorting.
+const EVERY_PAIR_UP_TO: usize = 12;
+
+/// [`min_separation_m`] of `pos_m`, which it may reorder: a sweep along the axis of widest
 /// spread, sorted, comparing each point only with those closer along that axis than the
-/// best distance so far (O(N log N) for a spread-out swarm, not N²/2 distances).
+/// best distance so far (O(N log N) for a spread-out swarm, not N²/2 distances); every
+/// pair for a handful of vehicles.
 pub fn min_separation_in_place(pos_m: &mut [Vector3<f64>]) -> f64 {
+    if pos_m.len() <= EVERY_PAIR_UP_TO {
+        // The square root is monotonic and correctly rounded: taken once, of the least
+        // squared distance, it is the least distance exactly (NaNs are ignored either way).
+        let mut least = f64::INFINITY;
+        for (i, a) in pos_m.iter().enumerate() {
+            for b in &pos_m[i + 1..] {
+                least = least.min((a - b).norm_squared());
+            }
+        }
+        return least.sqrt();
+    }
     let spread = |axis: usize| {
         let (lo, hi) = pos_m
             .iter()
@@ -497,7 +512,8 @@ mod tests {
             min
         };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        for n in [2, 3, 10, 200] {
+        // Both ways: every pair (up to EVERY_PAIR_UP_TO) and the sweep (above).
+        for n in [2, 3, 10, EVERY_PAIR_UP_TO, EVERY_PAIR_UP_TO + 1, 200] {
             for spread in [1.0, 1000.0] {
                 let p: Vec<Vector3<f64>> = (0..n)
                     .map(|_| {

@@ -398,8 +398,9 @@ impl VehicleLink {
         self.clock(now);
         let mut taken = false;
         let key = self.signer.as_ref().map(|s| s.key().clone());
-        for frame in frames(bytes, key.as_ref()) {
-            let Ok(frame) = frame else {
+        for decoded in frames(bytes, key.as_ref()) {
+            // Borrowed, not moved out: a frame is a few hundred bytes to copy.
+            let Ok(frame) = &decoded else {
                 self.ignored_frames += 1;
                 continue;
             };

@@ -28,8 +28,9 @@ impl Vehicle {
     pub fn handle_datagram(&mut self, now: SimTime, link: LinkId, bytes: &[u8]) -> bool {
         let key = self.io.signing.as_ref().map(|s| s.key().clone());
         let mut vouched = false;
-        for frame in frames(bytes, key.as_ref()) {
-            match frame {
+        for decoded in frames(bytes, key.as_ref()) {
+            // Borrowed, not moved out: a frame is a few hundred bytes to copy.
+            match &decoded {
                 Ok(frame) => {
                     if !self.admit(&frame, link) {
                         continue;
@@ -40,7 +41,7 @@ impl Vehicle {
                         self.on_setup_signing(m, frame.signature.is_some());
                         continue;
                     }
-                    self.handle_message(now, link, sender, frame.msg);
+                    self.handle_message(now, link, sender, &frame.msg);
                 }
                 Err(err) => {
                     self.counters.bad_frames += 1;
@@ -73,7 +74,7 @@ impl Vehicle {
         ours
     }
 
-    fn handle_message(&mut self, now: SimTime, link: LinkId, sender: (u8, u8), msg: MavMessage) {
+    fn handle_message(&mut self, now: SimTime, link: LinkId, sender: (u8, u8), msg: &MavMessage) {
         let heard = match msg {
             MavMessage::HEARTBEAT(m) => self.on_heartbeat(now, &m),
             MavMessage::SET_ATTITUDE_TARGET(m) => self.on_set_attitude_target(now, &m),
