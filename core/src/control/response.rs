@@ -185,6 +185,7 @@ impl ResponseFit {
     /// The least-squares fit of the sums as they are.
     fn fit_now(&self) -> Option<AttitudeResponse> {
         let n = 2.0 * self.samples as f64;
+        let excited_from = least_excited_sum(n);
         // Every delay's quotients first, in a straight loop the compiler vectorises (the
         // fit runs for every vehicle on every tick that brings a report pair), then the
         // choice.
@@ -196,8 +197,7 @@ impl ResponseFit {
             rates[j] = rate;
             residuals[j] = self.syy - self.sxy[j] * rate;
             // Without short-circuits, so that the loop stays branch-free.
-            admissible[j] =
-                (self.sxx[j] / n >= MIN_EXCITATION_RAD2) & (rate > 0.0) & rate.is_finite();
+            admissible[j] = (self.sxx[j] >= excited_from) & (rate > 0.0) & rate.is_finite();
         }
         // The first admissible delay, then any with a smaller residual.
         let mut best = usize::MAX;
@@ -221,6 +221,21 @@ impl ResponseFit {
             samples: self.samples,
         })
     }
+}
+
+/// The least `Σxx` whose mean square over `n` samples (`n > 0`) reaches
+/// [`MIN_EXCITATION_RAD2`] as the quotient rounds: `Σxx ≥ least_excited_sum(n)` exactly when
+/// `Σxx / n ≥ MIN_EXCITATION_RAD2` (a rounded quotient never falls as its dividend grows),
+/// without a division per delay.
+fn least_excited_sum(n: f64) -> f64 {
+    let mut sum = MIN_EXCITATION_RAD2 * n;
+    while sum / n >= MIN_EXCITATION_RAD2 {
+        sum = sum.next_down();
+    }
+    while sum / n < MIN_EXCITATION_RAD2 {
+        sum = sum.next_up();
+    }
+    sum
 }
 
 #[cfg(test)]
@@ -286,6 +301,23 @@ mod tests {
         assert_eq!(after.samples, before.samples + 1);
         assert_eq!(Some(after), fit.fit_now());
         assert_ne!(after.time_constant_s, before.time_constant_s);
+    }
+
+    #[test]
+    fn the_excitation_floor_is_the_quotient_s_test_exactly() {
+        for samples in [250_u64, 251, 300, 999, 1000, 4096, 14_686, 123_457, 1 << 40] {
+            let n = 2.0 * samples as f64;
+            let floor = least_excited_sum(n);
+            assert!(floor / n >= MIN_EXCITATION_RAD2, "{samples}");
+            assert!(floor.next_down() / n < MIN_EXCITATION_RAD2, "{samples}");
+            for sum in [0.0, floor.next_down(), floor, floor.next_up(), 10.0 * floor] {
+                assert_eq!(
+                    sum >= floor,
+                    sum / n >= MIN_EXCITATION_RAD2,
+                    "{samples} samples, {sum}"
+                );
+            }
+        }
     }
 
     #[test]
