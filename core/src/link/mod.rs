@@ -18,7 +18,7 @@ pub use convert::{
 };
 pub use dialect::{Autopilot, AutopilotChoice, ParamAction, ParamStep, StreamRate};
 pub use ringswarm_wire::codec::{
-    Encoder, Frame, FrameError, decode_datagram, decode_datagram_with, frame_system_id, frames,
-    raw_frames,
+    Encoder, Frame, FrameError, decode_datagram, decode_datagram_with, for_each_frame,
+    frame_system_id, frames, raw_frames,
 };
 pub use signer::{LinkSigning, Signer};

@@ -13,7 +13,9 @@ use super::params::ParamSession;
 use super::telemetry::TelemetryGate;
 use super::{LinkConfig, LinkEvent, Phase, Setpoint, VehicleState};
 
-use crate::link::{Encoder, Inbound, Outgoing, Signer, VehicleCommand, encode, frames, inbound};
+use crate::link::{
+    Encoder, Frame, Inbound, Outgoing, Signer, VehicleCommand, encode, for_each_frame, inbound,
+};
 
 /// How long the fence upload waits for the vehicle before it sends its last message
 /// again (PX4 asks again for a missing item every 250 ms by itself).
@@ -398,51 +400,53 @@ impl VehicleLink {
         self.clock(now);
         let mut taken = false;
         let key = self.signer.as_ref().map(|s| s.key().clone());
-        for decoded in frames(bytes, key.as_ref()) {
-            // Borrowed, not moved out: a frame is a few hundred bytes to copy.
-            let Ok(frame) = &decoded else {
-                self.ignored_frames += 1;
-                continue;
-            };
-            if let Some(signer) = self.signer.as_mut()
-                && let Err(why) = signer.check(&frame, self.cfg.system_id)
-            {
-                signer.refused += 1;
-                if !signer.reported {
-                    signer.reported = true;
-                    self.events.push_back(LinkEvent::SigningRefused(why));
-                }
-                continue;
-            }
-            let system_id = frame.system_id();
-            if system_id != self.cfg.system_id {
-                self.ignored_frames += 1;
-                let (word, bit) = (usize::from(system_id / 64), 1u64 << (system_id % 64));
-                if self.wrong_systems[word] & bit == 0 {
-                    // Reported once per foreign system id, not per frame.
-                    self.wrong_systems[word] |= bit;
-                    self.events.push_back(LinkEvent::WrongSystem { system_id });
-                }
-                continue;
-            }
-            if frame.header.component_id != 1 {
-                self.ignored_frames += 1;
-                continue;
-            }
-            taken = true;
-            let update = inbound(&frame.msg);
-            if let Some(Inbound::Ack { target_system, .. }) = update
-                && target_system != 0
-                && target_system != self.cfg.own_ids.0
-            {
-                continue; // an acknowledgement meant for another ground station
-            }
-            self.state.last_heard = Some(now);
-            if let Some(update) = update {
-                self.apply(now, update);
-            }
-        }
+        for_each_frame(bytes, key.as_ref(), |decoded| match decoded {
+            Ok(frame) => taken |= self.take_frame(now, frame),
+            Err(_) => self.ignored_frames += 1,
+        });
         taken
+    }
+
+    /// One decoded frame of [`Self::handle_datagram`]; `true` when it is taken as the
+    /// vehicle's.
+    fn take_frame(&mut self, now: SimTime, frame: &Frame) -> bool {
+        if let Some(signer) = self.signer.as_mut()
+            && let Err(why) = signer.check(frame, self.cfg.system_id)
+        {
+            signer.refused += 1;
+            if !signer.reported {
+                signer.reported = true;
+                self.events.push_back(LinkEvent::SigningRefused(why));
+            }
+            return false;
+        }
+        let system_id = frame.system_id();
+        if system_id != self.cfg.system_id {
+            self.ignored_frames += 1;
+            let (word, bit) = (usize::from(system_id / 64), 1u64 << (system_id % 64));
+            if self.wrong_systems[word] & bit == 0 {
+                // Reported once per foreign system id, not per frame.
+                self.wrong_systems[word] |= bit;
+                self.events.push_back(LinkEvent::WrongSystem { system_id });
+            }
+            return false;
+        }
+        if frame.header.component_id != 1 {
+            self.ignored_frames += 1;
+            return false;
+        }
+        let update = inbound(&frame.msg);
+        if let Some(Inbound::Ack { target_system, .. }) = update
+            && target_system != 0
+            && target_system != self.cfg.own_ids.0
+        {
+            return true; // an acknowledgement meant for another ground station
+        }
+        self.state.last_heard = Some(now);
+        if let Some(update) = update {
+            self.apply(now, update);
+        }
+        true
     }
 
     /// A vehicle in the Hold we handed it to (to be taken back when fresh) is streamed to

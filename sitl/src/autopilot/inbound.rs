@@ -15,7 +15,7 @@ use mavlink::dialects::common::{
 use super::commands::ReceivedCommand;
 use super::offboard::{self, AttitudeTarget, OffboardTarget, PositionTarget, Refusal};
 use super::{LinkId, Vehicle};
-use crate::codec::frames;
+use crate::codec::for_each_frame;
 use crate::time::SimTime;
 
 impl Vehicle {
@@ -28,27 +28,24 @@ impl Vehicle {
     pub fn handle_datagram(&mut self, now: SimTime, link: LinkId, bytes: &[u8]) -> bool {
         let key = self.io.signing.as_ref().map(|s| s.key().clone());
         let mut vouched = false;
-        for decoded in frames(bytes, key.as_ref()) {
-            // Borrowed, not moved out: a frame is a few hundred bytes to copy.
-            match &decoded {
-                Ok(frame) => {
-                    if !self.admit(&frame, link) {
-                        continue;
-                    }
-                    vouched |= self.io.signing.is_none() || frame.signature.is_some();
-                    let sender = (frame.system_id(), frame.header.component_id);
-                    if let MavMessage::SETUP_SIGNING(m) = &frame.msg {
-                        self.on_setup_signing(m, frame.signature.is_some());
-                        continue;
-                    }
-                    self.handle_message(now, link, sender, &frame.msg);
+        for_each_frame(bytes, key.as_ref(), |decoded| match decoded {
+            Ok(frame) => {
+                if !self.admit(frame, link) {
+                    return;
                 }
-                Err(err) => {
-                    self.counters.bad_frames += 1;
-                    tracing::debug!(sysid = self.cfg.system_id, error = %err, "bad frame");
+                vouched |= self.io.signing.is_none() || frame.signature.is_some();
+                let sender = (frame.system_id(), frame.header.component_id);
+                if let MavMessage::SETUP_SIGNING(m) = &frame.msg {
+                    self.on_setup_signing(m, frame.signature.is_some());
+                    return;
                 }
+                self.handle_message(now, link, sender, &frame.msg);
             }
-        }
+            Err(err) => {
+                self.counters.bad_frames += 1;
+                tracing::debug!(sysid = self.cfg.system_id, error = %err, "bad frame");
+            }
+        });
         vouched
     }
 
@@ -76,28 +73,24 @@ impl Vehicle {
 
     fn handle_message(&mut self, now: SimTime, link: LinkId, sender: (u8, u8), msg: &MavMessage) {
         let heard = match msg {
-            MavMessage::HEARTBEAT(m) => self.on_heartbeat(now, &m),
-            MavMessage::SET_ATTITUDE_TARGET(m) => self.on_set_attitude_target(now, &m),
-            MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_position_target_local(now, &m),
-            MavMessage::SET_POSITION_TARGET_GLOBAL_INT(m) => {
-                self.on_position_target_global(now, &m)
-            }
+            MavMessage::HEARTBEAT(m) => self.on_heartbeat(now, m),
+            MavMessage::SET_ATTITUDE_TARGET(m) => self.on_set_attitude_target(now, m),
+            MavMessage::SET_POSITION_TARGET_LOCAL_NED(m) => self.on_position_target_local(now, m),
+            MavMessage::SET_POSITION_TARGET_GLOBAL_INT(m) => self.on_position_target_global(now, m),
             MavMessage::MISSION_COUNT(_)
             | MavMessage::MISSION_ITEM_INT(_)
             | MavMessage::MISSION_REQUEST_LIST(_)
             | MavMessage::MISSION_REQUEST_INT(_)
             | MavMessage::MISSION_ACK(_)
             | MavMessage::MISSION_CLEAR_ALL(_)
-            | MavMessage::MISSION_SET_CURRENT(_) => {
-                self.on_mission_message(now, link, sender, &msg)
-            }
+            | MavMessage::MISSION_SET_CURRENT(_) => self.on_mission_message(now, link, sender, msg),
             #[allow(deprecated)]
             MavMessage::MISSION_ITEM(_) | MavMessage::MISSION_REQUEST(_) => {
-                self.on_mission_message(now, link, sender, &msg)
+                self.on_mission_message(now, link, sender, msg)
             }
-            MavMessage::COMMAND_LONG(m) => self.on_command_long(now, link, sender, &m),
-            MavMessage::COMMAND_INT(m) => self.on_command_int(now, link, sender, &m),
-            MavMessage::SET_MODE(m) => self.on_set_mode(now, link, sender, &m),
+            MavMessage::COMMAND_LONG(m) => self.on_command_long(now, link, sender, m),
+            MavMessage::COMMAND_INT(m) => self.on_command_int(now, link, sender, m),
+            MavMessage::SET_MODE(m) => self.on_set_mode(now, link, sender, m),
             MavMessage::PARAM_REQUEST_LIST(m) => {
                 let ours = self.params_for_us(m.target_system, m.target_component);
                 if ours {
@@ -105,9 +98,9 @@ impl Vehicle {
                 }
                 ours
             }
-            MavMessage::PARAM_REQUEST_READ(m) => self.on_param_request_read(link, &m),
-            MavMessage::PARAM_SET(m) => self.on_param_set(link, &m),
-            MavMessage::TIMESYNC(m) => self.on_timesync(now, link, &m),
+            MavMessage::PARAM_REQUEST_READ(m) => self.on_param_request_read(link, m),
+            MavMessage::PARAM_SET(m) => self.on_param_set(link, m),
+            MavMessage::TIMESYNC(m) => self.on_timesync(now, link, m),
             // ArduPilot's stream groups (MAVProxy asks for them); PX4 has none.
             #[allow(deprecated)]
             MavMessage::REQUEST_DATA_STREAM(m) if self.is_ardupilot() => {

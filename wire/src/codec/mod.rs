@@ -192,11 +192,84 @@ impl Iterator for Frames<'_> {
     }
 }
 
+/// Hands every frame of one datagram, in order, to `visit`: the decoded frame by
+/// reference (built once, where it is read: a message is a few hundred bytes to move), or
+/// why a frame could not be decoded. The same frames and errors as [`frames`], for a
+/// reader that only borrows them.
+pub fn for_each_frame(
+    bytes: &[u8],
+    key: Option<&SigningKey>,
+    mut visit: impl FnMut(Result<&Frame, FrameError>),
+) {
+    let mut at = 0;
+    while at < bytes.len() {
+        let skipped = bytes[at..]
+            .iter()
+            .position(|b| *b == STX_V1 || *b == STX_V2)
+            .unwrap_or(bytes.len() - at);
+        if skipped > 0 {
+            at += skipped;
+            visit(Err(FrameError::Garbage { skipped }));
+            continue;
+        }
+        let (checked, consumed) = check_frame(&bytes[at..], key);
+        at = consumed.map_or(bytes.len(), |n| at + n);
+        match checked {
+            Ok(parts) => match parts.message() {
+                Ok(msg) => visit(Ok(&parts.frame(msg))),
+                Err(error) => visit(Err(error)),
+            },
+            Err(error) => visit(Err(error)),
+        }
+    }
+}
+
+/// A frame whose length, header and checksum are good, its payload not parsed yet.
+struct Checked<'a> {
+    header: MavHeader,
+    msgid: u32,
+    version: MavlinkVersion,
+    payload: &'a [u8],
+    signature: Option<Trailer>,
+}
+
+impl Checked<'_> {
+    /// The payload parsed.
+    fn message(&self) -> Result<MavMessage, FrameError> {
+        let msgid = self.msgid;
+        MavMessage::parse(self.version, msgid, self.payload).map_err(|e| match e {
+            // An unknown id whose checksum happened to match with no extra byte.
+            ParserError::UnknownMessage { .. } => FrameError::UnknownMessage { msgid },
+            _ => FrameError::BadPayload { msgid },
+        })
+    }
+
+    fn frame(&self, msg: MavMessage) -> Frame {
+        Frame {
+            header: self.header,
+            msg,
+            version: self.version,
+            signature: self.signature,
+        }
+    }
+}
+
 /// Decodes one frame at the start of `bytes`; returns its length when it is known.
 fn decode_frame(
     bytes: &[u8],
     key: Option<&SigningKey>,
 ) -> (Result<Frame, FrameError>, Option<usize>) {
+    let (checked, consumed) = check_frame(bytes, key);
+    let frame = checked.and_then(|parts| parts.message().map(|msg| parts.frame(msg)));
+    (frame, consumed)
+}
+
+/// Checks the frame at the start of `bytes` (length, checksum, signature); returns its
+/// length when it is known.
+fn check_frame<'a>(
+    bytes: &'a [u8],
+    key: Option<&SigningKey>,
+) -> (Result<Checked<'a>, FrameError>, Option<usize>) {
     let v2 = bytes[0] == STX_V2;
     let header_len = if v2 { 10 } else { 6 };
     let Some(total) = frame_len(bytes) else {
@@ -233,25 +306,19 @@ fn decode_frame(
     } else {
         MavlinkVersion::V1
     };
-    let payload = &bytes[header_len..crc_at];
     let signature = (v2 && bytes[2] & INCOMPAT_SIGNED != 0).then(|| trailer(&bytes[..total], key));
-    let result = MavMessage::parse(version, msgid, payload)
-        .map(|msg| Frame {
-            header: MavHeader {
-                system_id: u32::from(system_id),
-                component_id,
-                sequence,
-            },
-            msg,
-            version,
-            signature,
-        })
-        .map_err(|e| match e {
-            // An unknown id whose checksum happened to match with no extra byte.
-            ParserError::UnknownMessage { .. } => FrameError::UnknownMessage { msgid },
-            _ => FrameError::BadPayload { msgid },
-        });
-    (result, Some(total))
+    let checked = Checked {
+        header: MavHeader {
+            system_id: u32::from(system_id),
+            component_id,
+            sequence,
+        },
+        msgid,
+        version,
+        payload: &bytes[header_len..crc_at],
+        signature,
+    };
+    (Ok(checked), Some(total))
 }
 
 /// The trailer of the complete signed MAVLink 2 frame `frame`, checked against `key`.
@@ -440,5 +507,29 @@ pub(crate) mod tests {
         let frames = decode_datagram(&garbage);
         assert_eq!(frames[0], Err(FrameError::Garbage { skipped: 3 }));
         assert!(frames[1].is_ok());
+    }
+
+    #[test]
+    fn the_visitor_sees_what_the_iterator_yields() {
+        let mut encoder = Encoder::new(7, 1);
+        let good = encoder.encode(&heartbeat());
+        let mut corrupt = encoder.encode(&heartbeat());
+        corrupt[12] ^= 0xFF;
+        // Garbage, a frame, a corrupt frame, garbage, a frame, then a truncated one.
+        let mut datagram = vec![9, 9];
+        for part in [
+            &good[..],
+            &corrupt[..],
+            &[1, 2, 3][..],
+            &good[..],
+            &good[..15],
+        ] {
+            datagram.extend_from_slice(part);
+        }
+        let expected = decode_datagram(&datagram);
+        assert_eq!(expected.len(), 6, "{expected:?}");
+        let mut seen = Vec::new();
+        for_each_frame(&datagram, None, |frame| seen.push(frame.cloned()));
+        assert_eq!(seen, expected);
     }
 }
