@@ -137,7 +137,7 @@ fn encode_unsigned(header: MavHeader, msg: &MavMessage, out: &mut Vec<u8>) {
     // The message's seed byte closes the checksum: appended for it (one pass over the
     // frame), then replaced by the checksum.
     out.push(MavMessage::extra_crc(msgid));
-    let crc = X25.checksum(&out[start + 1..]);
+    let crc = X25.compute(&out[start + 1..]);
     out.pop();
     out.extend_from_slice(&crc.to_le_bytes());
 }

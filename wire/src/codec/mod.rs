@@ -7,7 +7,8 @@
 //! that the caller can count them, and decoding goes on after a bad frame when its length
 //! is known.
 
-use crc::{CRC_16_MCRF4XX, Crc, Table};
+use crcxx::crc16::catalog::CRC_16_MCRF4XX;
+use crcxx::crc16::{Crc, LookupTable256xN};
 use mavlink::dialects::common::MavMessage;
 use mavlink::error::ParserError;
 use mavlink::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message};
@@ -33,17 +34,18 @@ const V2_HEADER_LEN: usize = 10;
 /// The longest MAVLink payload.
 const MAX_PAYLOAD_LEN: usize = 255;
 
-/// MAVLink's checksum, CRC-16/MCRF4XX (X.25 without the final inversion), sixteen table
-/// slices at a time: each frame is checksummed once when it is sent and once when it is read.
-const X25: Crc<u16, Table<16>> = Crc::<u16, Table<16>>::new(&CRC_16_MCRF4XX);
+/// MAVLink's checksum, CRC-16/MCRF4XX (X.25 without the final inversion), by table slices
+/// of 16, 8 and 4 bytes: each frame is checksummed once when it is sent and once when it
+/// is read.
+const X25: Crc<LookupTable256xN<16>> = Crc::<LookupTable256xN<16>>::new(&CRC_16_MCRF4XX);
 
 /// The checksum of a frame's bytes after the start byte, closed with the message's
 /// `extra_crc` seed byte.
 fn checksum(bytes: &[u8], extra_crc: u8) -> u16 {
-    let mut digest = X25.digest();
+    let mut digest = X25.compute_multipart();
     digest.update(bytes);
     digest.update(&[extra_crc]);
-    digest.finalize()
+    digest.value()
 }
 
 /// The longest MAVLink 2 frame: start byte, 9-byte header, 255-byte payload, checksum,
