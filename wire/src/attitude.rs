@@ -18,7 +18,14 @@ pub fn body_z_to_attitude(body_z_ned: Vector3<f64>, yaw_rad: f64) -> UnitQuatern
         body_z.z = 1.0;
     }
     let body_z = body_z.normalize();
-    let y_c = Vector3::new(-yaw_rad.sin(), yaw_rad.cos(), 0.0);
+    // At yaw zero (the swarm's setpoints) sine and cosine are exact without the library:
+    // sin ±0 = ±0, cos ±0 = 1.
+    let (sin, cos) = if yaw_rad == 0.0 {
+        (yaw_rad, 1.0)
+    } else {
+        yaw_rad.sin_cos()
+    };
+    let y_c = Vector3::new(-sin, cos, 0.0);
     let mut body_x = y_c.cross(&body_z);
     if body_z.z < 0.0 {
         body_x = -body_x;

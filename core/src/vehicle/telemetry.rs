@@ -202,10 +202,13 @@ fn allowed_m(prev: &Sample, next: &Sample) -> f64 {
 
 /// The first field of a report that cannot be true, named.
 fn implausible(pos: &Vector3<f64>, vel: &Vector3<f64>) -> Option<String> {
-    let names = ["x", "y", "z", "vx", "vy", "vz"];
-    for (name, value) in names.iter().zip(pos.iter().chain(vel.iter())) {
-        if !value.is_finite() {
-            return Some(format!("LOCAL_POSITION_NED.{name} is {value}"));
+    // Every report is checked: the names are looked for only when a value is not finite.
+    if !(pos.iter().all(|v| v.is_finite()) & vel.iter().all(|v| v.is_finite())) {
+        let names = ["x", "y", "z", "vx", "vy", "vz"];
+        for (name, value) in names.iter().zip(pos.iter().chain(vel.iter())) {
+            if !value.is_finite() {
+                return Some(format!("LOCAL_POSITION_NED.{name} is {value}"));
+            }
         }
     }
     if vel.norm() > MAX_REPORTED_SPEED_MPS {
