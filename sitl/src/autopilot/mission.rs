@@ -145,8 +145,11 @@ impl Vehicle {
 
     /// The transfer's retries and timeouts, and the 1 Hz MISSION_CURRENT.
     pub(super) fn mission_timers(&mut self, now: SimTime) {
-        let plans = stored_plans(&self.navigator.mission, &self.geofence);
-        self.mission_transfer.handle_timeout(now, &plans);
+        // Only a transfer under way has timers (and reads the stored plans).
+        if !self.mission_transfer.is_idle() {
+            let plans = stored_plans(&self.navigator.mission, &self.geofence);
+            self.mission_transfer.handle_timeout(now, &plans);
+        }
         self.do_transfer_steps();
         if now >= self.navigator.mission.next_report {
             self.navigator.mission.next_report = now + Duration::from_secs(1);
