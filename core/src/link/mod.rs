@@ -19,6 +19,6 @@ pub use convert::{
 pub use dialect::{Autopilot, AutopilotChoice, ParamAction, ParamStep, StreamRate};
 pub use ringswarm_wire::codec::{
     Encoder, Frame, FrameError, decode_datagram, decode_datagram_with, for_each_frame,
-    frame_system_id, frames, raw_frames,
+    frame_system_id, raw_frames,
 };
 pub use signer::{LinkSigning, Signer};
