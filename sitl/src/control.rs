@@ -42,8 +42,6 @@ impl AttitudeSetpoint {
 pub struct AttitudeController {
     rate_integral: Vector3<f64>,
     last_rate: Option<Vector3<f64>>,
-    /// The integrator's bound for the rate gains `I` it was worked out for: `(I, bound)`.
-    integral_bound: Option<(Vector3<f64>, Vector3<f64>)>,
 }
 
 impl AttitudeController {
@@ -125,7 +123,7 @@ impl AttitudeController {
         // Integrate only with enough thrust to be flying, like PX4's landed gating.
         if thrust_norm > 0.05 {
             self.rate_integral += rate_error * dt_s;
-            let limit = self.integral_limit(&gains.rate_i);
+            let limit = frame.rate_integral_scale();
             self.rate_integral = self
                 .rate_integral
                 .zip_map(&limit, |x, l| x.clamp(-l * 10.0, l * 10.0));
@@ -137,19 +135,6 @@ impl AttitudeController {
         let torque =
             inertia.component_mul(&angular_accel) + rate.cross(&inertia.component_mul(&rate));
         frame.mix(thrust_norm * frame.profile().max_thrust_n(), torque)
-    }
-
-    /// `0.3 / I` per axis (I at least 1e-9), worked out again only when the gains change:
-    /// three divisions a step otherwise.
-    fn integral_limit(&mut self, rate_i: &Vector3<f64>) -> Vector3<f64> {
-        match self.integral_bound {
-            Some((gains, limit)) if gains == *rate_i => limit,
-            _ => {
-                let limit = Vector3::repeat(0.3).component_div(&rate_i.map(|g| g.max(1e-9)));
-                self.integral_bound = Some((*rate_i, limit));
-                limit
-            }
-        }
     }
 }
 

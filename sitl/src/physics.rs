@@ -76,6 +76,9 @@ pub struct Airframe {
     /// The motor lag's decay `e^(−dt/τ)` over the last step length `dt` (s), kept so that
     /// fixed steps pay the exponential once: `(dt, decay)`.
     motor_decay: (f64, f64),
+    /// `0.3 / I` per axis of the profile's rate gains `I` (at least 1e-9): the scale of
+    /// the rate integrator's bound, worked out once rather than on every step.
+    rate_integral_scale: Vector3<f64>,
 }
 
 /// Motor positions in FRD (x, y) for PX4's quad X, and the yaw reaction sign.
@@ -100,12 +103,21 @@ impl Airframe {
         let mixing = allocation.try_inverse().expect(
             "the X allocation matrix is invertible for any positive arm and moment constant",
         );
+        let rate_integral_scale =
+            Vector3::repeat(0.3).component_div(&profile.gains.rate_i.map(|g| g.max(1e-9)));
         Self {
             profile,
             allocation,
             mixing,
             motor_decay: (0.0, 1.0),
+            rate_integral_scale,
         }
+    }
+
+    /// `0.3 / I` per axis of the profile's rate gains `I`: the rate controller bounds its
+    /// integrator at ten times this.
+    pub fn rate_integral_scale(&self) -> Vector3<f64> {
+        self.rate_integral_scale
     }
 
     /// The profile.
