@@ -155,6 +155,7 @@ fn filter_row(side: usize, share: f64, limit_s: f64, kind: Rows) {
                     drift_mps2: Vector2::zeros(),
                     limit_mps2: 6.0,
                     braking_mps2: share * 6.0,
+                    lag_s: 0.0,
                 })
                 .collect();
             // Every vehicle flown to its place (0.05/s² and 0.5/s, inside its disc):

@@ -113,6 +113,11 @@ pub struct Agent {
     pub limit_mps2: f64,
     /// Its share of a pair's braking authority (m/s²).
     pub braking_mps2: f64,
+    /// The time constant of the lag through which its acceleration follows its commands
+    /// (s; 0: after a pure delay), its attitude response's. Counted inside the age as a
+    /// delay; its state already shows part of the commands it is still following
+    /// ([`on_way`]).
+    pub lag_s: f64,
 }
 
 /// What the filter did on one tick.
@@ -422,7 +427,7 @@ impl SafetyFilter {
         self.before.clear();
         if settings.rows == Rows::Stopping {
             self.before
-                .extend((0..n).map(|k| self.on_way.halves(k, timing)));
+                .extend((0..n).map(|k| self.on_way.halves(k, timing, agents[k].lag_s)));
         }
         self.stop = match settings.rows {
             Rows::Barrier => None,

@@ -114,6 +114,7 @@ mod tests {
             drift_mps2: Vector2::zeros(),
             limit_mps2: limit,
             braking_mps2: braking,
+            lag_s: 0.0,
         }
     }
 

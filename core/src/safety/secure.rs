@@ -66,7 +66,7 @@ impl SafetyFilter {
                 // count them); before any call, this one held for the delay.
                 let before = match self.stop {
                     Some(_) => self.before.get(k).copied().unwrap_or_default(),
-                    None if self.on_way.known(k) => self.on_way.halves(k, timing),
+                    None if self.on_way.known(k) => self.on_way.halves(k, timing, a.lag_s),
                     None => [net; 2],
                 };
                 let mut plan = Plan {

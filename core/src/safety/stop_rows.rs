@@ -238,6 +238,7 @@ mod tests {
             drift_mps2: Vector2::zeros(),
             limit_mps2: 6.0,
             braking_mps2: 3.0,
+            lag_s: 0.0,
         }
     }
 

@@ -33,6 +33,7 @@ fn agent(p: [f64; 3], v: [f64; 3], weight: f64) -> Agent {
         drift_mps2: Vector2::zeros(),
         limit_mps2: 6.0,
         braking_mps2: 2.0,
+        lag_s: 0.0,
     }
 }
 
@@ -564,6 +565,7 @@ fn packed_swap(side: usize, s: Settings, ticks: usize, out_from: usize) -> (f64,
         let agents: Vec<Agent> = (0..n)
             .map(|k| Agent {
                 braking_mps2: 3.0,
+                lag_s: 0.0,
                 ..agent([pos[k].x, pos[k].y, 50.0], [vel[k].x, vel[k].y, 0.0], 1.0)
             })
             .collect();

@@ -14,6 +14,13 @@ use crate::vehicle::VehicleLink;
 /// x500's measured `L + T` is 0.18–0.20 s, PX4 SIH's 0.28–0.36 s (docs/math.md).
 pub const UNMEASURED_RESPONSE_S: f64 = 0.3;
 
+/// The lag counted inside an unmeasured response (s): the time constants fitted are
+/// 0.08–0.15 s on the emulated x500, 0.16–0.18 s on PX4 SIH and 0.23–0.27 s on ArduCopter
+/// SITL, each with a delay of 0.02–0.14 s (docs/math.md). Counting the whole response as a
+/// delay would count the commands the vehicle already shows again
+/// ([`crate::safety::Agent::lag_s`]).
+pub const UNMEASURED_LAG_S: f64 = 0.2;
+
 /// The longest measured attitude response counted (s); a longer fit is not trusted.
 pub const MAX_RESPONSE_S: f64 = 1.0;
 
@@ -198,6 +205,7 @@ impl Swarm {
                 drift_mps2: self.law.law_commands[i].xy() - self.law.accel[i],
                 limit_mps2: limit,
                 braking_mps2: setup.braking_share * limit,
+                lag_s: if local(i) { self.counted_lag_s(i) } else { 0.0 },
             });
             self.safety.xy.push(self.law.commands[i].xy());
         }
@@ -211,9 +219,11 @@ impl Swarm {
             } else {
                 f64::INFINITY
             },
-            // The stopping rows model the commands on their way as a pure delay; a
-            // vehicle's attitude response is a lag, under which they count its recent
-            // commands twice (docs/dense.md, "The synchronised stop").
+            // A command moves the stopping rows' stop end by `h²/2 + hT/2` per m/s²
+            // (about a centimetre at 50 Hz), so they hold only while the plan predicts
+            // each vehicle that closely; flown with x500s they relax and the block loses
+            // its separation (docs/dense.md, "The synchronised stop"). The swarm flies the
+            // barrier rows.
             rows: crate::safety::Rows::Barrier,
         };
         let report = self.safety.filter.filter(
@@ -391,6 +401,17 @@ impl Swarm {
             .filter(|r| (0.0..=MAX_RESPONSE_S).contains(r))
             .map_or(round_trip + UNMEASURED_RESPONSE_S, |r| r.max(round_trip));
         state + self.listen_lag.as_secs_f64() + self.setup.control_interval.as_secs_f64() + response
+    }
+
+    /// The lag of vehicle `i`'s attitude response counted inside its age (s): the
+    /// fitted time constant when the fit is counted ([`Self::command_age_s`]), otherwise
+    /// [`UNMEASURED_LAG_S`] of the unmeasured response.
+    fn counted_lag_s(&self, i: VehicleIndex) -> f64 {
+        self.slots[i]
+            .flown
+            .attitude_response()
+            .filter(|r| (0.0..=MAX_RESPONSE_S).contains(&r.response_s))
+            .map_or(UNMEASURED_LAG_S, |r| r.time_constant_s)
     }
 
     /// Logs every pair that came within the separation (once per entry).
