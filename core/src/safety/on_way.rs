@@ -71,45 +71,54 @@ impl OnWay {
         // The velocity the commands still on their way add, and the position they add
         // by `δ` when each is taken as given at its mean time.
         let (mut dv, mut dp) = (Vector2::zeros(), Vector2::zeros());
-        for (m, net) in history.iter().enumerate() {
+        // The lag's output when the state was measured, `a₀`: a command fed over `[s, e]`
+        // before then adds `a(e^{min(e, 0)/τ} − e^{s/τ})`. From the first such command
+        // on, `e^{s/τ}` falls by `r = e^{−h/τ}` a call further back.
+        let mut output = Vector2::zeros();
+        let mut calls = history.iter().enumerate();
+        let mut next_before = None;
+        for (m, net) in calls.by_ref() {
             // As a delay: acts over [start, end]; fed to the lag `τ` earlier.
             let end_s = delay_s - m as f64 * hold_s;
             let start_s = end_s - hold_s;
             let a = net.unwrap_or_else(Vector2::zeros);
-            // Fed after the state: a delay of `τ`.
-            let fed_from_s = (start_s - lag_s).max(0.0) + lag_s;
-            if end_s > fed_from_s {
+            if end_s > lag_s {
+                // Fed after the state, in whole or in part: a delay of `τ`.
+                let fed_from_s = (start_s - lag_s).max(0.0) + lag_s;
                 let length_s = end_s - fed_from_s;
                 dv += a * length_s;
                 dp += a * (length_s * (delay_s - 0.5 * (fed_from_s + end_s)));
+            } else if lag_s <= 0.0 {
+                break;
             }
-            if lag_s <= 0.0 {
-                if end_s <= 0.0 {
-                    break;
-                }
-                continue;
-            }
-            // Fed before the state: what the lag still holds of it, `τ·a₀`, given at
-            // mean time `τ`.
-            let (fed_s, fed_end_s) = (start_s - lag_s, (end_s - lag_s).min(0.0));
-            if fed_s < 0.0 {
-                let held = a * (lag_s * ((fed_end_s / lag_s).exp() - (fed_s / lag_s).exp()));
-                dv += held;
-                dp += held * (delay_s - lag_s);
-            }
-            if fed_end_s < -FORGOTTEN_LAGS * lag_s {
+            if lag_s > 0.0 && start_s < lag_s {
+                let r = (-hold_s / lag_s).exp();
+                let x = ((start_s - lag_s) / lag_s).exp();
+                output += a * ((x / r).min(1.0) - x);
+                next_before = Some((x * r, r));
                 break;
             }
         }
+        if let Some((x, r)) = next_before {
+            // Every older command was fed wholly before: `a·x(1/r − 1)`.
+            let (mut sum, mut weight) = (Vector2::zeros(), 1.0);
+            for (_, net) in calls {
+                if let Some(a) = net {
+                    sum += a * weight;
+                }
+                weight *= r;
+            }
+            output += sum * (x * (1.0 / r - 1.0));
+        }
+        // What the lag still holds, `τ·a₀`, given at mean time `τ`.
+        dv += output * lag_s;
+        dp += output * (lag_s * (delay_s - lag_s));
         // Two halves of τ = δ/2: τ(b₁ + b₂) = Δv, τ²(3b₁ + b₂)/2 = Δp.
         let tau = 0.5 * delay_s;
         let first = (dp - dv * (0.5 * tau)) / (tau * tau);
         [first, dv / tau - first]
     }
 }
-
-/// How many lags back a command's remainder is still counted (e⁻⁴⁰: none).
-const FORGOTTEN_LAGS: f64 = 40.0;
 
 #[cfg(test)]
 mod tests {

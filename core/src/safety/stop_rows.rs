@@ -24,11 +24,11 @@
 //! commands can do in `δ + h`, so a segment the commands make is never longer than the
 //! row assumes. A vehicle not ours keeps its velocity (`Eₖ = pₖ + vₖ(δ + h + T)`).
 //!
-//! The commands on their way are modelled as a pure delay ([`super::on_way`]): each acts
-//! for its period, `δ` after it was given. A vehicle whose attitude responds with a lag
-//! rather than a delay shows part of its recent commands in its state already, which the
-//! model then counts again; so the swarm flies the barrier rows, and these serve
-//! vehicles that follow their commands after a known delay.
+//! The commands on their way ([`super::on_way`]) each act for their period, `δ` after
+//! they were given, less what a vehicle's lag has already passed on to its state. A
+//! command moves the stop's end by only `h²/2 + hT/2` per m/s², so a pair at the
+//! separation has its row broken by millimetres of model error; the swarm flies the
+//! barrier rows (docs/dense.md, "The synchronised stop").
 //!
 //! Pure: no allocation, no clock.
 
