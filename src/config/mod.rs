@@ -156,11 +156,9 @@ pub struct SafetySection {
     /// 95 % of the separation, or a fallback) while it flies its law: `hold` (default),
     /// `land` or `continue`.
     pub action: crate::swarm::BreachAction,
-    /// Break jams (default false): vehicles the filter has held for `jam_hold_s` without
-    /// closing on their places are turned past each other, every held pair about its
-    /// midpoint in the same sense, at `jam_turn_mps2`; the turn keeps `Σ wᵢuᵢ`. Off by
-    /// default: the watch cannot yet tell a jam from a ring that converges slowly while
-    /// its filter binds (docs/dense.md).
+    /// Break jams (default false): vehicles the filter has held (an active row, and at
+    /// least half of the command taken away) for `jam_hold_s` without closing on their
+    /// places are broken as `jam_break` says (docs/dense.md).
     pub resolve_jams: bool,
     /// How long a vehicle is held without progress before it counts as jammed (s,
     /// default 5).

@@ -3,7 +3,10 @@
 //! still, and the law's pull towards the places never wins.
 //!
 //! [`JamWatch`] finds them: a vehicle is *held* on a tick when one of its pair rows is
-//! active (the filter's answer meets it with nothing to spare); it is *jammed* once it
+//! active (the filter's answer meets it with nothing to spare) and the filter took at
+//! least [`JamSettings::restrained_share`] of its command away (`|uᵢ − ūᵢ| ≥ s·|uᵢ|`, the
+//! law's command `uᵢ` against the filter's `ūᵢ`): a filter that only trims the command
+//! of a ring converging slowly does not hold it. It is *jammed* once it
 //! has been held for [`JamSettings::hold_s`] while still more than
 //! [`JamSettings::min_error_m`] from its place and no closer to it by
 //! [`JamSettings::progress_m`] than when the hold began. A hold goes on through breaks
@@ -38,6 +41,9 @@ pub struct JamSettings {
     pub min_error_m: f64,
     /// The longest break in a hold (s).
     pub gap_s: f64,
+    /// The least share of a vehicle's command the filter must take away for an active row
+    /// to hold it.
+    pub restrained_share: f64,
     /// How long it must go unheld to be released.
     pub release_s: f64,
     /// The turning acceleration of an equal-weight pair, each vehicle (m/s²).
@@ -53,6 +59,7 @@ impl Default for JamSettings {
             progress_m: 0.5,
             min_error_m: 1.0,
             gap_s: 1.0,
+            restrained_share: 0.5,
             release_s: 2.0,
             bias_mps2: 1.0,
             layer: None,
@@ -88,23 +95,27 @@ pub struct JamWatch {
 
 impl JamWatch {
     /// Takes a tick at `now`: the active pair rows `(i, j)` (`i == j`: a one-vehicle row,
-    /// which holds nobody against anybody and is ignored) and each vehicle's distance to
-    /// its place (m; `None`: unknown, which ends its watch).
+    /// which holds nobody against anybody and is ignored), whether the filter took at
+    /// least [`JamSettings::restrained_share`] of each vehicle's command away (missing:
+    /// no), and each vehicle's distance to its place (m; `None`: unknown, which ends its
+    /// watch).
     pub fn update(
         &mut self,
         settings: &JamSettings,
         now: SimTime,
         active: &[(usize, usize)],
+        restrained: &[bool],
         error_m: &[Option<f64>],
     ) -> JamChange {
         let n = error_m.len();
         self.held.resize(n, Held::default());
         self.marks.clear();
         self.marks.resize(n, false);
+        let restrained = |k: usize| restrained.get(k).copied().unwrap_or(false);
         for &(i, j) in active {
             if i != j && i < n && j < n {
-                self.marks[i] = true;
-                self.marks[j] = true;
+                self.marks[i] |= restrained(i);
+                self.marks[j] |= restrained(j);
             }
         }
         let mut change = JamChange::default();
@@ -210,24 +221,51 @@ mod tests {
         let errors = [Some(8.0), Some(8.0), Some(8.0)];
         for k in 0..250 {
             let t = s(f64::from(k) * 0.02);
-            let change = watch.update(&settings, t, &active, &errors);
+            let change = watch.update(&settings, t, &active, &[true; 3], &errors);
             assert!(change.jammed.is_empty(), "jammed at {t:?}");
         }
         // 5 s held (0 → 5.0 s), 8 m from its place, no closer: jammed, not vehicle 2.
-        let change = watch.update(&settings, s(5.0), &active, &errors);
+        let change = watch.update(&settings, s(5.0), &active, &[true; 3], &errors);
         assert_eq!(change.jammed, vec![0, 1]);
         assert!(watch.is_jammed(0) && !watch.is_jammed(2));
         // Unheld for less than 2 s: still jammed; then released.
         assert!(
             watch
-                .update(&settings, s(6.9), &[], &errors)
+                .update(&settings, s(6.9), &[], &[true; 3], &errors)
                 .released
                 .is_empty()
         );
         assert_eq!(
-            watch.update(&settings, s(7.0), &[], &errors).released,
+            watch
+                .update(&settings, s(7.0), &[], &[true; 3], &errors)
+                .released,
             vec![0, 1]
         );
+        assert!(!watch.any());
+    }
+
+    #[test]
+    fn a_row_that_only_trims_a_command_holds_nobody() {
+        // Vehicles 0 and 1 in an active row for 10 s, 8 m from their places: the filter
+        // took half or more of 1's command away, not of 0's: only 1 is jammed.
+        let settings = JamSettings::default();
+        let mut watch = JamWatch::default();
+        let errors = [Some(8.0), Some(8.0)];
+        for k in 0..=500 {
+            watch.update(
+                &settings,
+                s(f64::from(k) * 0.02),
+                &[(0, 1)],
+                &[false, true],
+                &errors,
+            );
+        }
+        assert!(!watch.is_jammed(0) && watch.is_jammed(1));
+        // Nothing said of a vehicle: not restrained.
+        let mut watch = JamWatch::default();
+        for k in 0..=500 {
+            watch.update(&settings, s(f64::from(k) * 0.02), &[(0, 1)], &[], &errors);
+        }
         assert!(!watch.any());
     }
 
@@ -239,7 +277,13 @@ mod tests {
         let mut watch = JamWatch::default();
         for k in 0..=250 {
             let active: &[(usize, usize)] = if k % 2 == 0 { &[(0, 1)] } else { &[] };
-            watch.update(&settings, s(f64::from(k) * 0.02), active, &errors);
+            watch.update(
+                &settings,
+                s(f64::from(k) * 0.02),
+                active,
+                &[true; 3],
+                &errors,
+            );
         }
         assert!(watch.is_jammed(0));
         // Held 3 s, free 1 s, held 3 s: the break ends the hold, no jam.
@@ -251,7 +295,7 @@ mod tests {
             } else {
                 &[(0, 1)]
             };
-            watch.update(&settings, s(t), active, &errors);
+            watch.update(&settings, s(t), active, &[true; 3], &errors);
         }
         assert!(!watch.any());
     }
@@ -264,21 +308,27 @@ mod tests {
         for k in 0..1000 {
             let t = f64::from(k) * 0.02;
             let error = 20.0 - 0.2 * t;
-            let change = watch.update(&settings, s(t), &[(0, 1)], &[Some(error), Some(error)]);
+            let change = watch.update(
+                &settings,
+                s(t),
+                &[(0, 1)],
+                &[true; 2],
+                &[Some(error), Some(error)],
+            );
             assert!(change.jammed.is_empty(), "jammed at {t} s");
         }
         // At its place (0.5 m off) it is never jammed however long it is held.
         let mut watch = JamWatch::default();
         for k in 0..1000 {
             let t = s(f64::from(k) * 0.02);
-            let change = watch.update(&settings, t, &[(0, 1)], &[Some(0.5), Some(0.5)]);
+            let change = watch.update(&settings, t, &[(0, 1)], &[true; 2], &[Some(0.5), Some(0.5)]);
             assert!(change.jammed.is_empty());
         }
         // A one-vehicle row (the fence) holds nobody.
         let mut watch = JamWatch::default();
         for k in 0..1000 {
             let t = s(f64::from(k) * 0.02);
-            watch.update(&settings, t, &[(0, 0)], &[Some(9.0)]);
+            watch.update(&settings, t, &[(0, 0)], &[true], &[Some(9.0)]);
         }
         assert!(!watch.any());
     }
@@ -289,7 +339,13 @@ mod tests {
         let mut watch = JamWatch::default();
         let errors = [Some(8.0), Some(8.0)];
         for k in 0..=250 {
-            watch.update(&settings, s(f64::from(k) * 0.02), &[(0, 1)], &errors);
+            watch.update(
+                &settings,
+                s(f64::from(k) * 0.02),
+                &[(0, 1)],
+                &[true; 3],
+                &errors,
+            );
         }
         assert!(watch.is_jammed(0));
         // Vehicle 0 east of vehicle 1: normal east, turned +90°: north for 0, south for 1.

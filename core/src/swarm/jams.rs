@@ -1,5 +1,5 @@
 //! Breaking jams in the control tick: the jam watch fed with the filter's active rows of
-//! the last tick and each vehicle's distance to its place; jammed vehicles then pass on
+//! the last tick, what it took of each command, and each vehicle's distance to its place; jammed vehicles then pass on
 //! the jam layer (`crate::safety::layers`: their altitude target moves, from the next
 //! tick's altitude loop on), or are turned past each other by a bias added to the
 //! commands before the saturation (`crate::safety::jam`).
@@ -49,7 +49,9 @@ impl Swarm {
             .extend(work.offsets.iter().map(|o| o.map(|o| o.norm())));
         let active = self.safety.filter.active_rows();
         let was_jammed = work.watch.any();
-        let change = work.watch.update(&settings, now, active, &work.errors);
+        let change = work
+            .watch
+            .update(&settings, now, active, &work.restrained, &work.errors);
         if work.watch.any() {
             self.safety.stats.jam_ticks += 1;
             if !was_jammed {

@@ -125,6 +125,9 @@ pub(super) struct JamWork {
     pub(super) positions: Vec<Option<Vector2<f64>>>,
     /// Horizontal commands (m/s², ENU).
     pub(super) commands: Vec<Vector2<f64>>,
+    /// Whether the last filter took at least the watch's share of each vehicle's command
+    /// away.
+    pub(super) restrained: Vec<bool>,
 }
 
 impl SafetyWork {
@@ -315,6 +318,25 @@ impl Swarm {
                     );
                 }
             }
+        }
+        // What the filter took of each command, for the jam watch: an active row holds a
+        // vehicle only when it took a good share of the law's command away.
+        if let Some(jams) = setup.jams {
+            let work = &mut self.safety.jams;
+            work.restrained.clear();
+            work.restrained.extend(
+                self.safety
+                    .xy
+                    .iter()
+                    .zip(&self.law.commands)
+                    .zip(&self.safety.agents)
+                    .map(|((post, pre), a)| {
+                        let taken = (pre.xy() - post).norm();
+                        a.controlled
+                            && taken > 0.0
+                            && taken >= jams.restrained_share * pre.xy().norm()
+                    }),
+            );
         }
         for (i, xy) in self.safety.xy.iter().enumerate() {
             if self.safety.agents[i].controlled && !self.is_remote(VehicleIndex(i)) {
