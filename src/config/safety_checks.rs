@@ -100,7 +100,7 @@ impl Config {
             Some(f) if altitude - layer_m >= f.min_altitude_m + f.margin_m => false,
             Some(f) => {
                 p.push(format!(
-                    "safety.jam_break = \"layer\": a jam layer {layer_m} m above or below formation.altitude_m = {altitude} m leaves the fence's altitudes [{}, {}] m (margin {} m): lower safety.jam_layer_m (at least safety.vertical_m = {} m), widen the band, or set safety.jam_break = \"turn\"",
+                    "safety.jam_break = \"layer\": a jam layer {layer_m} m above or below formation.altitude_m = {altitude} m leaves the fence's altitudes [{}, {}] m (margin {} m): lower safety.jam_layer_m (at least safety.vertical_m = {} m), widen the band, set safety.jam_break = \"turn\", or stop breaking jams with safety.resolve_jams = false",
                     f.min_altitude_m, f.max_altitude_m, f.margin_m, self.safety.vertical_m
                 ));
                 return None;

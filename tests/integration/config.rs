@@ -708,7 +708,7 @@ fn the_jam_layer_fits_the_fence_band_above_or_below_or_is_refused() {
     // No room either way: refused, naming the numbers and the ways out.
     let e = rule("", Some((40.0, 63.0))).unwrap_err();
     assert!(
-        e.lines().any(|l| l == "safety.jam_break = \"layer\": a jam layer 12 m above or below formation.altitude_m = 50 m leaves the fence's altitudes [40, 63] m (margin 2 m): lower safety.jam_layer_m (at least safety.vertical_m = 9 m), widen the band, or set safety.jam_break = \"turn\""),
+        e.lines().any(|l| l == "safety.jam_break = \"layer\": a jam layer 12 m above or below formation.altitude_m = 50 m leaves the fence's altitudes [40, 63] m (margin 2 m): lower safety.jam_layer_m (at least safety.vertical_m = 9 m), widen the band, set safety.jam_break = \"turn\", or stop breaking jams with safety.resolve_jams = false"),
         "{e}"
     );
     // ... which the turn needs no room for, and a smaller layer fits.
@@ -732,8 +732,18 @@ fn the_jam_layer_fits_the_fence_band_above_or_below_or_is_refused() {
         e.contains("unknown variant `climb`, expected `layer` or `turn`"),
         "{e}"
     );
-    // Off unless jams are broken.
-    let off = with("[formation]", "[safety]\njam_layer_m = 12.0\n\n[formation]");
+    // Jams are broken on the layer unless the file says not to.
+    let default = Config::from_toml(&with("[formation]", "[safety]\n\n[formation]"))
+        .unwrap()
+        .validate()
+        .unwrap();
+    let jams = default.safety.and_then(|s| s.jams).unwrap();
+    assert_eq!(jams.layer.map(|l| l.offset_up_m()), Some(12.0));
+    assert_eq!(jams.restrained_share, 0.5);
+    let off = with(
+        "[formation]",
+        "[safety]\nresolve_jams = false\njam_layer_m = 12.0\n\n[formation]",
+    );
     let setup = Config::from_toml(&off).unwrap().validate().unwrap();
     assert_eq!(setup.safety.and_then(|s| s.jams), None);
 }

@@ -175,22 +175,35 @@ fn config(text: &str) -> Config {
     Config::from_toml(text).unwrap()
 }
 
+/// Assigned, the block reaches its circle and the jam watch (on by default) finds no jam:
+/// the filter trims the commands without holding anybody. In vehicle order every path
+/// crosses the block: without breaking jams the filter keeps them apart and the formation
+/// does not finish; the default breaks them on the layer and gets most of the way.
 #[test]
 fn a_four_by_four_block_assigned_to_a_circle_finishes_apart() {
     let assigned = fly(&config(&block_circle()), 90.0);
     let mut fixed = config(&block_circle());
     fixed.formation.assign = Some("fixed".into());
+    let broken = fly(&fixed, 90.0);
+    fixed.safety.resolve_jams = false;
     let in_order = fly(&fixed, 90.0);
-    eprintln!("assigned {assigned:?}\nin vehicle order {in_order:?}");
+    eprintln!("assigned {assigned:?}\nin vehicle order {in_order:?}\nits jams broken {broken:?}");
     assert!(assigned.formation_m < 1.0, "{assigned:?}");
     assert!(assigned.min_separation_m >= 0.95 * 3.0, "{assigned:?}");
     assert!(assigned.velocity_off < 1e-3, "{assigned:?}");
     assert_eq!(assigned.fallbacks, 0);
-    // In vehicle order every path crosses the block: the filter keeps them apart and
-    // the formation does not finish.
+    assert_eq!(
+        (assigned.jams, assigned.layer_climbs),
+        (0, 0),
+        "{assigned:?}"
+    );
     assert!(in_order.min_separation_m >= 0.95 * 3.0, "{in_order:?}");
     assert!(in_order.formation_m > 5.0, "{in_order:?}");
     assert!(in_order.filtered_ticks > assigned.filtered_ticks);
+    assert!(broken.min_separation_m >= 0.95 * 3.0, "{broken:?}");
+    assert!(broken.jams > 0 && broken.layer_climbs > 0, "{broken:?}");
+    assert!(broken.formation_m < 4.0, "{broken:?}");
+    assert!(broken.weighted_off < 1e-3, "{broken:?}");
 }
 
 /// A ring of 36 converges slowly (its smallest non-zero eigenvalue is 0.008, and at the
@@ -217,6 +230,8 @@ fn a_six_by_six_block_assigned_does_no_worse_than_the_law_alone() {
         "{with_filter:?}"
     );
     assert!(with_filter.weighted_off < 1e-3, "{with_filter:?}");
+    // The jam watch (on by default) sees a slow ring, not a jam.
+    assert_eq!(with_filter.jams, 0, "{with_filter:?}");
     assert!(
         with_filter.velocity_off <= alone.velocity_off + 1e-3,
         "{with_filter:?}"
