@@ -732,18 +732,17 @@ fn the_jam_layer_fits_the_fence_band_above_or_below_or_is_refused() {
         e.contains("unknown variant `climb`, expected `layer` or `turn`"),
         "{e}"
     );
-    // Jams are broken on the layer unless the file says not to.
-    let default = Config::from_toml(&with("[formation]", "[safety]\n\n[formation]"))
+    // The watch's share of a command taken, at its default.
+    let jams = Config::from_toml(&file("", None))
         .unwrap()
         .validate()
+        .unwrap()
+        .safety
+        .and_then(|s| s.jams)
         .unwrap();
-    let jams = default.safety.and_then(|s| s.jams).unwrap();
-    assert_eq!(jams.layer.map(|l| l.offset_up_m()), Some(12.0));
     assert_eq!(jams.restrained_share, 0.5);
-    let off = with(
-        "[formation]",
-        "[safety]\nresolve_jams = false\njam_layer_m = 12.0\n\n[formation]",
-    );
+    // Off unless jams are broken.
+    let off = with("[formation]", "[safety]\njam_layer_m = 12.0\n\n[formation]");
     let setup = Config::from_toml(&off).unwrap().validate().unwrap();
     assert_eq!(setup.safety.and_then(|s| s.jams), None);
 }

@@ -175,18 +175,20 @@ fn config(text: &str) -> Config {
     Config::from_toml(text).unwrap()
 }
 
-/// Assigned, the block reaches its circle and the jam watch (on by default) finds no jam:
-/// the filter trims the commands without holding anybody. In vehicle order every path
+/// Assigned, the block reaches its circle, and the jam watch finds no jam there: the
+/// filter trims the commands without holding anybody. In vehicle order every path
 /// crosses the block: without breaking jams the filter keeps them apart and the formation
-/// does not finish; the default breaks them on the layer and gets most of the way.
+/// does not finish; breaking them on the layer gets most of the way.
 #[test]
 fn a_four_by_four_block_assigned_to_a_circle_finishes_apart() {
-    let assigned = fly(&config(&block_circle()), 90.0);
+    let mut watched = config(&block_circle());
+    watched.safety.resolve_jams = true;
+    let assigned = fly(&watched, 90.0);
     let mut fixed = config(&block_circle());
     fixed.formation.assign = Some("fixed".into());
-    let broken = fly(&fixed, 90.0);
-    fixed.safety.resolve_jams = false;
     let in_order = fly(&fixed, 90.0);
+    fixed.safety.resolve_jams = true;
+    let broken = fly(&fixed, 90.0);
     eprintln!("assigned {assigned:?}\nin vehicle order {in_order:?}\nits jams broken {broken:?}");
     assert!(assigned.formation_m < 1.0, "{assigned:?}");
     assert!(assigned.min_separation_m >= 0.95 * 3.0, "{assigned:?}");
@@ -215,7 +217,9 @@ fn a_four_by_four_block_assigned_to_a_circle_finishes_apart() {
 fn a_six_by_six_block_assigned_does_no_worse_than_the_law_alone() {
     // Yu's bound for m = 18 is β²/α > 117.4: α = 0.2 with the file's β = 5 gives 125.
     let text = block_of(6).replace("alpha = 1.0", "alpha = 0.2");
-    let with_filter = fly(&config(&text), 90.0);
+    let mut watched = config(&text);
+    watched.safety.resolve_jams = true;
+    let with_filter = fly(&watched, 90.0);
     let mut off = config(&text);
     off.safety.enabled = false;
     let alone = fly(&off, 90.0);
@@ -230,7 +234,7 @@ fn a_six_by_six_block_assigned_does_no_worse_than_the_law_alone() {
         "{with_filter:?}"
     );
     assert!(with_filter.weighted_off < 1e-3, "{with_filter:?}");
-    // The jam watch (on by default) sees a slow ring, not a jam.
+    // The jam watch sees a slow ring, not a jam.
     assert_eq!(with_filter.jams, 0, "{with_filter:?}");
     assert!(
         with_filter.velocity_off <= alone.velocity_off + 1e-3,
