@@ -20,7 +20,9 @@ impl Swarm {
             return;
         };
         if !matches!(self.phase, SwarmPhase::Consensus(_)) {
-            self.leave_the_jam_layer(now);
+            if let Some(rule) = settings.layer {
+                self.leave_the_jam_layer(now, &rule);
+            }
             return;
         }
         let n = self.vehicle_count();
@@ -149,6 +151,12 @@ impl Swarm {
                 _ => {}
             }
         }
+        // A vehicle climbs or comes down only after a tick the filter finished: on a tick
+        // out of time it checked horizontal braking alone, and moving vehicles through the
+        // block's altitude then lost the separation in real time (docs/dense.md).
+        if !work.filter_finished {
+            return;
+        }
         work.remote_layered.clear();
         if sharded {
             work.remote_layered.extend_from_slice(&work.layered);
@@ -206,24 +214,41 @@ impl Swarm {
         names.join(", ")
     }
 
-    /// Out of consensus every vehicle flies at the formation's altitude again.
-    fn leave_the_jam_layer(&mut self, now: SimTime) {
-        let layered = &mut self.safety.jams.layered;
-        if !layered.iter().any(Option::is_some) {
+    /// Out of consensus every vehicle comes back to the formation's altitude, each once
+    /// nobody is within the layer's clearance of it and after a tick the filter finished:
+    /// all at once, a holding block had vehicles come down onto it.
+    fn leave_the_jam_layer(&mut self, now: SimTime, rule: &LayerRule) {
+        let work = &mut self.safety.jams;
+        if !work.layered.iter().any(Option::is_some) || !work.filter_finished {
             return;
         }
-        let back: Vec<usize> = (0..layered.len())
-            .filter(|&k| layered[k].is_some())
+        work.positions.clear();
+        work.positions
+            .extend(self.law.states.iter().map(|s| s.map(|s| s.pos_enu_m.xy())));
+        let positions = &work.positions;
+        let back: Vec<usize> = (0..work.layered.len())
+            .filter(|&k| work.layered[k].is_some() && self.slots[k].link().is_some())
+            .filter(|&k| {
+                positions.get(k).copied().flatten().is_some_and(|p| {
+                    positions.iter().enumerate().all(|(j, q)| {
+                        j == k || q.is_none_or(|q| (q - p).norm() >= rule.clear_m)
+                    })
+                })
+            })
             .collect();
-        layered.iter_mut().for_each(|l| *l = None);
+        for &k in &back {
+            work.layered[k] = None;
+        }
+        if back.is_empty() {
+            return;
+        }
         let names = self.labels(&back);
         self.log.push(
             now,
-            true,
+            false,
             format!(
-                "consensus over: vehicle(s) {} come back from the jam layer to the formation's \
-                 altitude",
-                names
+                "consensus over: vehicle(s) {names} come back from the jam layer to the \
+                 formation's altitude: nobody near"
             ),
         );
     }

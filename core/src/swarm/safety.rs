@@ -128,6 +128,9 @@ pub(super) struct JamWork {
     /// Whether the last filter took at least the watch's share of each vehicle's command
     /// away.
     pub(super) restrained: Vec<bool>,
+    /// Whether the last filter call finished (its solve and its check in time, no
+    /// fallback): vehicles move to and from the jam layer only then.
+    pub(super) filter_finished: bool,
 }
 
 impl SafetyWork {
@@ -236,6 +239,9 @@ impl Swarm {
             self.setup.fence.as_ref().map(|f| (&f.fence, f.margin_m)),
         );
         let fell_back = matches!(report.outcome, Outcome::Fallback { .. });
+        self.safety.jams.filter_finished = !fell_back
+            && !report.check_out_of_time
+            && !matches!(report.outcome, Outcome::Unfinished { .. });
         let stats = &mut self.safety.stats;
         stats.ticks += 1;
         stats.active_ticks += u64::from(report.active > 0);
