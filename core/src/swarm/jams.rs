@@ -151,9 +151,10 @@ impl Swarm {
                 _ => {}
             }
         }
-        // A vehicle climbs or comes down only after a tick the filter finished: on a tick
-        // out of time it checked horizontal braking alone, and moving vehicles through the
-        // block's altitude then lost the separation in real time (docs/dense.md).
+        // A vehicle climbs or comes down only while the filter keeps finishing
+        // (`super::safety::LAYER_CALM_S`): on a tick out of time it checks horizontal
+        // braking alone, and moving vehicles through the block's altitude then lost the
+        // separation in real time (docs/dense.md).
         if !work.filter_finished {
             return;
         }
@@ -215,7 +216,7 @@ impl Swarm {
     }
 
     /// Out of consensus every vehicle comes back to the formation's altitude, each once
-    /// nobody is within the layer's clearance of it and after a tick the filter finished:
+    /// nobody is within the layer's clearance of it and while the filter keeps finishing:
     /// all at once, a holding block had vehicles come down onto it.
     fn leave_the_jam_layer(&mut self, now: SimTime, rule: &LayerRule) {
         let work = &mut self.safety.jams;

@@ -21,6 +21,11 @@ pub const UNMEASURED_RESPONSE_S: f64 = 0.3;
 /// ([`crate::safety::Agent::lag_s`]).
 pub const UNMEASURED_LAG_S: f64 = 0.2;
 
+/// How long every filter call must have finished before a vehicle moves to or from the
+/// jam layer (s): a climb takes seconds, and on a tick out of time the check brakes
+/// horizontally and cannot stop a vertical move (docs/dense.md).
+pub const LAYER_CALM_S: f64 = 2.0;
+
 /// The longest measured attitude response counted (s); a longer fit is not trusted.
 pub const MAX_RESPONSE_S: f64 = 1.0;
 
@@ -128,9 +133,11 @@ pub(super) struct JamWork {
     /// Whether the last filter took at least the watch's share of each vehicle's command
     /// away.
     pub(super) restrained: Vec<bool>,
-    /// Whether the last filter call finished (its solve and its check in time, no
-    /// fallback): vehicles move to and from the jam layer only then.
+    /// Whether every filter call of the last [`LAYER_CALM_S`] finished (its solve and its
+    /// check in time, no fallback): vehicles move to and from the jam layer only then.
     pub(super) filter_finished: bool,
+    /// When a filter call last did not finish.
+    pub(super) last_unfinished: Option<SimTime>,
 }
 
 impl SafetyWork {
@@ -239,9 +246,16 @@ impl Swarm {
             self.setup.fence.as_ref().map(|f| (&f.fence, f.margin_m)),
         );
         let fell_back = matches!(report.outcome, Outcome::Fallback { .. });
-        self.safety.jams.filter_finished = !fell_back
-            && !report.check_out_of_time
-            && !matches!(report.outcome, Outcome::Unfinished { .. });
+        let work = &mut self.safety.jams;
+        if fell_back
+            || report.check_out_of_time
+            || matches!(report.outcome, Outcome::Unfinished { .. })
+        {
+            work.last_unfinished = Some(now);
+        }
+        work.filter_finished = work
+            .last_unfinished
+            .is_none_or(|t| now.saturating_since(t).as_secs_f64() >= LAYER_CALM_S);
         let stats = &mut self.safety.stats;
         stats.ticks += 1;
         stats.active_ticks += u64::from(report.active > 0);
