@@ -156,11 +156,10 @@ pub struct SafetySection {
     /// 95 % of the separation, or a fallback) while it flies its law: `hold` (default),
     /// `land` or `continue`.
     pub action: crate::swarm::BreachAction,
-    /// Break jams (default false): vehicles the filter has held (an active row, and at
+    /// Break jams (default true): vehicles the filter has held (an active row, and at
     /// least half of the command taken away) for `jam_hold_s` without closing on their
-    /// places are broken as `jam_break` says (docs/dense.md). Off by default: in real time,
-    /// with the filter out of time on most ticks, vehicles climbing to and coming back
-    /// from the layer lost the separation (docs/dense.md).
+    /// places are broken as `jam_break` says, on the layer only while the filter keeps up
+    /// (docs/dense.md).
     pub resolve_jams: bool,
     /// How long a vehicle is held without progress before it counts as jammed (s,
     /// default 5).
@@ -195,7 +194,7 @@ impl Default for SafetySection {
             vertical_m: 9.0,
             braking_share: 0.5,
             action: crate::swarm::BreachAction::Hold,
-            resolve_jams: false,
+            resolve_jams: true,
             jam_hold_s: 5.0,
             jam_break: JamBreak::Layer,
             jam_layer_m: None,

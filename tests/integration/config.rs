@@ -741,8 +741,16 @@ fn the_jam_layer_fits_the_fence_band_above_or_below_or_is_refused() {
         .and_then(|s| s.jams)
         .unwrap();
     assert_eq!(jams.restrained_share, 0.5);
-    // Off unless jams are broken.
-    let off = with("[formation]", "[safety]\njam_layer_m = 12.0\n\n[formation]");
+    // On by default; off when the file says so.
+    let default = Config::from_toml(&with("[formation]", "[safety]\n\n[formation]"))
+        .unwrap()
+        .validate()
+        .unwrap();
+    assert!(default.safety.and_then(|s| s.jams).is_some());
+    let off = with(
+        "[formation]",
+        "[safety]\nresolve_jams = false\njam_layer_m = 12.0\n\n[formation]",
+    );
     let setup = Config::from_toml(&off).unwrap().validate().unwrap();
     assert_eq!(setup.safety.and_then(|s| s.jams), None);
 }

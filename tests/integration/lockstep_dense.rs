@@ -181,14 +181,12 @@ fn config(text: &str) -> Config {
 /// does not finish; breaking them on the layer gets most of the way.
 #[test]
 fn a_four_by_four_block_assigned_to_a_circle_finishes_apart() {
-    let mut watched = config(&block_circle());
-    watched.safety.resolve_jams = true;
-    let assigned = fly(&watched, 90.0);
+    let assigned = fly(&config(&block_circle()), 90.0);
     let mut fixed = config(&block_circle());
     fixed.formation.assign = Some("fixed".into());
-    let in_order = fly(&fixed, 90.0);
-    fixed.safety.resolve_jams = true;
     let broken = fly(&fixed, 90.0);
+    fixed.safety.resolve_jams = false;
+    let in_order = fly(&fixed, 90.0);
     eprintln!("assigned {assigned:?}\nin vehicle order {in_order:?}\nits jams broken {broken:?}");
     assert!(assigned.formation_m < 1.0, "{assigned:?}");
     assert!(assigned.min_separation_m >= 0.95 * 3.0, "{assigned:?}");
@@ -217,9 +215,7 @@ fn a_four_by_four_block_assigned_to_a_circle_finishes_apart() {
 fn a_six_by_six_block_assigned_does_no_worse_than_the_law_alone() {
     // Yu's bound for m = 18 is β²/α > 117.4: α = 0.2 with the file's β = 5 gives 125.
     let text = block_of(6).replace("alpha = 1.0", "alpha = 0.2");
-    let mut watched = config(&text);
-    watched.safety.resolve_jams = true;
-    let with_filter = fly(&watched, 90.0);
+    let with_filter = fly(&config(&text), 90.0);
     let mut off = config(&text);
     off.safety.enabled = false;
     let alone = fly(&off, 90.0);

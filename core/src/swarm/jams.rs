@@ -231,9 +231,10 @@ impl Swarm {
             .filter(|&k| work.layered[k].is_some() && self.slots[k].link().is_some())
             .filter(|&k| {
                 positions.get(k).copied().flatten().is_some_and(|p| {
-                    positions.iter().enumerate().all(|(j, q)| {
-                        j == k || q.is_none_or(|q| (q - p).norm() >= rule.clear_m)
-                    })
+                    positions
+                        .iter()
+                        .enumerate()
+                        .all(|(j, q)| j == k || q.is_none_or(|q| (q - p).norm() >= rule.clear_m))
                 })
             })
             .collect();
