@@ -61,6 +61,29 @@ pub struct LayerChange {
     pub back: Vec<usize>,
 }
 
+/// Whether no other vehicle is within `clear_m` of vehicle `k` horizontally (false when
+/// its position is unknown).
+fn nobody_near(clear_m: f64, positions_m: &[Option<Vector2<f64>>], k: usize) -> bool {
+    positions_m.get(k).copied().flatten().is_some_and(|p| {
+        positions_m
+            .iter()
+            .enumerate()
+            .all(|(j, q)| j == k || q.is_none_or(|q| (q - p).norm() >= clear_m))
+    })
+}
+
+/// When consensus is over: which of the layered vehicles `ks` may come back now, those
+/// with nobody within the rule's clearance horizontally (the others wait, so that a block
+/// holding below is not come down upon).
+pub fn clear_to_come_back(
+    rule: &LayerRule,
+    ks: impl Iterator<Item = usize>,
+    positions_m: &[Option<Vector2<f64>>],
+) -> Vec<usize> {
+    ks.filter(|&k| nobody_near(rule.clear_m, positions_m, k))
+        .collect()
+}
+
 /// Whether the way to a place points into the northern half (east included, west not):
 /// of two opposite ways, exactly one does.
 pub fn northern(way: Vector2<f64>) -> bool {
@@ -86,14 +109,7 @@ pub fn update_layers(
     layered: &mut [Option<SimTime>],
 ) -> LayerChange {
     let n = layered.len().min(offset_m.len()).min(positions_m.len());
-    let nobody_near = |k: usize| {
-        positions_m[k].is_some_and(|p| {
-            positions_m
-                .iter()
-                .enumerate()
-                .all(|(j, q)| j == k || q.is_none_or(|q| (q - p).norm() >= rule.clear_m))
-        })
-    };
+    let nobody_near = |k: usize| nobody_near(rule.clear_m, positions_m, k);
     let way_clear = |layered: &[Option<SimTime>], k: usize, offset: Vector2<f64>| {
         positions_m[k].is_some_and(|p| {
             positions_m.iter().enumerate().all(|(j, q)| {
@@ -331,6 +347,23 @@ mod tests {
             &mut layered,
         );
         assert_eq!(change.back, vec![0]);
+    }
+
+    #[test]
+    fn when_consensus_is_over_only_a_vehicle_with_nobody_near_comes_back() {
+        // Vehicles 0 and 2 on the layer; 1 at the formation's altitude 3 m from 0 (inside
+        // the 3.6 m clearance), 2 alone (4 m from 1, 5 m from 0); 3 not known.
+        let positions = [v(0.0, 0.0), v(3.0, 0.0), v(3.0, 4.0), None];
+        assert_eq!(
+            clear_to_come_back(&RULE, [0, 2, 3].into_iter(), &positions),
+            vec![2]
+        );
+        // Exactly the clearance away counts as clear.
+        let positions = [v(0.0, 0.0), v(3.6, 0.0)];
+        assert_eq!(
+            clear_to_come_back(&RULE, [0].into_iter(), &positions),
+            vec![0]
+        );
     }
 
     #[test]

@@ -9,7 +9,7 @@ use ringswarm_wire::time::SimTime;
 
 use super::{Swarm, SwarmPhase};
 use crate::safety::jam::{JamSettings, rotation_bias};
-use crate::safety::layers::{LayerRule, update_layers};
+use crate::safety::layers::{LayerRule, clear_to_come_back, update_layers};
 
 impl Swarm {
     /// On consensus ticks with `[safety]` and jam breaking on: which vehicles are jammed
@@ -226,18 +226,12 @@ impl Swarm {
         work.positions.clear();
         work.positions
             .extend(self.law.states.iter().map(|s| s.map(|s| s.pos_enu_m.xy())));
-        let positions = &work.positions;
-        let back: Vec<usize> = (0..work.layered.len())
-            .filter(|&k| work.layered[k].is_some() && self.slots[k].link().is_some())
-            .filter(|&k| {
-                positions.get(k).copied().flatten().is_some_and(|p| {
-                    positions
-                        .iter()
-                        .enumerate()
-                        .all(|(j, q)| j == k || q.is_none_or(|q| (q - p).norm() >= rule.clear_m))
-                })
-            })
-            .collect();
+        let layered = &work.layered;
+        let back = clear_to_come_back(
+            rule,
+            (0..layered.len()).filter(|&k| layered[k].is_some() && self.slots[k].link().is_some()),
+            &work.positions,
+        );
         for &k in &back {
             work.layered[k] = None;
         }

@@ -26,6 +26,12 @@ pub const UNMEASURED_LAG_S: f64 = 0.2;
 /// horizontally and cannot stop a vertical move (docs/dense.md).
 pub const LAYER_CALM_S: f64 = 2.0;
 
+/// Whether the filter has kept up for [`LAYER_CALM_S`] at `now`, its last call out of time
+/// or fallen back at `last_unfinished` (`None`: never).
+fn calm(last_unfinished: Option<SimTime>, now: SimTime) -> bool {
+    last_unfinished.is_none_or(|t| now.saturating_since(t).as_secs_f64() >= LAYER_CALM_S)
+}
+
 /// The longest measured attitude response counted (s); a longer fit is not trusted.
 pub const MAX_RESPONSE_S: f64 = 1.0;
 
@@ -253,9 +259,7 @@ impl Swarm {
         {
             work.last_unfinished = Some(now);
         }
-        work.filter_finished = work
-            .last_unfinished
-            .is_none_or(|t| now.saturating_since(t).as_secs_f64() >= LAYER_CALM_S);
+        work.filter_finished = calm(work.last_unfinished, now);
         let stats = &mut self.safety.stats;
         stats.ticks += 1;
         stats.active_ticks += u64::from(report.active > 0);
@@ -506,5 +510,18 @@ impl Swarm {
     /// The separation the filter enforces (`None`: off).
     pub fn safety_enforced(&self) -> Option<crate::safety::Separation> {
         self.setup.safety.map(|s| s.separation)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_layer_waits_two_seconds_of_finished_filter_calls() {
+        let at = SimTime::from_secs_f64;
+        assert!(calm(None, at(0.0)));
+        assert!(!calm(Some(at(10.0)), at(11.98)));
+        assert!(calm(Some(at(10.0)), at(12.0)));
     }
 }
