@@ -213,6 +213,16 @@ mod tests {
         SimTime::from_secs_f64(v)
     }
 
+    /// Vehicles 0 and 1, 8 m from their places, in an active row every 20 ms tick from 0
+    /// to `ticks`, restrained as `restrained` says.
+    fn hold_pair(watch: &mut JamWatch, ticks: u32, restrained: &[bool]) {
+        let errors = [Some(8.0), Some(8.0)];
+        for k in 0..=ticks {
+            let t = s(f64::from(k) * 0.02);
+            watch.update(&JamSettings::default(), t, &[(0, 1)], restrained, &errors);
+        }
+    }
+
     #[test]
     fn a_vehicle_held_without_progress_is_jammed_after_the_hold_and_released_later() {
         let settings = JamSettings::default();
@@ -246,26 +256,14 @@ mod tests {
 
     #[test]
     fn a_row_that_only_trims_a_command_holds_nobody() {
-        // Vehicles 0 and 1 in an active row for 10 s, 8 m from their places: the filter
-        // took half or more of 1's command away, not of 0's: only 1 is jammed.
-        let settings = JamSettings::default();
+        // 10 s in an active row: the filter took half or more of 1's command away, not of
+        // 0's: only 1 is jammed.
         let mut watch = JamWatch::default();
-        let errors = [Some(8.0), Some(8.0)];
-        for k in 0..=500 {
-            watch.update(
-                &settings,
-                s(f64::from(k) * 0.02),
-                &[(0, 1)],
-                &[false, true],
-                &errors,
-            );
-        }
+        hold_pair(&mut watch, 500, &[false, true]);
         assert!(!watch.is_jammed(0) && watch.is_jammed(1));
         // Nothing said of a vehicle: not restrained.
         let mut watch = JamWatch::default();
-        for k in 0..=500 {
-            watch.update(&settings, s(f64::from(k) * 0.02), &[(0, 1)], &[], &errors);
-        }
+        hold_pair(&mut watch, 500, &[]);
         assert!(!watch.any());
     }
 
@@ -337,16 +335,7 @@ mod tests {
     fn the_bias_turns_a_pair_and_keeps_the_weighted_sum() {
         let settings = JamSettings::default();
         let mut watch = JamWatch::default();
-        let errors = [Some(8.0), Some(8.0)];
-        for k in 0..=250 {
-            watch.update(
-                &settings,
-                s(f64::from(k) * 0.02),
-                &[(0, 1)],
-                &[true; 3],
-                &errors,
-            );
-        }
+        hold_pair(&mut watch, 250, &[true; 2]);
         assert!(watch.is_jammed(0));
         // Vehicle 0 east of vehicle 1: normal east, turned +90°: north for 0, south for 1.
         let positions = [Some(Vector2::new(2.0, 0.0)), Some(Vector2::new(-2.0, 0.0))];
