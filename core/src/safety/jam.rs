@@ -169,6 +169,12 @@ impl JamWatch {
     pub fn any(&self) -> bool {
         self.held.iter().any(|h| h.jammed)
     }
+
+    /// Whether no vehicle is held or jammed: a tick with no active pair row then changes
+    /// nothing, and need not be taken.
+    pub fn idle(&self) -> bool {
+        self.held.iter().all(|h| h.since.is_none() && !h.jammed)
+    }
 }
 
 /// Adds the turning bias of every active pair `(i, j)` with a jammed vehicle to the
@@ -251,6 +257,8 @@ mod tests {
                 .released,
             vec![0, 1]
         );
+        // Released and unheld past the gap: nothing left for a quiet tick to change.
+        assert!(watch.idle());
         assert!(!watch.any());
     }
 
@@ -259,8 +267,10 @@ mod tests {
         // 10 s in an active row: the filter took half or more of 1's command away, not of
         // 0's: only 1 is jammed.
         let mut watch = JamWatch::default();
+        assert!(watch.idle());
         hold_pair(&mut watch, 500, &[false, true]);
         assert!(!watch.is_jammed(0) && watch.is_jammed(1));
+        assert!(!watch.idle());
         // Nothing said of a vehicle: not restrained.
         let mut watch = JamWatch::default();
         hold_pair(&mut watch, 500, &[]);

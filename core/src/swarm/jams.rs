@@ -25,6 +25,20 @@ impl Swarm {
             }
             return;
         }
+        // Nobody held, jammed or on the layer, and no pair row active: the tick changes
+        // nothing (with shards, another shard's vehicles may be on the layer).
+        let quiet = self.peers.is_none()
+            && self.safety.jams.watch.idle()
+            && !self.safety.jams.layered.iter().any(Option::is_some)
+            && self
+                .safety
+                .filter
+                .active_rows()
+                .iter()
+                .all(|&(i, j)| i == j);
+        if quiet {
+            return;
+        }
         let n = self.vehicle_count();
         let work = &mut self.safety.jams;
         work.positions.clear();
