@@ -344,8 +344,12 @@ impl Swarm {
             }
         }
         // What the filter took of each command, for the jam watch: an active row holds a
-        // vehicle only when it took a good share of the law's command away.
-        if let Some(jams) = setup.jams {
+        // vehicle only when it took a good share of the law's command away (read only with
+        // this call's active rows, so not needed without one).
+        if let Some(jams) = setup
+            .jams
+            .filter(|_| !self.safety.filter.active_rows().is_empty())
+        {
             let work = &mut self.safety.jams;
             work.restrained.clear();
             work.restrained.extend(
