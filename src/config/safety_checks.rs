@@ -4,11 +4,8 @@
 use super::Config;
 use super::problems::Problems;
 use super::validate::MAX_DISTANCE_M;
+use crate::safety::layers::LAYER_CLEAR_SHARE;
 use crate::swarm::{GuardLimits, MAX_SPEED_MPS};
-
-/// A vehicle comes back from the jam layer only with nobody within this many horizontal
-/// separations of it, or of its way to its place.
-const LAYER_CLEAR_SHARE: f64 = 1.2;
 
 impl Config {
     /// `[safety]`: every key checked by name, and no two formation places closer than the

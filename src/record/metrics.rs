@@ -349,6 +349,9 @@ pub struct SafetyReport {
     pub jam_ticks: u64,
     /// Times a vehicle left the formation's altitude for the jam layer.
     pub layer_climbs: u64,
+    /// Vehicles that, told to land above another closer than the horizontal
+    /// separation, first flew clear of every other vehicle's way down.
+    pub landing_moves: u64,
     /// Ticks on which the time limit (`budget_share`, in real time) ended a solve before
     /// its answer: the dual ascent's answer so far went out, secured by the stopping
     /// check.
@@ -400,6 +403,7 @@ impl SafetyReport {
             jams: s.jams,
             jam_ticks: s.jam_ticks,
             layer_climbs: s.layer_climbs,
+            landing_moves: s.landing_moves,
             unfinished_ticks: s.unfinished_ticks,
             unfinished_missed_mps2: s.unfinished_missed_mps2,
             unfinished_braked: s.unfinished_braked,

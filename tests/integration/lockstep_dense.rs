@@ -334,3 +334,94 @@ fn an_assignment_solved_off_the_tick_gives_the_places_solved_in_it() {
         1
     );
 }
+
+/// Landing with vehicles on the jam layer: the mirror swap stopped 20 s into consensus,
+/// jams still being passed, with the ground at z = 0 (the formation 50 m up). Coming
+/// straight down, a vehicle on the layer lands on or beside the one below it (0.55 m
+/// apart on the ground, measured before the landing was ordered this way). Each such
+/// vehicle now first flies clear at its altitude: in the air and on the ground every
+/// pair keeps 0.95 × the 3 m separation.
+#[test]
+fn a_vehicle_on_the_jam_layer_lands_clear_of_the_one_below_it() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/block-swap.toml");
+    let text = std::fs::read_to_string(path)
+        .unwrap()
+        .replace("duration_s = 240.0", "duration_s = 20.0")
+        .replace("ground_below_m = 100.0", "ground_below_m = 0.0");
+    let config = config(&text);
+    let sep = ringswarm::safety::Separation {
+        horizontal_m: 3.0,
+        vertical_m: config.safety.vertical_m,
+        gamma: 1.0,
+    };
+    let mut run = Lockstep::from_config(&config).unwrap();
+    let (mut min_landing_m, mut tick) = (f64::INFINITY, 0);
+    // The closest two horizontally, and the most vehicles on the layer, when the landing
+    // was ordered.
+    let mut at_order: Option<(f64, usize)> = None;
+    let mut until = SimTime::ZERO;
+    while !run.swarm().is_finished() && until < SimTime::from_secs_f64(300.0) {
+        until = until + std::time::Duration::from_secs(1);
+        run.run_until(until, |r| {
+            if r.swarm().control_ticks() == tick {
+                return;
+            }
+            tick = r.swarm().control_ticks();
+            if !matches!(r.swarm().phase(), SwarmPhase::Landing(_)) {
+                return;
+            }
+            let p: Vec<_> = r
+                .vehicles()
+                .iter()
+                .map(|v| ned_to_enu(v.status().pos_world_ned_m))
+                .collect();
+            let mut closest_xy = f64::INFINITY;
+            for (i, a) in p.iter().enumerate() {
+                for b in &p[i + 1..] {
+                    min_landing_m = min_landing_m.min(sep.distance_m(*a, *b));
+                    closest_xy = closest_xy.min((a.xy() - b.xy()).norm());
+                }
+            }
+            let up = p.iter().filter(|q| q.z > 50.0 + 6.0).count();
+            at_order.get_or_insert((closest_xy, up));
+        });
+    }
+    assert!(run.swarm().is_finished(), "every vehicle landed");
+    let (closest_xy, up) = at_order.expect("the landing was ordered");
+    let ground: Vec<Vector2<f64>> = run
+        .vehicles()
+        .iter()
+        .map(|v| ned_to_enu(v.status().pos_world_ned_m).xy())
+        .collect();
+    let mut min_ground_m = f64::INFINITY;
+    for (i, a) in ground.iter().enumerate() {
+        for b in &ground[i + 1..] {
+            min_ground_m = min_ground_m.min((a - b).norm());
+        }
+    }
+    let waited = run
+        .swarm()
+        .events()
+        .iter()
+        .filter(|e| e.text.contains("waits to land"))
+        .count();
+    let landed_clear = run
+        .swarm()
+        .events()
+        .iter()
+        .filter(|e| e.text.contains("lands: nobody within 3.6 m"))
+        .count();
+    eprintln!(
+        "closest at the order {closest_xy:.3} m with {up} on the layer; waited {waited}, \
+         in the air {min_landing_m:.3} m, on the ground {min_ground_m:.3} m"
+    );
+    // The case is the one to guard: vehicles on the layer, one of them over another
+    // closer than the separation.
+    assert!(up > 0 && closest_xy < 3.0, "{closest_xy} {up}");
+    assert!(waited > 0 && waited <= up, "{waited} {up}");
+    assert_eq!(run.swarm().safety_stats().landing_moves, waited as u64);
+    // Each came clear and landed without waiting out its time.
+    assert_eq!(landed_clear, waited);
+    assert!(min_landing_m >= 0.95 * 3.0, "{min_landing_m}");
+    assert!(min_ground_m >= 0.95 * 3.0, "{min_ground_m}");
+}

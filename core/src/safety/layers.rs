@@ -26,6 +26,10 @@ use ringswarm_wire::time::SimTime;
 
 use super::fence::segment_distance_m;
 
+/// A vehicle comes back from the jam layer (and comes down to land, `super::landing`) only
+/// with nobody within this many horizontal separations of it ([`LayerRule::clear_m`]).
+pub const LAYER_CLEAR_SHARE: f64 = 1.2;
+
 /// Where the layer is and when a vehicle may leave it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LayerRule {

@@ -32,6 +32,7 @@ mod exact;
 pub mod fence;
 pub mod flow;
 pub mod jam;
+pub mod landing;
 pub mod layers;
 pub mod neighbours;
 mod on_way;

@@ -20,7 +20,10 @@ impl Swarm {
             return;
         };
         if !matches!(self.phase, SwarmPhase::Consensus(_)) {
-            if let Some(rule) = settings.layer {
+            // Landing, a vehicle comes down where it is or waits (`super::landing`).
+            if let Some(rule) = settings.layer
+                && !matches!(self.phase, SwarmPhase::Landing(_))
+            {
                 self.leave_the_jam_layer(now, &rule);
             }
             return;
@@ -128,9 +131,12 @@ impl Swarm {
 }
 
 impl Swarm {
-    /// Vehicle `i`'s altitude target (m, up, common frame): the formation's, or the jam
-    /// layer's while it passes a jam there.
+    /// Vehicle `i`'s altitude target (m, up, common frame): the formation's, the jam
+    /// layer's while it passes a jam there, or the one it holds while it waits to land.
     pub(super) fn altitude_target_m(&self, i: usize) -> f64 {
+        if let Some(altitude_m) = self.slots.get(i).and_then(|s| s.waits_to_land) {
+            return altitude_m;
+        }
         let layer = self
             .setup
             .safety

@@ -43,6 +43,7 @@ mod horizon;
 
 mod io;
 mod jams;
+mod landing;
 mod laws;
 mod model;
 mod peers;
@@ -72,6 +73,7 @@ use events::EventLog;
 pub use events::{MAX_KEPT_EVENTS, REPEAT_WINDOW, SwarmEvent};
 pub use guard::{DivergenceGuard, GuardLimits, GuardTrip};
 pub use io::{LISTEN_LAG_FLOOR, MAX_TICK_DEFER};
+pub use landing::LANDING_CLEAR_WAIT;
 use model::FlownModel;
 pub use phases::LOST_LANDING_WAIT;
 pub use places::AssignJob;
@@ -319,14 +321,13 @@ impl Swarm {
 
     pub(crate) fn land_because(&mut self, now: SimTime, reason: StopReason) {
         self.stop.get_or_insert(reason);
-        if !matches!(self.phase, SwarmPhase::Landing(_)) {
+        let first = !matches!(self.phase, SwarmPhase::Landing(_));
+        if first {
             self.log
                 .push(now, false, "landing every vehicle".to_owned());
             self.phase = SwarmPhase::Landing(now);
         }
-        for link in self.slots.iter_mut().filter_map(VehicleSlot::link_mut) {
-            link.land(now);
-        }
+        self.order_landing(now, first);
         self.after_all_links(now);
     }
 

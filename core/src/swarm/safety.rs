@@ -86,6 +86,9 @@ pub struct SafetyStats {
     pub jam_ticks: u64,
     /// Times a vehicle left the formation's altitude for the jam layer.
     pub layer_climbs: u64,
+    /// Vehicles that, told to land above another closer than the horizontal
+    /// separation, first flew clear of it (`super::landing`).
+    pub landing_moves: u64,
     /// `safety.action = "continue"` was reported (once a flight).
     continue_reported: bool,
     /// The smallest ellipsoidal distance between two vehicles with a usable state, seen

@@ -58,8 +58,12 @@ pub(super) struct VehicleSlot {
     /// The velocity it holds while the swarm waits for the others (taken when it first
     /// flies on our commands), and the re-target stage's planned velocity (m/s, ENU).
     pub(super) keep_velocity: Option<Vector2<f64>>,
-    /// Where it holds while holding (m, ENU).
+    /// Where it holds while holding (m, ENU); while it waits to land, the spot clear
+    /// of the others it flies to first.
     pub(super) hold_point: Option<Vector2<f64>>,
+    /// While it waits to land clear of a vehicle below it (`super::landing`): the
+    /// altitude it holds meanwhile (m, up, common frame).
+    pub(super) waits_to_land: Option<f64>,
     /// Where it holds, having taken off under the swarm, while the swarm waits for the
     /// others (the handshake; m, ENU).
     pub(super) keep_point: Option<Vector2<f64>>,
@@ -83,6 +87,7 @@ impl VehicleSlot {
             u_z: 0.0,
             keep_velocity: None,
             hold_point: None,
+            waits_to_land: None,
             keep_point: None,
             started_on_ground: false,
             place_m,

@@ -38,6 +38,7 @@ impl Swarm {
         self.gather_states(now);
         self.update_horizon(now);
         self.transition(now);
+        self.land_when_clear(now);
         self.shard_prediction(now);
         self.assign_places_in_shards(now);
         self.observe_models(now);
