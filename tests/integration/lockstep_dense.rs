@@ -399,18 +399,12 @@ fn a_vehicle_on_the_jam_layer_lands_clear_of_the_one_below_it() {
             min_ground_m = min_ground_m.min((a - b).norm());
         }
     }
-    let waited = run
-        .swarm()
-        .events()
-        .iter()
-        .filter(|e| e.text.contains("waits to land"))
-        .count();
-    let landed_clear = run
-        .swarm()
-        .events()
-        .iter()
-        .filter(|e| e.text.contains("lands: nobody within 3.6 m"))
-        .count();
+    let events = |text: &str| {
+        let events = run.swarm().events().iter();
+        events.filter(|e| e.text.contains(text)).count()
+    };
+    let waited = events("waits to land");
+    let landed_clear = events("lands: nobody within 3.6 m");
     eprintln!(
         "closest at the order {closest_xy:.3} m with {up} on the layer; waited {waited}, \
          in the air {min_landing_m:.3} m, on the ground {min_ground_m:.3} m"

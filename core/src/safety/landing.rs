@@ -17,6 +17,23 @@ const SPOT_STEP_M: f64 = 0.5;
 /// How far from where it is a spot is looked for, in clearances.
 const SPOT_REACH_CLEARANCES: f64 = 4.0;
 
+/// The nearest other vehicle to `k` for which `within` gives a distance (its index and
+/// that distance); `None` when there is none or `k`'s position is unknown. A vehicle
+/// whose position is unknown is not counted.
+fn nearest<P: Copy>(
+    k: usize,
+    positions: &[Option<P>],
+    within: impl Fn(P, P) -> Option<f64>,
+) -> Option<(usize, f64)> {
+    let p = positions.get(k).copied().flatten()?;
+    positions
+        .iter()
+        .enumerate()
+        .filter(|&(j, _)| j != k)
+        .filter_map(|(j, q)| within(p, (*q)?).map(|d| (j, d)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+}
+
 /// Whether vehicle `k` must wait before it comes down: the nearest vehicle below it
 /// closer than `horizontal_m` horizontally (its index and the horizontal distance, m),
 /// `None` when there is none or `k`'s position is unknown.
@@ -25,37 +42,23 @@ pub fn below_within(
     k: usize,
     positions_m: &[Option<Vector3<f64>>],
 ) -> Option<(usize, f64)> {
-    let p = positions_m.get(k).copied().flatten()?;
-    positions_m
-        .iter()
-        .enumerate()
-        .filter(|&(j, _)| j != k)
-        .filter_map(|(j, q)| {
-            let q = (*q)?;
-            let d = (q.xy() - p.xy()).norm();
-            (q.z < p.z && d < horizontal_m).then_some((j, d))
-        })
-        .min_by(|a, b| a.1.total_cmp(&b.1))
+    nearest(k, positions_m, |p, q| {
+        let d = (q.xy() - p.xy()).norm();
+        (q.z < p.z && d < horizontal_m).then_some(d)
+    })
 }
 
 /// The nearest other vehicle horizontally closer than `clear_m` to `k` (index and
-/// distance, m); `None` when nobody is that close. A vehicle whose position is unknown
-/// is not counted; `k`'s own unknown position counts as nobody near.
+/// distance, m); `None` when nobody is that close or `k`'s position is unknown.
 pub fn nearest_within(
     clear_m: f64,
     k: usize,
     positions_m: &[Option<Vector2<f64>>],
 ) -> Option<(usize, f64)> {
-    let p = positions_m.get(k).copied().flatten()?;
-    positions_m
-        .iter()
-        .enumerate()
-        .filter(|&(j, _)| j != k)
-        .filter_map(|(j, q)| {
-            let d = ((*q)? - p).norm();
-            (d < clear_m).then_some((j, d))
-        })
-        .min_by(|a, b| a.1.total_cmp(&b.1))
+    nearest(k, positions_m, |p, q| {
+        let d = (q - p).norm();
+        (d < clear_m).then_some(d)
+    })
 }
 
 /// The nearest spot to `from_m` at least `clear_m` from every point of `taken_m` (where
