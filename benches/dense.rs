@@ -123,6 +123,7 @@ fn filter_row(side: usize, share: f64, limit_s: f64, kind: Rows) {
         keep_weighted_sum: true,
         time_limit_s: limit_s,
         rows: kind,
+        brake_to_mps: Vector2::zeros(),
     };
     {
         let spacing_m = 4.0;

@@ -454,6 +454,7 @@ fn safety_table() {
         keep_weighted_sum: true,
         time_limit_s: f64::INFINITY,
         rows: Rows::Barrier,
+        brake_to_mps: nalgebra::Vector2::zeros(),
     };
     for n in [6usize, 64, 1000] {
         let setup = Config::from_toml(&ring(n, 50.0))

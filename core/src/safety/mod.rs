@@ -210,6 +210,14 @@ pub struct Settings {
     pub time_limit_s: f64,
     /// Which row keeps each pair apart.
     pub rows: Rows,
+    /// The velocity the stopping check brakes a vehicle to, with the barrier rows (m/s,
+    /// ENU; zero: to rest): the swarm's common velocity while it drifts. Braked to rest,
+    /// a vehicle of a block drifting at 1 m/s is run into by the neighbours behind it
+    /// that keep flying (a vehicle not flown on our commands, another shard's on a tick
+    /// its own filter finished). Braked to the common velocity it keeps its place among
+    /// them, and a pair that both brake is as far apart as braking to rest in the frame
+    /// moving at that velocity keeps it. Not finite: zero.
+    pub brake_to_mps: Vector2<f64>,
 }
 
 impl Settings {

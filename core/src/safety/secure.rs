@@ -48,6 +48,13 @@ impl SafetyFilter {
             command_s: s.stop_s,
             brake_s: self.last_stop_s.unwrap_or(s.stop_s),
         });
+        // The plans in the frame that moves at the velocity braked to (the stopping rows
+        // plan to rest, and so does their check): a pair's distance at each instant is
+        // the same in any such frame, and braking to rest in it is braking to that
+        // velocity.
+        let frame_mps = Some(settings.brake_to_mps)
+            .filter(|v| stops.is_none() && v.iter().all(|x| x.is_finite()))
+            .unwrap_or_default();
         self.committed.resize(n, None);
         self.plans.clear();
         self.motions.clear();
@@ -71,7 +78,7 @@ impl SafetyFilter {
                 };
                 let mut plan = Plan {
                     pos_m: pos,
-                    vel_mps: vel.xy(),
+                    vel_mps: vel.xy() - frame_mps,
                     vz_mps: vel.z,
                     before_mps2: if a.controlled { before } else { [net; 2] },
                     first: First::Command(net),
@@ -179,7 +186,7 @@ impl SafetyFilter {
             self.committed[k] = Some(p.braking_mps2);
             let a = &agents[k];
             // Braking along the velocity as the plan does (from when the command acts),
-            // no further than to rest within the hold.
+            // no further than to rest within the hold (both in the plans' frame).
             let v = p.vel_mps + (p.before_mps2[0] + p.before_mps2[1]) * (0.5 * timing.delay_s);
             let speed = v.norm();
             let net = if speed > 0.0 {

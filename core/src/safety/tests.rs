@@ -18,6 +18,7 @@ fn settings(keep: bool) -> Settings {
         keep_weighted_sum: keep,
         time_limit_s: f64::INFINITY,
         rows: Rows::Barrier,
+        brake_to_mps: Vector2::zeros(),
     }
 }
 
@@ -619,4 +620,96 @@ fn with_the_stopping_rows_a_packed_swap_keeps_apart_and_braking_from_any_tick_is
     assert!(closest >= 3.0 - 1e-9, "{closest}");
     assert!(braked >= 16 * 400, "{braked}");
     assert_eq!(unresolved, 0);
+}
+
+/// The check in a frame that moves: a drifting line, the middle vehicle ours and its two
+/// neighbours flown by somebody else at the drift (1 m/s east), 3.5 m apart; our
+/// vehicle's command keeps the drift. Braked to rest, it is run into by the one behind:
+/// the check brakes it and still counts the pair. Braked to the drift, nothing conflicts
+/// and the command stays.
+#[test]
+fn braking_to_the_common_velocity_keeps_a_vehicle_s_place_in_a_drifting_line() {
+    let drift = Vector2::new(1.0, 0.0);
+    let mut agents = [
+        agent([0.0, 0.0, 50.0], [1.0, 0.0, 0.0], 1.0),
+        agent([3.5, 0.0, 50.0], [1.0, 0.0, 0.0], 1.0),
+        agent([7.0, 0.0, 50.0], [1.0, 0.0, 0.0], 1.0),
+    ];
+    agents[0].controlled = false;
+    agents[2].controlled = false;
+    let check = |brake_to_mps: Vector2<f64>| {
+        let s = Settings {
+            time_limit_s: 0.0,
+            brake_to_mps,
+            ..settings(false)
+        };
+        let mut filter = SafetyFilter::default();
+        let mut commands = [Vector2::zeros(); 3];
+        filter.filter(&s, &agents, &mut commands, None);
+        let mut commands = [Vector2::zeros(); 3];
+        let secured = filter.secure(&s, &agents, &mut commands, None);
+        (secured, commands)
+    };
+    let (at_rest, commands) = check(Vector2::zeros());
+    assert_eq!((at_rest.braked, at_rest.unresolved), (1, 1));
+    // Braking along its velocity at 2 m/s², the most that stops it within the hold:
+    // 1 m/s over the 0.02 s hold would be 50 m/s², so the braking share.
+    assert!(
+        (commands[1] - Vector2::new(-2.0, 0.0)).norm() < 1e-12,
+        "{commands:?}"
+    );
+    let (moving, commands) = check(drift);
+    assert_eq!((moving.braked, moving.unresolved), (0, 0));
+    assert_eq!(commands[1], Vector2::zeros());
+    // A velocity that is not a number is rest.
+    let (nan, _) = check(Vector2::new(f64::NAN, 0.0));
+    assert_eq!((nan.braked, nan.unresolved), (1, 1));
+}
+
+/// The same conflict seen from a frame moving at `c`: every velocity plus `c` and the
+/// check braking to `c` brakes the same vehicles, counts the same pairs and gives the same
+/// commands as the check braking to rest (accelerations do not change with the frame).
+#[test]
+fn the_check_braking_to_a_velocity_is_the_check_at_rest_in_the_frame_moving_with_it() {
+    let base = [
+        agent([0.0, 0.0, 50.0], [2.0, 0.0, 0.0], 1.0),
+        agent([4.4, 0.0, 50.0], [-2.0, 0.0, 0.0], 1.0),
+        agent([100.0, 0.0, 50.0], [1.0, 0.0, 0.0], 1.0),
+    ];
+    let law = [
+        Vector2::new(2.0, 0.0),
+        Vector2::new(-2.0, 0.0),
+        Vector2::new(0.5, 0.0),
+    ];
+    let run = |c: Vector2<f64>| {
+        let s = Settings {
+            time_limit_s: 0.0,
+            brake_to_mps: c,
+            ..settings(true)
+        };
+        let mut agents = base;
+        for a in &mut agents {
+            if let Some(side) = a.side.as_mut() {
+                side.vel_mps += Vector3::new(c.x, c.y, 0.0);
+            }
+        }
+        let mut filter = SafetyFilter::default();
+        let mut commands = law;
+        filter.filter(&s, &agents, &mut commands, None);
+        let mut commands = law;
+        let secured = filter.secure(&s, &agents, &mut commands, None);
+        (secured.braked, secured.unresolved, commands)
+    };
+    let (braked, unresolved, at_rest) = run(Vector2::zeros());
+    assert_eq!((braked, unresolved), (2, 1));
+    for c in [Vector2::new(1.0, 0.0), Vector2::new(-3.0, 2.5)] {
+        let (b, u, moving) = run(c);
+        assert_eq!((b, u), (braked, unresolved), "{c}");
+        for k in 0..3 {
+            assert!(
+                (moving[k] - at_rest[k]).norm() < 1e-9,
+                "{c} {k}: {moving:?} {at_rest:?}"
+            );
+        }
+    }
 }

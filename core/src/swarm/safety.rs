@@ -163,6 +163,42 @@ impl SafetyWork {
 }
 
 impl Swarm {
+    /// The velocity the filter's stopping check brakes a vehicle to (m/s, ENU): the
+    /// prediction in consensus (one for every shard), the w-weighted mean of the known
+    /// velocities while the vehicles keep theirs (handshake, re-target stage), and rest
+    /// once the swarm brakes and holds.
+    fn common_velocity_mps(&self) -> Vector2<f64> {
+        let keeping = matches!(
+            self.phase,
+            SwarmPhase::Handshake | SwarmPhase::Retargeting(_) | SwarmPhase::Consensus(_)
+        );
+        if !keeping {
+            return Vector2::zeros();
+        }
+        let v = match (self.phase, self.predicted_final_velocity) {
+            (SwarmPhase::Consensus(_), Some(v)) => v,
+            _ => {
+                let (mut sum, mut w_sum) = (Vector2::zeros(), 0.0);
+                for (s, w) in self.law.states.iter().zip(&self.law.w) {
+                    if let Some(s) = s {
+                        sum += s.vel_enu_mps.xy() * *w;
+                        w_sum += *w;
+                    }
+                }
+                if w_sum > 0.0 {
+                    sum / w_sum
+                } else {
+                    Vector2::zeros()
+                }
+            }
+        };
+        if v.iter().all(|x| x.is_finite()) && v.norm() <= super::MAX_SPEED_MPS {
+            v
+        } else {
+            Vector2::zeros()
+        }
+    }
+
     /// Filters the horizontal commands of the vehicles flown on our commands, in place,
     /// when `[safety]` is on.
     pub(super) fn filter_for_safety(&mut self, now: SimTime) {
@@ -247,6 +283,7 @@ impl Swarm {
             // its separation (docs/dense.md, "The synchronised stop"). The swarm flies the
             // barrier rows.
             rows: crate::safety::Rows::Barrier,
+            brake_to_mps: self.common_velocity_mps(),
         };
         let report = self.safety.filter.filter(
             &settings,
