@@ -15,7 +15,7 @@ use super::Fence;
 /// Spacing of the candidate spots, along a ring and from one ring to the next (m).
 const SPOT_STEP_M: f64 = 0.5;
 /// How far from where it is a spot is looked for, in clearances.
-const SPOT_REACH_CLEARANCES: f64 = 4.0;
+pub const SPOT_REACH_CLEARANCES: f64 = 4.0;
 
 /// The nearest other vehicle to `k` for which `within` gives a distance (its index and
 /// that distance); `None` when there is none or `k`'s position is unknown. A vehicle

@@ -10,7 +10,7 @@ use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
 use super::{Swarm, SwarmPhase, VehicleIndex};
-use crate::safety::landing::{below_within, landing_spot_m, nearest_within};
+use crate::safety::landing::{SPOT_REACH_CLEARANCES, below_within, landing_spot_m, nearest_within};
 use crate::safety::layers::LAYER_CLEAR_SHARE;
 
 /// How long a vehicle waits to come down clear of the others before it lands anyway.
@@ -103,7 +103,7 @@ impl Swarm {
                      {d:.2} m away horizontally, and no spot within {:.0} m is {clear_m:.1} m \
                      clear of the others: it holds at {altitude_m:.1} m until nobody is near \
                      (at most {:.0} s)",
-                    4.0 * clear_m,
+                    SPOT_REACH_CLEARANCES * clear_m,
                     LANDING_CLEAR_WAIT.as_secs_f64()
                 ),
             };
@@ -132,11 +132,13 @@ impl Swarm {
             .collect();
         let waited_out = now.saturating_since(since) >= LANDING_CLEAR_WAIT;
         for i in self.indices() {
-            if self.slots[i].waits_to_land.is_none() || positions[i.get()].is_none() {
+            if self.slots[i].waits_to_land.is_none() {
                 continue;
             }
+            // Without a fresh state it cannot be seen clear: it waits out its time.
+            let known = positions[i.get()].is_some();
             let nearest = nearest_within(clear_m, i.get(), &positions);
-            if nearest.is_some() && !waited_out {
+            if (!known || nearest.is_some()) && !waited_out {
                 continue;
             }
             let slot = &mut self.slots[i];
@@ -149,6 +151,11 @@ impl Swarm {
             }
             let name = self.setup.links[i.get()].file_label();
             let text = match nearest {
+                None if !known => format!(
+                    "vehicle {name} lands after waiting {:.0} s to come clear, its position \
+                     unknown",
+                    LANDING_CLEAR_WAIT.as_secs_f64()
+                ),
                 None => format!("vehicle {name} lands: nobody within {clear_m:.1} m of it"),
                 Some((j, d)) => format!(
                     "vehicle {name} lands after waiting {:.0} s to come clear: vehicle {} is \
@@ -157,7 +164,7 @@ impl Swarm {
                     self.setup.links[j].file_label()
                 ),
             };
-            self.log.push(now, nearest.is_some(), text);
+            self.log.push(now, nearest.is_some() || !known, text);
         }
     }
 }
