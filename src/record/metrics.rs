@@ -374,6 +374,10 @@ pub struct SafetyReport {
     /// The filter's time per control tick (wall clock; the sweep for pairs and the
     /// solve): median, 99th percentile and longest.
     pub filter_time: crate::swarm::timing::Quantiles,
+    /// The age the filter counted each tick, by which every pair's separation grows:
+    /// what is known of the oldest vehicle when the command acts (its state's age, how
+    /// far behind its sockets the coordinator was, its response, a control period).
+    pub counted_age: crate::swarm::timing::Quantiles,
     /// The most vehicles whose commands were solved together in one piece.
     pub largest_piece: usize,
     /// The most sweeps of the filter's dual ascent in one tick.
@@ -413,6 +417,7 @@ impl SafetyReport {
             check_unresolved: s.check_unresolved,
             check_out_of_time_ticks: s.check_out_of_time_ticks,
             filter_time: s.filter_time.quantiles(),
+            counted_age: s.counted_age.quantiles(),
             largest_piece: s.largest_piece,
             most_sweeps: s.most_sweeps,
         })

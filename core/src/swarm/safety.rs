@@ -2,6 +2,8 @@
 //! [`crate::safety::SafetyFilter`] between the law and the saturation, and what it did
 //! counted for `summary.json` and logged.
 
+use std::time::Duration;
+
 use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
@@ -71,6 +73,10 @@ pub struct SafetyStats {
     pub check_out_of_time_ticks: u64,
     /// How long each tick's filter call took (wall clock).
     pub filter_time: super::timing::Histogram,
+    /// The age each tick's filter counted, by which every pair's separation grows: what
+    /// is known of the oldest vehicle when the command acts (its state's age, how far
+    /// behind its sockets the coordinator was, its response, a period).
+    pub counted_age: super::timing::Histogram,
     /// The most vehicles in one piece solved together.
     pub largest_piece: usize,
     /// The most sweeps of the dual ascent in one tick.
@@ -208,9 +214,11 @@ impl Swarm {
         let consensus = matches!(self.phase, SwarmPhase::Consensus(_));
         let period_s = self.setup.control_interval.as_secs_f64();
         let mut age_s: f64 = 0.0;
+        // The vehicle whose age is counted, for the events.
+        let mut oldest = None;
         for i in self.indices() {
-            if self.law.states[i].is_some() && self.ours_in_air(i) {
-                age_s = age_s.max(self.command_age_s(i, now) - period_s);
+            let age = if self.law.states[i].is_some() && self.ours_in_air(i) {
+                self.command_age_s(i, now) - period_s
             } else if self.law.states[i].is_some()
                 && let Some(at) = self.remote_measured(i)
             {
@@ -218,7 +226,13 @@ impl Swarm {
                 // answers its own shard's commands only after its attitude response
                 // (not measured here: counted as unmeasured).
                 let hop_s = now.saturating_since(at).as_secs_f64();
-                age_s = age_s.max(hop_s + period_s + UNMEASURED_RESPONSE_S);
+                hop_s + period_s + UNMEASURED_RESPONSE_S
+            } else {
+                continue;
+            };
+            if age > age_s {
+                age_s = age;
+                oldest = Some(i);
             }
         }
         // Each position put at one instant, the newest report's arrival: on a lossy or
@@ -291,6 +305,7 @@ impl Swarm {
             &mut self.safety.xy,
             self.setup.fence.as_ref().map(|f| (&f.fence, f.margin_m)),
         );
+        let counted_age = Duration::try_from_secs_f64(settings.age_s).unwrap_or(Duration::MAX);
         let fell_back = matches!(report.outcome, Outcome::Fallback { .. });
         let work = &mut self.safety.jams;
         if fell_back
@@ -304,6 +319,7 @@ impl Swarm {
         stats.ticks += 1;
         stats.active_ticks += u64::from(report.active > 0);
         stats.filter_time.record(report.elapsed);
+        stats.counted_age.record(counted_age);
         stats.largest_piece = stats.largest_piece.max(report.largest_piece);
         stats.most_sweeps = stats.most_sweeps.max(report.sweeps);
         if let Some((_, _, d)) = report.closest {
@@ -358,12 +374,19 @@ impl Swarm {
                 stats.unfinished_braked += braked as u64;
                 stats.unfinished_unresolved += unresolved as u64;
                 if stats.unfinished_ticks % 100 == 1 {
+                    let oldest = oldest
+                        .map_or_else(|| "none".to_string(), |i| self.setup.links[i].file_label());
                     self.log.push(
                         now,
                         true,
                         format!(
-                            "safety filter: its time ran out before the answer: the answer so far went out, {braked} vehicles braking where it and then braking would not keep the separation (unfinished tick {})",
-                            stats.unfinished_ticks
+                            "safety filter: its time ran out before the answer: the answer so far went out, {braked} vehicles braking where it and then braking would not keep the separation (unfinished tick {}; {} active rows, largest piece {}, {} sweeps; the age counted {:.0} ms, the oldest {oldest}; listening {:.0} ms behind)",
+                            stats.unfinished_ticks,
+                            report.active,
+                            report.largest_piece,
+                            report.sweeps,
+                            counted_age.as_secs_f64() * 1e3,
+                            self.listen_lag.as_secs_f64() * 1e3,
                         ),
                     );
                 }
