@@ -10,7 +10,9 @@
 //!
 //! Fit: for every candidate delay `L = j·Δ` (`j = 0..=`[`MAX_DELAY_STEPS`], `Δ` the
 //! control period), least squares of `y = (θ₁ − θ₀)/(t₁ − t₀)` (two consecutive reports)
-//! on `x = θ_sp[k₀ − j] − θ₀` (`k₀` the tick of the first report), through the origin:
+//! on `x = mean(θ_sp[k₀ − j], …, θ_sp[k₁ − 1 − j]) − θ₀` (`k₀` the tick of the first
+//! report, `k₁` of the second: the commands that acted between them; one tick's when
+//! the attitude is reported every tick), through the origin:
 //! `1/T = Σxy/Σxx`, residual `Σyy − (Σxy)²/Σxx`. The delay with the least residual wins.
 //! Running sums only: constant memory, no allocation, roll and pitch pooled.
 
@@ -146,16 +148,30 @@ impl ResponseFit {
         }
         // The delays that reach back no further than the first tick.
         let delays = (k0.min(MAX_DELAY_STEPS as u64) + 1) as usize;
+        // The ticks between the two reports: k₀ up to the one before this.
+        let ticks = (self.tick - k0).max(1) as usize;
         for axis in 0..2 {
             let y = (theta[axis] - theta0[axis]) / dt;
             self.syy += y * y;
-            // The commands each delay pairs with (delay j: tick k₀ − j, at `newest − j`),
-            // gathered first so that the sums below are straight loops over arrays.
-            let newest = k_now + HISTORY;
-            let window = &self.commanded[axis][newest + 1 - DELAYS..=newest];
+            // What each delay pairs with: the mean of the commands of the ticks between
+            // the reports, delayed by it (delay j: ticks k₀ − j up to the tick before
+            // this less j), gathered first so that the sums below are straight loops
+            // over arrays. A report every tick pairs with the command of tick k₀ − j
+            // alone; reports several ticks apart pair with what acted between them,
+            // not with one tick's command: a command that changes from tick to tick (a
+            // filter braking on every other tick) otherwise reads as noise in x, which
+            // shrinks the fitted rate and stretches the lag.
             let mut x = [0.0; DELAYS];
-            for (x, command) in x.iter_mut().zip(window.iter().rev()) {
-                *x = command - theta0[axis];
+            for m in 0..ticks {
+                let newest = slot(k0 + m as u64) + HISTORY;
+                let window = &self.commanded[axis][newest + 1 - DELAYS..=newest];
+                for (x, command) in x.iter_mut().zip(window.iter().rev()) {
+                    *x += command;
+                }
+            }
+            let mean = 1.0 / ticks as f64;
+            for x in &mut x {
+                *x = *x * mean - theta0[axis];
             }
             let sums = self.sxx.iter_mut().zip(self.sxy.iter_mut());
             for ((sxx, sxy), x) in sums.zip(&x).take(delays) {
@@ -269,6 +285,67 @@ mod tests {
             }
         }
         fit
+    }
+
+    /// As [`simulate`], reported every `every` ticks, the command of every other tick
+    /// `chatter` rad off the sines (a filter that brakes on every other tick).
+    fn simulate_sparse(
+        delay: usize,
+        t_s: f64,
+        ticks: usize,
+        every: usize,
+        chatter: f64,
+    ) -> ResponseFit {
+        let dt = 0.02;
+        let mut fit = ResponseFit::new(dt);
+        let mut sent = vec![[0.0; 2]; ticks];
+        let mut theta = [0.0f64; 2];
+        let decay = (-dt / t_s).exp();
+        for k in 0..ticks {
+            let t = k as f64 * dt;
+            let off = if k % 2 == 1 { chatter } else { 0.0 };
+            let cmd = [
+                0.1 * (1.3 * t).sin() + 0.05 * (4.1 * t).sin() + off,
+                0.08 * (0.9 * t).cos() + 0.04 * (3.3 * t).sin() - off,
+            ];
+            let report = (k % every == 0).then_some((theta, t));
+            fit.tick(report, cmd, true);
+            sent[k] = cmd;
+            let sp = if k >= delay {
+                sent[k - delay]
+            } else {
+                [0.0; 2]
+            };
+            for a in 0..2 {
+                theta[a] = sp[a] + (theta[a] - sp[a]) * decay;
+            }
+        }
+        fit
+    }
+
+    /// Reports five ticks apart (10 Hz at 50 Hz), a command that changes by 0.1 rad from
+    /// tick to tick: each report pair is fitted against the mean of the five commands
+    /// that acted between its reports. The delay (2 ticks) is found and the lag within
+    /// 15 % of the 0.15 s flown; the forward difference over 0.1 s makes it read long by
+    /// `Δ/(1 − e^(−Δ/T)) = 0.1/(1 − e^(−2/3)) = 0.2055 s` at most (a command held over the
+    /// whole interval): 0.2003 s, as without the chatter. Paired with the first tick's
+    /// command alone, the chatter read as noise: no delay and a lag of 0.33 s.
+    #[test]
+    fn reports_several_ticks_apart_are_fitted_against_the_commands_between_them() {
+        let fit = simulate_sparse(2, 0.15, 6000, 5, 0.05)
+            .fit()
+            .expect("a fit");
+        assert!((fit.delay_s - 0.04).abs() < 1e-12, "{fit:?}");
+        assert!(
+            fit.time_constant_s > 0.15 && fit.time_constant_s < 0.2055,
+            "{fit:?}"
+        );
+        // Reported every tick, the same vehicle fits exactly as before.
+        let fit = simulate_sparse(2, 0.15, 6000, 1, 0.05)
+            .fit()
+            .expect("a fit");
+        let rate = (1.0 - (-0.02f64 / 0.15).exp()) / 0.02;
+        assert!((1.0 / fit.time_constant_s - rate).abs() < 1e-6, "{fit:?}");
     }
 
     #[test]
