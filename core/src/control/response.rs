@@ -262,32 +262,10 @@ mod tests {
     /// first-order lag `t_s`, exactly integrated over one 20 ms period, reported every
     /// tick; the command a sum of sines (rad).
     fn simulate(delay: usize, t_s: f64, ticks: usize) -> ResponseFit {
-        let dt = 0.02;
-        let mut fit = ResponseFit::new(dt);
-        let mut sent = vec![[0.0; 2]; ticks];
-        let mut theta = [0.0f64; 2];
-        let decay = (-dt / t_s).exp();
-        for k in 0..ticks {
-            let t = k as f64 * dt;
-            let cmd = [
-                0.1 * (1.3 * t).sin() + 0.05 * (4.1 * t).sin(),
-                0.08 * (0.9 * t).cos() + 0.04 * (3.3 * t).sin(),
-            ];
-            fit.tick(Some((theta, t)), cmd, true);
-            sent[k] = cmd;
-            let sp = if k >= delay {
-                sent[k - delay]
-            } else {
-                [0.0; 2]
-            };
-            for a in 0..2 {
-                theta[a] = sp[a] + (theta[a] - sp[a]) * decay;
-            }
-        }
-        fit
+        simulate_sparse(delay, t_s, ticks, 1, 0.0)
     }
 
-    /// As [`simulate`], reported every `every` ticks, the command of every other tick
+    /// The same vehicle reported every `every` ticks, the command of every other tick
     /// `chatter` rad off the sines (a filter that brakes on every other tick).
     fn simulate_sparse(
         delay: usize,
