@@ -158,11 +158,30 @@ fn the_round_trip_is_counted_in_the_barrier() {
     // and the barrier counts it: the separation holds. Without the round trip the same
     // flight came within 2.75 m.
     let (min_m, run) = crossing_late(150.0, BreachAction::Hold);
-    for link in run.swarm().links() {
+    let mut slowest = 0.0f64;
+    for (i, link) in run.swarm().links().enumerate() {
         let rtt = link.round_trip().expect("measured").as_secs_f64();
         assert!((0.300..0.321).contains(&rtt), "round trip {rtt} s");
+        let fit = run
+            .swarm()
+            .attitude_response(ringswarm::swarm::VehicleIndex(i))
+            .map_or(0.0, |r| r.response_s);
+        slowest = slowest.max(if fit <= 1.0 { fit.max(rtt) } else { rtt + 0.3 });
     }
     assert!(min_m >= 3.0, "{min_m}");
+    // `safety.counted_age`: on the last tick at least the slowest vehicle's counted
+    // response (its fit, which holds the link's 0.3 s, or the round trip) and a control
+    // period of 20 ms; never more than a trusted response (1 s), a period and a state a
+    // period old. Before any vehicle flies on our commands, a period alone.
+    let age = &run.swarm().safety_stats().counted_age;
+    let longest = age.max().as_secs_f64();
+    assert!(
+        (slowest + 0.020 - 1e-6..=1.0 + 0.040 + 1e-6).contains(&longest),
+        "{longest} s, slowest response {slowest} s"
+    );
+    // The histogram gives the top of its bin above 1.024 ms: at most 0.2 % over.
+    let shortest = age.quantile(0.01).expect("ticks").as_secs_f64();
+    assert!((0.020..=0.020 * 1.002).contains(&shortest), "{shortest} s");
     assert_eq!(run.swarm().safety_stats().separation_actions, 0);
 }
 
