@@ -473,6 +473,7 @@ fn safety_table() {
             limit_mps2: 7.0,
             braking_mps2: 3.5,
             lag_s: 0.0,
+            spread_m: 0.0,
         };
         // A row of vehicles 10 m apart along east, flying north in formation.
         let formation: Vec<Agent> = (0..n)

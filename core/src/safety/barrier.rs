@@ -99,6 +99,21 @@ pub fn pair_row(
     braking_mps2: f64,
     age_s: f64,
 ) -> Option<PairRow> {
+    pair_row_spread(sep, i, j, braking_mps2, age_s, 0.0)
+}
+
+/// [`pair_row`] for a pair that must keep `spread_m` (m, scaled, ≥ 0) more than the
+/// separation: how far the two may be from the positions their sides give (a vehicle
+/// whose state stopped arriving, as a chain of points along its stopping path:
+/// [`super::lost`]).
+pub fn pair_row_spread(
+    sep: &Separation,
+    i: &Side,
+    j: &Side,
+    braking_mps2: f64,
+    age_s: f64,
+    spread_m: f64,
+) -> Option<PairRow> {
     let dp = sep.scaled(i.pos_m - j.pos_m);
     let dv = sep.scaled(i.vel_mps - j.vel_mps);
     let distance = dp.norm();
@@ -108,7 +123,8 @@ pub fn pair_row(
     let n = dp / distance;
     let s = n.dot(&dv);
     let a_brake = braking_mps2;
-    let d = sep.horizontal_m + dv.norm() * age_s + 0.5 * a_brake * age_s * age_s;
+    let d =
+        sep.horizontal_m + spread_m.max(0.0) + dv.norm() * age_s + 0.5 * a_brake * age_s * age_s;
     let room = distance - d;
     let curvature = (dv.norm_squared() - s * s).max(0.0) / distance;
     // The vertical accelerations are given: their share of nᵀΔũ moves to the bound.
@@ -216,6 +232,19 @@ mod tests {
         assert!((aged.room_m - (7.0 - 0.42)).abs() < 1e-12);
         // Closing at 4 m/s with 7 m of room: h = −4 + √56.
         assert!((fresh.h_mps - (56f64.sqrt() - 4.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_spread_grows_the_separation_by_itself() {
+        let s = sep();
+        let i = side([10.0, 0.0, 5.0], [-3.0, 0.0, 0.0]);
+        let j = side([0.0, 0.0, 5.0], [1.0, 0.0, 0.0]);
+        let plain = pair_row(&s, &i, &j, 4.0, 0.1).expect("apart");
+        let spread = pair_row_spread(&s, &i, &j, 4.0, 0.1, 1.25).expect("apart");
+        // 10 m apart, 3 m + 0.42 m of age, 1.25 m more.
+        assert!((spread.room_m - (plain.room_m - 1.25)).abs() < 1e-12);
+        assert!((spread.room_m - (7.0 - 0.42 - 1.25)).abs() < 1e-12);
+        assert!(spread.b > plain.b, "less room asks for more");
     }
 
     #[test]

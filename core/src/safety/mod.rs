@@ -34,6 +34,7 @@ pub mod flow;
 pub mod jam;
 pub mod landing;
 pub mod layers;
+pub mod lost;
 pub mod neighbours;
 mod on_way;
 mod pieces;
@@ -48,7 +49,7 @@ use nalgebra::{Vector2, Vector3};
 
 use pieces::two_sided;
 
-pub use barrier::{PairRow, Separation, Side, pair_row};
+pub use barrier::{PairRow, Separation, Side, pair_row, pair_row_spread};
 pub use fence::{Fence, FenceItem, FenceItemKind, FenceShape, fence_row, stop_point_m};
 pub use neighbours::{Found, Sweep};
 pub use reach::ReachBound;
@@ -119,6 +120,31 @@ pub struct Agent {
     /// delay; its state already shows part of the commands it is still following
     /// ([`on_way`]).
     pub lag_s: f64,
+    /// How far it may be from its side's position (m, scaled; 0 for a measured state):
+    /// a vehicle whose state stopped arriving is a chain of points along the path it may
+    /// take until its own Hold has stopped it ([`lost`]), each standing for the stretch
+    /// of that path within this of it. Every pair with it keeps this much more than the
+    /// separation. An agent with a spread stands for where a vehicle may be, not for a
+    /// state: it is left out of the closest pair, the close pairs and the active rows.
+    pub spread_m: f64,
+}
+
+impl Agent {
+    /// Whether it is a measured state (no spread): counted in the closest pair, the close
+    /// pairs and the active rows.
+    pub fn measured(&self) -> bool {
+        !(self.spread_m > 0.0)
+    }
+
+    /// Its spread, as a distance to keep (m; a spread that is not a positive number
+    /// counts as none).
+    fn spread(&self) -> f64 {
+        if self.spread_m.is_finite() {
+            self.spread_m.max(0.0)
+        } else {
+            0.0
+        }
+    }
 }
 
 /// What the filter did on one tick.
@@ -271,6 +297,8 @@ fn net(agents: &[Agent], commands: &[Vector2<f64>], k: usize) -> Vector2<f64> {
 pub struct SafetyFilter {
     sweep: flow::FlowSweep,
     positions: Vec<Option<Vector3<f64>>>,
+    /// Whether each agent of the last call is a measured state ([`Agent::measured`]).
+    measured: Vec<bool>,
     velocities: Vec<Option<Vector3<f64>>>,
     rows: Vec<Row>,
     var_of: Vec<Option<usize>>,
@@ -425,12 +453,17 @@ impl SafetyFilter {
         self.positions.clear();
         self.positions
             .extend(agents[..n].iter().map(|a| a.side.map(|s| s.pos_m)));
+        self.measured.clear();
+        self.measured
+            .extend(agents[..n].iter().map(Agent::measured));
         let top_speed = agents[..n]
             .iter()
             .filter_map(|a| a.side.map(|s| sep.scaled(s.vel_mps).norm()))
             .filter(|v| v.is_finite())
             .fold(0.0, f64::max);
-        let radius = look_radius_m(&sep, top_speed, LOOKAHEAD_S);
+        // Two spreads at most between any pair.
+        let widest_spread = agents[..n].iter().map(Agent::spread).fold(0.0, f64::max);
+        let radius = look_radius_m(&sep, top_speed, LOOKAHEAD_S) + 2.0 * widest_spread;
         // With the stopping rows, what each vehicle's commands on their way still do.
         let timing = settings.timing();
         self.before.clear();
@@ -468,7 +501,7 @@ impl SafetyFilter {
             radius,
             2.0 * pair_limit(0.0),
         );
-        let closest = found.closest;
+        let mut closest = found.closest;
         self.rows.clear();
         self.lambda.clear();
         self.active.clear();
@@ -487,7 +520,14 @@ impl SafetyFilter {
                 let keep = secure::keep_m(&sep, (a, b), stop.timing, true) + STOP_ROW_MARGIN_M;
                 stop.row(&sep, (a, self.before[i]), (b, self.before[j]), keep)
             } else {
-                pair_row(&sep, &si, &sj, braking(a) + braking(b), settings.age_s)
+                pair_row_spread(
+                    &sep,
+                    &si,
+                    &sj,
+                    braking(a) + braking(b),
+                    settings.age_s,
+                    a.spread() + b.spread(),
+                )
             };
             let Some(row) = row else {
                 continue;
@@ -501,6 +541,27 @@ impl SafetyFilter {
             let row = Row { i, j, row };
             broken |= row.lhs(agents, commands) < row.row.b;
             self.push_row(row);
+        }
+        if agents[..n].iter().any(|a| !a.measured()) {
+            // The closest pair of the measured states alone.
+            self.positions
+                .iter_mut()
+                .zip(&agents[..n])
+                .for_each(|(p, a)| {
+                    if !a.measured() {
+                        *p = None;
+                    }
+                });
+            closest = sweep
+                .sweep(
+                    &self.positions,
+                    &[],
+                    sep.vertical_scale(),
+                    |_| 0.0,
+                    0.0,
+                    radius,
+                )
+                .closest;
         }
         self.sweep = sweep;
         if let Some((fence, margin_m)) = fence {
@@ -600,6 +661,7 @@ impl SafetyFilter {
         self.active.extend(
             self.rows
                 .iter()
+                .filter(|r| agents[r.i].measured() && agents[r.j].measured())
                 .filter(|r| r.lhs(agents, commands) - r.row.b < ACTIVE_SLACK_MPS2)
                 .map(|r| (r.i, r.j)),
         );
@@ -629,7 +691,8 @@ impl SafetyFilter {
     pub fn close_pairs(&self, distance_m: f64) -> impl Iterator<Item = (usize, usize, f64)> + '_ {
         self.rows
             .iter()
-            .filter(move |r| !r.single() && r.row.distance_m < distance_m)
+            .filter(move |r| !r.single() && self.measured[r.i] && self.measured[r.j])
+            .filter(move |r| r.row.distance_m < distance_m)
             .map(|r| (r.i, r.j, r.row.distance_m))
     }
 

@@ -32,7 +32,8 @@ const MARGIN_M: f64 = 0.01;
 /// The bound for one tick's agents.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ReachBound {
-    /// `r_h + A_hi·τ²/2 + margin` (m).
+    /// `r_h + 2·spread + A_hi·τ²/2 + margin` (m): the widest spread of an agent counted
+    /// on both sides.
     base_m: f64,
     /// The state age `τ` (s).
     age_s: f64,
@@ -78,8 +79,14 @@ impl ReachBound {
             return None;
         }
         let x = ((2.0 * widest + 1.0 + z + a_hi) / sep.gamma).cbrt();
+        // A pair keeps its two spreads more than the separation.
+        let spread = agents
+            .iter()
+            .filter(|a| a.side.is_some())
+            .map(Agent::spread)
+            .fold(0.0, f64::max);
         Some(Self {
-            base_m: sep.horizontal_m + 0.5 * a_hi * age_s * age_s + MARGIN_M,
+            base_m: sep.horizontal_m + 2.0 * spread + 0.5 * a_hi * age_s * age_s + MARGIN_M,
             age_s,
             x_mps: x,
             two_a_lo: 2.0 * a_lo,
@@ -115,6 +122,7 @@ mod tests {
             limit_mps2: limit,
             braking_mps2: braking,
             lag_s: 0.0,
+            spread_m: 0.0,
         }
     }
 

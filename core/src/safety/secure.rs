@@ -324,9 +324,10 @@ pub(super) fn keep_m(
     timing: Timing,
     stopping: bool,
 ) -> f64 {
+    let separation_m = sep.horizontal_m + a.spread() + b.spread();
     if stopping {
-        return sep.horizontal_m;
+        return separation_m;
     }
     let delay_s = timing.delay_s;
-    sep.horizontal_m + 0.5 * (limit(a) + limit(b)) * delay_s * delay_s
+    separation_m + 0.5 * (limit(a) + limit(b)) * delay_s * delay_s
 }

@@ -239,6 +239,7 @@ mod tests {
             limit_mps2: 6.0,
             braking_mps2: 3.0,
             lag_s: 0.0,
+            spread_m: 0.0,
         }
     }
 

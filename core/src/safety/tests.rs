@@ -35,6 +35,7 @@ fn agent(p: [f64; 3], v: [f64; 3], weight: f64) -> Agent {
         limit_mps2: 6.0,
         braking_mps2: 2.0,
         lag_s: 0.0,
+        spread_m: 0.0,
     }
 }
 
@@ -567,6 +568,7 @@ fn packed_swap(side: usize, s: Settings, ticks: usize, out_from: usize) -> (f64,
             .map(|k| Agent {
                 braking_mps2: 3.0,
                 lag_s: 0.0,
+                spread_m: 0.0,
                 ..agent([pos[k].x, pos[k].y, 50.0], [vel[k].x, vel[k].y, 0.0], 1.0)
             })
             .collect();
@@ -712,4 +714,93 @@ fn the_check_braking_to_a_velocity_is_the_check_at_rest_in_the_frame_moving_with
             );
         }
     }
+}
+
+#[test]
+fn a_vehicle_closing_on_a_lost_ones_stopping_path_brakes_for_where_it_may_stop() {
+    use super::lost::LostVehicle;
+    // Ours at x = 0 flying east at 1 m/s; the lost one last seen at x = 8 flying west at
+    // 2 m/s, coasting 1.05 s at most, then braking at 1 m/s² or harder: its path runs
+    // 2·(1.05 + 2/2) = 4.1 m west, to x = 3.9, with the Hold's 0.25 m either side.
+    let path = LostVehicle {
+        pos_m: Vector3::new(8.0, 0.0, 10.0),
+        vel_mps: Vector2::new(-2.0, 0.0),
+        coast_s: 1.05,
+        speed_margin_mps: 0.0,
+        braking_mps2: 1.0,
+    }
+    .path()
+    .expect("bounded");
+    let mut agents = vec![agent([0.0, 0.0, 10.0], [1.0, 0.0, 0.0], 1.0)];
+    for (p, spread) in path.points() {
+        agents.push(Agent {
+            side: Some(Side {
+                pos_m: p,
+                vel_mps: Vector3::zeros(),
+                accel_z_mps2: 0.0,
+            }),
+            controlled: false,
+            weight: 1.0,
+            drift_mps2: Vector2::zeros(),
+            limit_mps2: 0.0,
+            braking_mps2: 0.0,
+            lag_s: 0.0,
+            spread_m: spread,
+        });
+    }
+    // 9 gaps of 4.1/9 m: each point's spread is 0.25 m and half a gap.
+    assert_eq!(agents.len(), 11);
+    let spread: f64 = 0.25 + 0.5 * 4.1 / 9.0;
+    let mut commands = vec![Vector2::zeros(); agents.len()];
+    let s = settings(false);
+    let report = SafetyFilter::default().filter(&s, &agents, &mut commands, None);
+    // The nearest point, at x = 3.9: D = 3.9, d = 3 + spread + |Δv|τ + Aτ²/2 with
+    // |Δv| = 1, τ = 0.04 s and A = 2 (ours alone brakes); closing at s = −1:
+    // aᵀu ≥ −γh³ − A·s/√(2A(D − d)), a = (−1, 0).
+    let d: f64 = 3.0 + spread + 0.04 + 0.5 * 2.0 * 0.04 * 0.04;
+    let root = (2.0 * 2.0 * (3.9 - d)).sqrt();
+    let h = -1.0 + root;
+    let b = -h * h * h + 2.0 / root;
+    assert!(b > 1.5, "it must brake: {b}");
+    assert!(
+        (commands[0].x + b).abs() < 1e-6,
+        "{} vs {}",
+        commands[0].x,
+        -b
+    );
+    assert!(commands[0].y.abs() < 1e-9);
+    assert!(matches!(report.outcome, Outcome::Filtered { .. }));
+    // The points stand for where it may be, not for a state: no closest pair, no close
+    // pair, no active row named.
+    assert_eq!(report.closest, None);
+    let filter_close = {
+        let mut f = SafetyFilter::default();
+        let mut c = vec![Vector2::zeros(); agents.len()];
+        f.filter(&s, &agents, &mut c, None);
+        (f.close_pairs(100.0).count(), f.active_rows().len())
+    };
+    assert_eq!(filter_close, (0, 0));
+    // Seen as a state that keeps its velocity, it would not have been braked for.
+    let mut as_state = vec![
+        agents[0],
+        Agent {
+            controlled: false,
+            ..agent([8.0, 0.0, 10.0], [-2.0, 0.0, 0.0], 1.0)
+        },
+    ];
+    let mut free = vec![Vector2::zeros(); 2];
+    SafetyFilter::default().filter(&s, &as_state, &mut free, None);
+    assert_eq!(free[0], Vector2::zeros());
+    // Beside a measured neighbour the closest pair is the measured one.
+    as_state[1].side = Some(Side {
+        pos_m: Vector3::new(0.0, 30.0, 10.0),
+        vel_mps: Vector3::zeros(),
+        accel_z_mps2: 0.0,
+    });
+    agents.push(as_state[1]);
+    let mut c = vec![Vector2::zeros(); agents.len()];
+    let report = SafetyFilter::default().filter(&s, &agents, &mut c, None);
+    let (i, j, distance) = report.closest.expect("two measured");
+    assert_eq!((i, j), (0, agents.len() - 1));
+    assert!((distance - 30.0).abs() < 1e-12);
 }

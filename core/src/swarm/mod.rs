@@ -45,6 +45,7 @@ mod io;
 mod jams;
 mod landing;
 mod laws;
+mod lost;
 mod model;
 mod peers;
 mod phases;

@@ -125,6 +125,8 @@ pub(super) struct SafetyWork {
     pub(super) closest_pair: Option<(usize, usize, f64)>,
     /// The jam watch and its buffers.
     pub(super) jams: JamWork,
+    /// What was sent to each vehicle, for the path of one whose state stops arriving.
+    pub(super) sent: super::lost::SentCommands,
 }
 
 /// The jam watch and what it reads each tick.
@@ -164,6 +166,7 @@ impl SafetyWork {
             stats: SafetyStats::new(),
             closest_pair: None,
             jams: JamWork::default(),
+            sent: super::lost::SentCommands::new(n),
         }
     }
 }
@@ -278,9 +281,12 @@ impl Swarm {
                 limit_mps2: limit,
                 braking_mps2: setup.braking_share * limit,
                 lag_s: if local(i) { self.counted_lag_s(i) } else { 0.0 },
+                spread_m: 0.0,
             });
             self.safety.xy.push(self.law.commands[i].xy());
         }
+        let measured = self.safety.agents.len();
+        self.push_lost_vehicles(now);
         let settings = Settings {
             separation: setup.separation,
             age_s: age_s + period_s,
@@ -429,12 +435,13 @@ impl Swarm {
                     }),
             );
         }
-        for (i, xy) in self.safety.xy.iter().enumerate() {
+        for (i, xy) in self.safety.xy.iter().enumerate().take(measured) {
             if self.safety.agents[i].controlled && !self.is_remote(VehicleIndex(i)) {
                 self.law.commands[i].x = xy.x;
                 self.law.commands[i].y = xy.y;
             }
         }
+        self.record_sent(now, measured);
         self.log_pairs_inside(now, setup.separation);
         self.act_on_breach(now, &setup, fell_back);
     }
@@ -498,22 +505,32 @@ impl Swarm {
     /// a fit beyond [`MAX_RESPONSE_S`] is not trusted, and then the round trip plus
     /// [`UNMEASURED_RESPONSE_S`] is counted.
     pub(super) fn command_age_s(&self, i: VehicleIndex, now: SimTime) -> f64 {
-        let link = self.link(i);
-        let state = link
+        let state = self
+            .link(i)
             .and_then(|l| l.state().last_position)
             .map_or(0.0, |at| now.saturating_since(at).as_secs_f64());
-        let round_trip = link
+        state
+            + self.listen_lag.as_secs_f64()
+            + self.setup.control_interval.as_secs_f64()
+            + self.counted_response_s(i)
+    }
+
+    /// The time from a command sent to vehicle `i` to a state that shows it, as counted
+    /// (s): its measured attitude response, never less than its round trip; the round
+    /// trip and [`UNMEASURED_RESPONSE_S`] when the fit is missing or not trusted.
+    pub(super) fn counted_response_s(&self, i: VehicleIndex) -> f64 {
+        let round_trip = self
+            .link(i)
             .and_then(VehicleLink::round_trip)
             .map_or(0.0, |rtt| rtt.as_secs_f64());
         // A fit beyond a second is no attitude loop a swarm flies with (the emulator's
         // ideal vehicles, which have none, fit 4.5 s): not counted.
-        let response = self.slots[i]
+        self.slots[i]
             .flown
             .attitude_response()
             .map(|r| r.response_s)
             .filter(|r| (0.0..=MAX_RESPONSE_S).contains(r))
-            .map_or(round_trip + UNMEASURED_RESPONSE_S, |r| r.max(round_trip));
-        state + self.listen_lag.as_secs_f64() + self.setup.control_interval.as_secs_f64() + response
+            .map_or(round_trip + UNMEASURED_RESPONSE_S, |r| r.max(round_trip))
     }
 
     /// The lag of vehicle `i`'s attitude response counted inside its age (s): the

@@ -67,8 +67,8 @@ pub struct VehicleLink {
     has_flown: bool,
     /// In (or, lost, last in) VehicleHold; `true` when it returns once fresh.
     held: Option<bool>,
-    /// The vehicle confirmed the Hold we asked for (acknowledged, or its heartbeat).
-    hold_confirmed: bool,
+    /// When the vehicle confirmed the Hold we asked for (acknowledged, or its heartbeat).
+    hold_confirmed: Option<SimTime>,
     /// A run of refused telemetry reports is going on (reported once per run).
     refusing: bool,
     refused_reports: u64,
@@ -137,7 +137,7 @@ impl VehicleLink {
             gate: TelemetryGate::default(),
             has_flown: false,
             held: None,
-            hold_confirmed: false,
+            hold_confirmed: None,
             refusing: false,
             refused_reports: 0,
             next_origin: None,
@@ -194,6 +194,15 @@ impl VehicleLink {
     /// tenth per sample); `None` before the first answer.
     pub fn round_trip(&self) -> Option<Duration> {
         self.round_trip
+    }
+
+    /// When the vehicle confirmed the Hold it was handed to (its acknowledgement or a
+    /// heartbeat in that mode), while it is in [`Phase::VehicleHold`] or was last there
+    /// before it went silent; `None` before that, or in any other phase.
+    pub fn hold_confirmed_at(&self) -> Option<SimTime> {
+        let held =
+            self.phase == Phase::VehicleHold || (self.phase == Phase::Lost && self.held.is_some());
+        self.hold_confirmed.filter(|_| held)
     }
 
     /// Whether the last accepted position is younger than the state timeout (its origin

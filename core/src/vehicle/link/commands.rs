@@ -27,7 +27,7 @@ impl VehicleLink {
     pub(super) fn hand_to_hold(&mut self, now: SimTime, reason: String, resume_when_fresh: bool) {
         self.phase = Phase::VehicleHold;
         self.held = Some(resume_when_fresh);
-        self.hold_confirmed = false;
+        self.hold_confirmed = None;
         self.heartbeats_out_of_offboard = 0;
         self.events.push_back(LinkEvent::HandedToHold(reason));
         let hold = self.state.dialect().hold_mode();
@@ -294,7 +294,7 @@ impl VehicleLink {
             Phase::Disarming => self.finish(now),
             Phase::VehicleHold => {
                 self.pending = None;
-                self.hold_confirmed = true;
+                self.hold_confirmed = Some(now);
             }
             _ => {}
         }

@@ -122,9 +122,9 @@ impl VehicleLink {
                     self.heartbeats_out_of_offboard = 0;
                     if self.pending.is_some() {
                         self.pending = None;
-                        self.hold_confirmed = true;
+                        self.hold_confirmed = Some(now);
                     }
-                } else if self.hold_confirmed {
+                } else if self.hold_confirmed.is_some() {
                     // Out of the Hold we asked for, by itself (a pilot, its
                     // battery failsafe): its decision.
                     self.heartbeats_out_of_offboard += 1;
