@@ -171,6 +171,18 @@ impl Autopilot {
         }
     }
 
+    /// How long after its last setpoint the vehicle's own failsafe takes over and brakes
+    /// (s), with the autopilot's defaults: PX4 leaves OFFBOARD after COM_OF_LOSS_T (1 s)
+    /// for COM_OBL_RC_ACT (Position by default, Hold without a radio). `None` for
+    /// ArduPilot: after GUID_TIMEOUT it levels and drifts in GUIDED, and nothing brakes
+    /// it but a mode change (its GCS failsafe is off by default).
+    pub fn setpoint_loss_brakes_after_s(self) -> Option<f64> {
+        match self {
+            Self::Px4 => Some(1.0),
+            Self::ArduPilot => None,
+        }
+    }
+
     /// The mode it is handed to when it cannot be flown on: it brakes and holds on its
     /// own estimate.
     pub fn hold_mode(self) -> VehicleCommand {

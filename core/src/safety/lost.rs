@@ -13,12 +13,17 @@
 //!   rest at no less than `a_b` and stays;
 //! - along `v₀` it goes at most `S = V·T + V²/(2·a_b)`; across it (or back), at most
 //!   `ρ = Δv·(T + V/(2·a_b))`, since no more than `Δv` of its velocity points off `v₀`
-//!   and braking takes that share down with the rest.
+//!   and braking takes that share down with the rest;
+//! - while it coasts it goes on along `v₀` at no less than `|v₀| − Δv`: the first
+//!   `S₀ = (|v₀| − Δv)·T` of the path it passes once, by `s/(|v₀| − Δv)` at `s`, and so
+//!   no more than `Δv·s/(|v₀| − Δv)` across it there. The capsule narrows towards its
+//!   start: a neighbour beside where the vehicle was last seen is not pushed as far as
+//!   one beside where it may stop.
 //!
-//! So it stays within `ρ` of the segment from `p₀` to `p₀ + S·v̂₀` (a capsule), and within
+//! So it stays within `ρ(s)` of the segment from `p₀` to `p₀ + S·v̂₀`, and within
 //! [`HOLD_SPREAD_M`] more once there: the Hold keeps its place on its own estimate. The
-//! filter keeps its neighbours out of the capsule: a chain of points along the segment,
-//! each an uncontrolled agent at rest whose spread covers its stretch
+//! filter keeps its neighbours out of it: a chain of points along the segment, each an
+//! uncontrolled agent at rest whose spread covers its stretch
 //! ([`super::Agent::spread_m`]). A neighbour then brakes for where the vehicle may stop,
 //! not for where it was last seen, and not for a point that goes on at its last velocity.
 //!
@@ -28,8 +33,9 @@ use nalgebra::{Vector2, Vector3};
 
 /// The least braking counted for a vehicle in its own Hold (m/s²): PX4's Hold brakes
 /// at MPC_ACC_HOR (3 m/s² by default) once its jerk limit has ramped up, ArduCopter's
-/// BRAKE harder; a third of PX4's default leaves room for a vehicle tuned gentler.
-pub const HOLD_BRAKING_MPS2: f64 = 1.0;
+/// BRAKE at 7.5 m/s² (BRAKE_MODE_DECEL_RATE); two thirds of PX4's default leave room
+/// for a vehicle tuned gentler.
+pub const HOLD_BRAKING_MPS2: f64 = 2.0;
 
 /// The time a Hold takes to start braking once in the mode (s), counted as coasting:
 /// PX4's ramp to MPC_ACC_HOR at MPC_JERK_AUTO (3 m/s² at 4 m/s³: 0.75 s).
@@ -63,8 +69,9 @@ pub struct LostVehicle {
     pub braking_mps2: f64,
 }
 
-/// The capsule a lost vehicle stays in: within `radius_m` of the segment from `start_m`
-/// along `direction` for `length_m` (horizontal; the altitude is its last one).
+/// The capsule a lost vehicle stays in: within [`StoppingPath::radius_at_m`] of the
+/// segment from `start_m` along `direction` for `length_m` (horizontal; the altitude is
+/// its last one).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StoppingPath {
     /// Where it was last seen (m, ENU).
@@ -73,8 +80,12 @@ pub struct StoppingPath {
     pub direction: Vector2<f64>,
     /// How far along it may go (m).
     pub length_m: f64,
-    /// How far off the segment it may be (m).
+    /// How far off the segment it may be, at most (m).
     pub radius_m: f64,
+    /// The stretch it passes once while coasting (m from the start).
+    pub narrow_m: f64,
+    /// How far off it may be per metre along that stretch.
+    pub narrow_per_m: f64,
 }
 
 impl LostVehicle {
@@ -102,19 +113,37 @@ impl LostVehicle {
         } else {
             Vector2::x()
         };
+        let slowest = speed - self.speed_margin_mps;
+        let (narrow_m, narrow_per_m) = if slowest > 0.0 {
+            (slowest * self.coast_s, self.speed_margin_mps / slowest)
+        } else {
+            (0.0, 0.0)
+        };
         Some(StoppingPath {
             start_m: self.pos_m,
             direction,
             length_m: top * reach_s,
             radius_m: self.speed_margin_mps * reach_s + HOLD_SPREAD_M,
+            narrow_m,
+            narrow_per_m,
         })
     }
 }
 
 impl StoppingPath {
+    /// How far off the segment it may be at `along_m` from the start (m).
+    pub fn radius_at_m(&self, along_m: f64) -> f64 {
+        if along_m < self.narrow_m {
+            (HOLD_SPREAD_M + self.narrow_per_m * along_m.max(0.0)).min(self.radius_m)
+        } else {
+            self.radius_m
+        }
+    }
+
     /// The points that stand for it, each with its spread (m): evenly along the segment,
     /// [`POINT_SPACING_M`] apart or, on a path longer than [`MAX_POINTS`] of them, wider;
-    /// each point's spread is the radius and half the gap to the next.
+    /// each point's spread is half the gap to the next and the radius at the far end of
+    /// its stretch.
     pub fn points(&self) -> impl Iterator<Item = (Vector3<f64>, f64)> + '_ {
         let gaps = (self.length_m / POINT_SPACING_M).ceil();
         let gaps = if gaps.is_finite() {
@@ -127,18 +156,22 @@ impl StoppingPath {
         } else {
             self.length_m / gaps as f64
         };
-        let spread_m = self.radius_m + 0.5 * gap_m;
         (0..=gaps).map(move |k| {
-            let along = self.direction * (gap_m * k as f64);
-            (self.start_m + Vector3::new(along.x, along.y, 0.0), spread_m)
+            let s = gap_m * k as f64;
+            let along = self.direction * s;
+            (
+                self.start_m + Vector3::new(along.x, along.y, 0.0),
+                self.radius_at_m(s + 0.5 * gap_m) + 0.5 * gap_m,
+            )
         })
     }
 
-    /// The horizontal distance from `p` to the capsule (m; 0 inside).
+    /// How far `p` lies outside the capsule across it, at its own place along it (m,
+    /// horizontal; 0 inside).
     pub fn distance_m(&self, p: Vector2<f64>) -> f64 {
         let d = p - self.start_m.xy();
         let along = d.dot(&self.direction).clamp(0.0, self.length_m);
-        ((d - self.direction * along).norm() - self.radius_m).max(0.0)
+        ((d - self.direction * along).norm() - self.radius_at_m(along)).max(0.0)
     }
 }
 
@@ -230,8 +263,13 @@ mod tests {
         // 5 m/s + 0.1: 5.1·(0.5 + 2.55) = 15.555 m, in 32 gaps of 0.486 m.
         assert_eq!(points.len(), 33);
         let gap = 15.555 / 32.0;
+        // It narrows over the first (5 − 0.1)·0.5 = 2.45 m, by 0.1/4.9 per metre.
+        assert!((path.narrow_m - 2.45).abs() < 1e-12);
+        assert!((path.radius_at_m(1.0) - (0.25 + 0.1 / 4.9)).abs() < 1e-12);
+        assert_eq!(path.radius_at_m(2.5), path.radius_m);
         for (k, (p, spread)) in points.iter().enumerate() {
-            assert!((spread - (path.radius_m + 0.5 * gap)).abs() < 1e-12);
+            let s = gap * k as f64;
+            assert!((spread - (path.radius_at_m(s + 0.5 * gap) + 0.5 * gap)).abs() < 1e-12);
             let expected = path.start_m.xy() + path.direction * (gap * k as f64);
             assert!((p.xy() - expected).norm() < 1e-9);
             assert_eq!(p.z, 20.0);
@@ -239,7 +277,8 @@ mod tests {
         // Any point of the capsule is within some point's spread.
         for k in 0..=1000 {
             let along = path.length_m * k as f64 / 1000.0;
-            let across = Vector2::new(-path.direction.y, path.direction.x) * path.radius_m;
+            let across =
+                Vector2::new(-path.direction.y, path.direction.x) * path.radius_at_m(along);
             let q = path.start_m.xy() + path.direction * along + across;
             let nearest = points
                 .iter()

@@ -133,7 +133,7 @@ impl Agent {
     /// Whether it is a measured state (no spread): counted in the closest pair, the close
     /// pairs and the active rows.
     pub fn measured(&self) -> bool {
-        !(self.spread_m > 0.0)
+        self.spread() <= 0.0
     }
 
     /// Its spread, as a distance to keep (m; a spread that is not a positive number

@@ -3,6 +3,7 @@
 //! them before.
 
 use std::collections::VecDeque;
+use std::time::Duration;
 
 use nalgebra::{Vector2, Vector3};
 use ringswarm_wire::time::SimTime;
@@ -17,12 +18,10 @@ use crate::vehicle::Phase;
 const KEEP_S: f64 = 3.0;
 
 /// What was sent to each vehicle the filter commanded: each tick's net horizontal
-/// acceleration times the period it held for, with when it was sent.
+/// acceleration times the period it held for (m/s, ENU), with when it was sent.
 #[derive(Debug, Clone, Default)]
 pub(super) struct SentCommands {
-    /// Per vehicle: when each tick's command was sent and the sum of all sent before it
-    /// (m/s), and the sum of all (m/s).
-    per_vehicle: Vec<(VecDeque<(SimTime, f64)>, f64)>,
+    per_vehicle: Vec<VecDeque<(SimTime, Vector2<f64>)>>,
     /// The last state of each vehicle kept as a path, once named in the events.
     named: Vec<Option<SimTime>>,
 }
@@ -30,20 +29,22 @@ pub(super) struct SentCommands {
 impl SentCommands {
     pub(super) fn new(n: usize) -> Self {
         Self {
-            per_vehicle: vec![(VecDeque::new(), 0.0); n],
+            per_vehicle: vec![VecDeque::new(); n],
             named: vec![None; n],
         }
     }
 
     /// Vehicle `i` was sent a net horizontal acceleration `net_mps2` for `period_s`.
-    fn record(&mut self, i: usize, now: SimTime, net_mps2: f64, period_s: f64) {
-        let Some((sent, total)) = self.per_vehicle.get_mut(i) else {
+    fn record(&mut self, i: usize, now: SimTime, net_mps2: Vector2<f64>, period_s: f64) {
+        let Some(sent) = self.per_vehicle.get_mut(i) else {
             return;
         };
-        sent.push_back((now, *total));
-        if net_mps2.is_finite() {
-            *total += net_mps2.abs() * period_s;
-        }
+        let dv = if net_mps2.iter().all(|x| x.is_finite()) {
+            net_mps2 * period_s
+        } else {
+            Vector2::zeros()
+        };
+        sent.push_back((now, dv));
         while sent
             .front()
             .is_some_and(|f| now.saturating_since(f.0).as_secs_f64() > KEEP_S)
@@ -52,14 +53,26 @@ impl SentCommands {
         }
     }
 
-    /// What the commands sent to vehicle `i` from `from` on can add to its speed (m/s):
-    /// each acted for its period.
-    fn speed_margin_mps(&self, i: usize, from: SimTime) -> f64 {
-        let Some((sent, total)) = self.per_vehicle.get(i) else {
+    /// What the commands sent to vehicle `i` can still add to its speed from its last
+    /// state at `last` on (m/s), its acceleration following them after a delay
+    /// `delay_s` through a first-order lag `lag_s`: a command sent after `last − delay`
+    /// acts wholly after `last`, an older one by `e^(−(last − delay − t)/lag)` of it.
+    /// The first are summed as vectors (their sum is what they add), the others by size.
+    fn speed_margin_mps(&self, i: usize, last: SimTime, delay_s: f64, lag_s: f64) -> f64 {
+        let Some(sent) = self.per_vehicle.get(i) else {
             return 0.0;
         };
-        let first = sent.partition_point(|s| s.0 < from);
-        sent.get(first).map_or(0.0, |s| (total - s.1).max(0.0))
+        let delay_us = (delay_s.clamp(0.0, KEEP_S) * 1e6) as u64;
+        let cut = SimTime::from_micros(last.as_micros().saturating_sub(delay_us));
+        let (mut whole, mut tail) = (Vector2::zeros(), 0.0);
+        for (t, dv) in sent {
+            if *t >= cut {
+                whole += dv;
+            } else if lag_s > 0.0 {
+                tail += dv.norm() * (-cut.saturating_since(*t).as_secs_f64() / lag_s).exp();
+            }
+        }
+        whole.norm() + tail
     }
 }
 
@@ -72,7 +85,7 @@ impl Swarm {
             if !a.controlled || self.is_remote(VehicleIndex(i)) {
                 continue;
             }
-            let net = (self.safety.xy[i] - a.drift_mps2).norm();
+            let net = self.safety.xy[i] - a.drift_mps2;
             self.safety.sent.record(i, now, net, period_s);
         }
     }
@@ -140,15 +153,26 @@ impl Swarm {
         }
         let state = self.common_state(i)?;
         let last = link.state().last_position?;
-        let braking_from = link.hold_confirmed_at().unwrap_or(now);
-        let response_s = self.counted_response_s(i).min(KEEP_S);
-        let since =
-            SimTime::from_micros(last.as_micros().saturating_sub((response_s * 1e6) as u64));
+        // It brakes once its Hold is confirmed, or its own failsafe took over after the
+        // last setpoint; until either, it may still coast.
+        let failsafe = link
+            .state()
+            .dialect()
+            .setpoint_loss_brakes_after_s()
+            .zip(link.last_setpoint_sent())
+            .map(|(after_s, sent)| sent + Duration::from_secs_f64(after_s));
+        let braking_from = [link.hold_confirmed_at(), failsafe]
+            .into_iter()
+            .flatten()
+            .min()
+            .unwrap_or(now);
+        let lag_s = self.counted_lag_s(i);
+        let delay_s = (self.counted_response_s(i) - lag_s).max(0.0);
         Some(LostVehicle {
             pos_m: state.pos_enu_m,
             vel_mps: state.vel_enu_mps.xy(),
             coast_s: braking_from.saturating_since(last).as_secs_f64() + HOLD_ONSET_S,
-            speed_margin_mps: self.safety.sent.speed_margin_mps(i.0, since),
+            speed_margin_mps: self.safety.sent.speed_margin_mps(i.0, last, delay_s, lag_s),
             braking_mps2: HOLD_BRAKING_MPS2,
         })
     }
@@ -163,23 +187,40 @@ mod tests {
     }
 
     #[test]
-    fn the_speed_margin_sums_what_was_sent_from_then_on() {
+    fn the_speed_margin_sums_what_still_acts_after_the_last_state() {
         let mut sent = SentCommands::new(2);
-        // 2 m/s² for 20 ms periods at 0, 20, 40 ms; 1 m/s² at 60 ms.
-        for (t, a) in [(0, 2.0), (20, 2.0), (40, 2.0), (60, 1.0)] {
-            sent.record(0, at(t), a, 0.02);
+        let east = Vector2::new(1.0, 0.0);
+        // 2 m/s² east for 20 ms periods at 0, 20 and 40 ms; 1 m/s² west at 60 ms.
+        for (t, a) in [(0, 2.0), (20, 2.0), (40, 2.0), (60, -1.0)] {
+            sent.record(0, at(t), east * a, 0.02);
         }
-        assert!((sent.speed_margin_mps(0, at(0)) - 0.14).abs() < 1e-12);
-        assert!((sent.speed_margin_mps(0, at(30)) - 0.06).abs() < 1e-12);
-        assert!((sent.speed_margin_mps(0, at(60)) - 0.02).abs() < 1e-12);
-        assert_eq!(sent.speed_margin_mps(0, at(61)), 0.0);
-        assert_eq!(sent.speed_margin_mps(1, at(0)), 0.0, "nothing sent");
-        assert_eq!(sent.speed_margin_mps(5, at(0)), 0.0, "no such vehicle");
-        // Old entries go; what they held stays out of the sum from a later time.
-        sent.record(0, at(4000), 3.0, 0.02);
-        assert!((sent.speed_margin_mps(0, at(3000)) - 0.06).abs() < 1e-12);
-        // A number that is not finite adds nothing.
-        sent.record(0, at(4020), f64::NAN, 0.02);
-        assert!((sent.speed_margin_mps(0, at(3000)) - 0.06).abs() < 1e-12);
+        // No delay, no lag: what was sent from the last state on, as one vector:
+        // 3·0.04 − 0.02 = 0.10 from 0 ms, 0.04 − 0.02 = 0.02 from 30 ms.
+        assert!((sent.speed_margin_mps(0, at(0), 0.0, 0.0) - 0.10).abs() < 1e-12);
+        assert!((sent.speed_margin_mps(0, at(30), 0.0, 0.0) - 0.02).abs() < 1e-12);
+        assert_eq!(sent.speed_margin_mps(0, at(61), 0.0, 0.0), 0.0);
+        // A 30 ms delay reaches back to the commands of 20 ms and later (0.06 in all).
+        assert!((sent.speed_margin_mps(0, at(50), 0.03, 0.0) - 0.06).abs() < 1e-12);
+        // A 0.1 s lag adds what is left of older ones: at 50 ms with no delay, the 0, 20
+        // and 40 ms commands by e^(−0.5), e^(−0.3) and e^(−0.1), after the vector of
+        // 60 ms (0.02).
+        let left: f64 = [-0.5f64, -0.3, -0.1].iter().map(|x| x.exp()).sum();
+        let expected = 0.02 + 0.04 * left;
+        let got = sent.speed_margin_mps(0, at(50), 0.0, 0.1);
+        assert!((got - expected).abs() < 1e-12, "{got} vs {expected}");
+        assert_eq!(
+            sent.speed_margin_mps(1, at(0), 0.0, 0.0),
+            0.0,
+            "nothing sent"
+        );
+        assert_eq!(
+            sent.speed_margin_mps(5, at(0), 0.0, 0.0),
+            0.0,
+            "no such vehicle"
+        );
+        // Old entries go; a number that is not finite adds nothing.
+        sent.record(0, at(4000), east * 3.0, 0.02);
+        sent.record(0, at(4020), Vector2::new(f64::NAN, 0.0), 0.02);
+        assert!((sent.speed_margin_mps(0, at(0), 0.0, 0.0) - 0.06).abs() < 1e-12);
     }
 }

@@ -536,7 +536,7 @@ impl Swarm {
     /// The lag of vehicle `i`'s attitude response counted inside its age (s): the
     /// fitted time constant when the fit is counted ([`Self::command_age_s`]), otherwise
     /// [`UNMEASURED_LAG_S`] of the unmeasured response.
-    fn counted_lag_s(&self, i: VehicleIndex) -> f64 {
+    pub(super) fn counted_lag_s(&self, i: VehicleIndex) -> f64 {
         self.slots[i]
             .flown
             .attitude_response()

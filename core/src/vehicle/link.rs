@@ -69,6 +69,8 @@ pub struct VehicleLink {
     held: Option<bool>,
     /// When the vehicle confirmed the Hold we asked for (acknowledged, or its heartbeat).
     hold_confirmed: Option<SimTime>,
+    /// When the last setpoint was sent.
+    last_setpoint_sent: Option<SimTime>,
     /// A run of refused telemetry reports is going on (reported once per run).
     refusing: bool,
     refused_reports: u64,
@@ -138,6 +140,7 @@ impl VehicleLink {
             has_flown: false,
             held: None,
             hold_confirmed: None,
+            last_setpoint_sent: None,
             refusing: false,
             refused_reports: 0,
             next_origin: None,
@@ -205,6 +208,11 @@ impl VehicleLink {
         self.hold_confirmed.filter(|_| held)
     }
 
+    /// When the last setpoint was sent (`None`: never).
+    pub fn last_setpoint_sent(&self) -> Option<SimTime> {
+        self.last_setpoint_sent
+    }
+
     /// Whether the last accepted position is younger than the state timeout (its origin
     /// known, and its estimator not saying it is lost): what the swarm may fly on.
     pub fn state_fresh(&self, now: SimTime) -> bool {
@@ -269,6 +277,7 @@ impl VehicleLink {
     }
 
     fn send_setpoint(&mut self, now: SimTime) {
+        self.last_setpoint_sent = Some(now);
         let (target_system, time_boot_ms) = (self.cfg.system_id, now.boot_ms());
         let setpoint = self.setpoint;
         let written;
