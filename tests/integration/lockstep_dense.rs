@@ -419,3 +419,55 @@ fn a_vehicle_on_the_jam_layer_lands_clear_of_the_one_below_it() {
     assert!(min_landing_m >= 0.95 * 3.0, "{min_landing_m}");
     assert!(min_ground_m >= 0.95 * 3.0, "{min_ground_m}");
 }
+
+/// A vehicle inside the drifting block goes quiet (no position from 12 s on, its heartbeat
+/// going on): it is handed to its own Hold, which brakes it at PX4's gentler rate, while
+/// the swarm holds and the others brake at up to their envelopes. The filter keeps the
+/// others clear of the path it may take until its Hold has stopped it
+/// (`ringswarm_core::safety::lost`), so the vehicles ahead of it, braking harder, are
+/// not run into: measured on the emulator's truth, every pair keeps 0.95 × the
+/// separation, and the quiet vehicle is named once.
+#[test]
+fn a_quiet_vehicle_inside_the_block_is_not_run_into_while_everyone_brakes() {
+    let fault = "[[emulator.fault]]\nvehicle = 6\nfrom_s = 12.0\nuntil_s = 1000.0\n\
+                 kind = \"no_position\"\n\n[[vehicle]]";
+    let text = block_of(4).replacen("[[vehicle]]", fault, 1);
+    let config = config(&text.replace("duration_s = 90.0", "duration_s = 60.0"));
+    let sep = ringswarm::safety::Separation {
+        horizontal_m: 3.0,
+        vertical_m: config.safety.vertical_m,
+        gamma: 1.0,
+    };
+    let mut run = Lockstep::from_config(&config).unwrap();
+    let (mut closest, mut closest_to_quiet, mut tick) = (f64::INFINITY, f64::INFINITY, 0);
+    run.run_until(SimTime::from_secs_f64(30.0), |r| {
+        if r.swarm().control_ticks() == tick {
+            return;
+        }
+        tick = r.swarm().control_ticks();
+        let p: Vec<_> = r
+            .vehicles()
+            .iter()
+            .map(|v| ned_to_enu(v.status().pos_world_ned_m))
+            .collect();
+        for (i, a) in p.iter().enumerate() {
+            for (j, b) in p.iter().enumerate().skip(i + 1) {
+                let d = sep.distance_m(*a, *b);
+                closest = closest.min(d);
+                if i == 5 || j == 5 {
+                    closest_to_quiet = closest_to_quiet.min(d);
+                }
+            }
+        }
+    });
+    let named = run
+        .swarm()
+        .events()
+        .iter()
+        .filter(|e| e.system_id == Some(6) && e.text.starts_with("no fresh state"))
+        .count();
+    eprintln!("closest {closest:.3} m, to the quiet vehicle {closest_to_quiet:.3} m");
+    assert_eq!(named, 1);
+    assert!(matches!(run.swarm().phase(), SwarmPhase::Holding(_)));
+    assert!(closest >= 0.95 * 3.0, "{closest}");
+}

@@ -14,7 +14,7 @@ use crate::safety::{Agent, Side};
 use crate::vehicle::Phase;
 
 /// How long what was sent to a vehicle is kept (s): longer than the longest response
-/// counted ([`super::safety::MAX_RESPONSE_S`]) and a state timeout.
+/// counted (a second) and a state timeout.
 const KEEP_S: f64 = 3.0;
 
 /// What was sent to each vehicle the filter commanded: each tick's net horizontal
@@ -24,6 +24,9 @@ pub(super) struct SentCommands {
     per_vehicle: Vec<VecDeque<(SimTime, Vector2<f64>)>>,
     /// The last state of each vehicle kept as a path, once named in the events.
     named: Vec<Option<SimTime>>,
+    /// For a vehicle another shard flies: when the first report that its shard had
+    /// handed it to its Hold (or lost it) was sent, while it is quiet.
+    handed_over: Vec<Option<SimTime>>,
 }
 
 impl SentCommands {
@@ -31,6 +34,7 @@ impl SentCommands {
         Self {
             per_vehicle: vec![VecDeque::new(); n],
             named: vec![None; n],
+            handed_over: vec![None; n],
         }
     }
 
@@ -82,7 +86,9 @@ impl Swarm {
         let period_s = self.setup.control_interval.as_secs_f64();
         for i in 0..measured.min(self.slots.len()) {
             let a = &self.safety.agents[i];
-            if !a.controlled || self.is_remote(VehicleIndex(i)) {
+            // A remote vehicle's answer here is what its own shard's filter answers too
+            // while the two cooperate (`Swarm::cooperating_remote`).
+            if !a.controlled {
                 continue;
             }
             let net = self.safety.xy[i] - a.drift_mps2;
@@ -136,11 +142,14 @@ impl Swarm {
         }
     }
 
-    /// What is known of vehicle `i` when it is flown here, in the air (as last known),
-    /// and without a fresh state: flying on our commands, handed to its own Hold, or
-    /// silent. `None` otherwise (a vehicle landing, or flown by someone else, is not
-    /// bounded).
-    fn lost_vehicle(&self, i: VehicleIndex, now: SimTime) -> Option<LostVehicle> {
+    /// What is known of vehicle `i` when it is in the air (as last known) without a fresh
+    /// state: flying on our commands, handed to its own Hold, or silent; flown here or,
+    /// as its shard reports it, by another shard. `None` otherwise (a vehicle landing,
+    /// or flown by someone else, is not bounded).
+    fn lost_vehicle(&mut self, i: VehicleIndex, now: SimTime) -> Option<LostVehicle> {
+        if self.is_remote(i) {
+            return self.lost_remote(i, now);
+        }
         let link = self.slots[i].link()?;
         if self.law.states[i].is_some() || link.state().landed {
             return None;
@@ -166,13 +175,57 @@ impl Swarm {
             .flatten()
             .min()
             .unwrap_or(now);
-        let lag_s = self.counted_lag_s(i);
-        let delay_s = (self.counted_response_s(i) - lag_s).max(0.0);
+        let (delay_s, lag_s) = self.counted_delay_and_lag_s(i);
         Some(LostVehicle {
             pos_m: state.pos_enu_m,
             vel_mps: state.vel_enu_mps.xy(),
             coast_s: braking_from.saturating_since(last).as_secs_f64() + HOLD_ONSET_S,
             speed_margin_mps: self.safety.sent.speed_margin_mps(i.0, last, delay_s, lag_s),
+            braking_mps2: HOLD_BRAKING_MPS2,
+        })
+    }
+
+    /// [`Self::lost_vehicle`] for a vehicle another shard flies, from its shard's last
+    /// report: its last state, once its shard reports it lost (handed to its own Hold,
+    /// or silent). Its shard handed it over no later than the first report that says so
+    /// was sent (its last setpoint went before that); whether the Hold was confirmed is
+    /// not reported, so only its autopilot's own failsafe (when the file names the
+    /// autopilot) bounds the coasting. What it was sent is what this shard's filter
+    /// answered for it while it cooperated.
+    fn lost_remote(&mut self, i: VehicleIndex, now: SimTime) -> Option<LostVehicle> {
+        let r = self.slots[i].remote()?;
+        let (phase, landed, measured, sent, state) =
+            (r.phase, r.landed, r.measured, r.sent, r.state);
+        // Reported flying, a remote vehicle without a fresh state is one whose shard went
+        // silent: it may fly on with its shard (a partition), and nothing bounds where;
+        // the swarm holds for a silent shard.
+        let quiet = self.law.states[i].is_none()
+            && !landed
+            && matches!(phase, Phase::VehicleHold | Phase::Lost);
+        let handed = self.safety.sent.handed_over.get_mut(i.0)?;
+        if !quiet {
+            *handed = None;
+            return None;
+        }
+        let handed = *handed.get_or_insert(sent);
+        let failsafe = match self.setup.links[i].autopilot {
+            crate::link::AutopilotChoice::Only(a) => a.setpoint_loss_brakes_after_s(),
+            crate::link::AutopilotChoice::Auto => None,
+        }
+        .map(|after_s| handed + Duration::from_secs_f64(after_s));
+        let (delay_s, lag_s) = self.counted_delay_and_lag_s(i);
+        Some(LostVehicle {
+            pos_m: state.pos_enu_m,
+            vel_mps: state.vel_enu_mps.xy(),
+            coast_s: failsafe
+                .unwrap_or(now)
+                .saturating_since(measured)
+                .as_secs_f64()
+                + HOLD_ONSET_S,
+            speed_margin_mps: self
+                .safety
+                .sent
+                .speed_margin_mps(i.0, measured, delay_s, lag_s),
             braking_mps2: HOLD_BRAKING_MPS2,
         })
     }

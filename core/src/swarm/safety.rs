@@ -533,10 +533,20 @@ impl Swarm {
             .map_or(round_trip + UNMEASURED_RESPONSE_S, |r| r.max(round_trip))
     }
 
+    /// Vehicle `i`'s attitude response as counted, split into its delay and its lag (s):
+    /// for another shard's vehicle, the unmeasured response's.
+    pub(super) fn counted_delay_and_lag_s(&self, i: VehicleIndex) -> (f64, f64) {
+        if self.is_remote(i) {
+            return (UNMEASURED_RESPONSE_S - UNMEASURED_LAG_S, UNMEASURED_LAG_S);
+        }
+        let lag_s = self.counted_lag_s(i);
+        ((self.counted_response_s(i) - lag_s).max(0.0), lag_s)
+    }
+
     /// The lag of vehicle `i`'s attitude response counted inside its age (s): the
     /// fitted time constant when the fit is counted ([`Self::command_age_s`]), otherwise
     /// [`UNMEASURED_LAG_S`] of the unmeasured response.
-    pub(super) fn counted_lag_s(&self, i: VehicleIndex) -> f64 {
+    fn counted_lag_s(&self, i: VehicleIndex) -> f64 {
         self.slots[i]
             .flown
             .attitude_response()
