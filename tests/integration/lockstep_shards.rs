@@ -729,3 +729,51 @@ fn four_shards_pass_the_mirror_swap_s_jams_on_the_layer() {
         "{climbs} {top_m}"
     );
 }
+
+/// A vehicle of one shard goes quiet (no position from 12 s on) inside the drifting
+/// 4 × 4 block, split between two shards by rows. Its shard hands it to its own Hold and
+/// reports it lost; both shards hold, and each keeps the others clear of where it may
+/// stop (`ringswarm_core::safety::lost`): the other from its shard's last report, named
+/// in both. On the emulator's truth every pair keeps 0.95 × the 3 m separation (3.454 m:
+/// the block brakes together, as it did before the path was kept).
+#[test]
+fn a_quiet_vehicle_of_one_shard_is_kept_clear_of_in_both() {
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/block-circle.toml"),
+    )
+    .unwrap();
+    let fault = "[[emulator.fault]]\nvehicle = 6\nfrom_s = 12.0\nuntil_s = 1000.0\n\
+                 kind = \"no_position\"\n\n[[vehicle]]";
+    let config = Config::from_toml(&text.replacen("[[vehicle]]", fault, 1)).unwrap();
+    let owner: Vec<usize> = (0..16).map(|i| usize::from(i >= 8)).collect();
+    let mut flight = build(
+        &config,
+        &owner,
+        (Watch::All, 100.0),
+        bus_ms(20.0, 0.0, 0.0),
+        |_| {},
+    );
+    let sep = ringswarm::safety::Separation {
+        horizontal_m: 3.0,
+        vertical_m: config.safety.vertical_m,
+        gamma: 1.0,
+    };
+    let mut closest = f64::INFINITY;
+    flight.run_until(SimTime::from_millis(30_000), |r| {
+        closest = closest.min(closest_now_m(r, &sep));
+    });
+    for swarm in flight.shards() {
+        assert!(
+            matches!(swarm.phase(), SwarmPhase::Holding(_)),
+            "{:?}",
+            swarm.phase()
+        );
+        let named = swarm
+            .events()
+            .iter()
+            .filter(|e| e.system_id == Some(6) && e.text.starts_with("no fresh state"))
+            .count();
+        assert_eq!(named, 1, "{:?}", global_events(swarm));
+    }
+    assert!(closest >= 0.95 * 3.0, "{closest}");
+}
