@@ -130,6 +130,25 @@ pub struct Agent {
 }
 
 impl Agent {
+    /// A point of where a vehicle may be ([`Self::spread_m`]): at rest, not commanded,
+    /// `spread_m` around `pos_m` (m, ENU).
+    pub fn bound(pos_m: Vector3<f64>, spread_m: f64) -> Self {
+        Self {
+            side: Some(Side {
+                pos_m,
+                vel_mps: Vector3::zeros(),
+                accel_z_mps2: 0.0,
+            }),
+            controlled: false,
+            weight: 1.0,
+            drift_mps2: Vector2::zeros(),
+            limit_mps2: 0.0,
+            braking_mps2: 0.0,
+            lag_s: 0.0,
+            spread_m,
+        }
+    }
+
     /// Whether it is a measured state (no spread): counted in the closest pair, the close
     /// pairs and the active rows.
     pub fn measured(&self) -> bool {

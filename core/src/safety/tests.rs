@@ -732,22 +732,7 @@ fn a_vehicle_closing_on_a_lost_ones_stopping_path_brakes_for_where_it_may_stop()
     .path()
     .expect("bounded");
     let mut agents = vec![agent([0.0, 0.0, 10.0], [1.0, 0.0, 0.0], 1.0)];
-    for (p, spread) in path.points() {
-        agents.push(Agent {
-            side: Some(Side {
-                pos_m: p,
-                vel_mps: Vector3::zeros(),
-                accel_z_mps2: 0.0,
-            }),
-            controlled: false,
-            weight: 1.0,
-            drift_mps2: Vector2::zeros(),
-            limit_mps2: 0.0,
-            braking_mps2: 0.0,
-            lag_s: 0.0,
-            spread_m: spread,
-        });
-    }
+    agents.extend(path.points().map(|(p, spread)| Agent::bound(p, spread)));
     // 9 gaps of 4.1/9 m: each point's spread is 0.25 m and half a gap.
     assert_eq!(agents.len(), 11);
     let spread: f64 = 0.25 + 0.5 * 4.1 / 9.0;

@@ -5,12 +5,12 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use nalgebra::{Vector2, Vector3};
+use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
 use super::{Swarm, VehicleIndex};
+use crate::safety::Agent;
 use crate::safety::lost::{HOLD_BRAKING_MPS2, HOLD_ONSET_S, LostVehicle};
-use crate::safety::{Agent, Side};
 use crate::vehicle::Phase;
 
 /// How long what was sent to a vehicle is kept (s): longer than the longest response
@@ -108,20 +108,7 @@ impl Swarm {
                 continue;
             };
             for (pos_m, spread_m) in path.points() {
-                self.safety.agents.push(Agent {
-                    side: Some(Side {
-                        pos_m,
-                        vel_mps: Vector3::zeros(),
-                        accel_z_mps2: 0.0,
-                    }),
-                    controlled: false,
-                    weight: 1.0,
-                    drift_mps2: Vector2::zeros(),
-                    limit_mps2: 0.0,
-                    braking_mps2: 0.0,
-                    lag_s: 0.0,
-                    spread_m,
-                });
+                self.safety.agents.push(Agent::bound(pos_m, spread_m));
                 self.safety.xy.push(Vector2::zeros());
             }
             let last = self.state_time(i);
