@@ -158,6 +158,20 @@ fn a_vehicle_whose_position_stops_while_its_heartbeat_goes_on_is_lost_within_the
     // Its heartbeat goes on: never lost, but in its own Hold, and the others hover.
     let link = &run.swarm().link(VehicleIndex(2)).unwrap();
     assert_eq!(link.phase(), Phase::VehicleHold);
+    // The link hands it over on its own timer, just before the swarm's tick holds; the
+    // Hold was acknowledged at once (no latency here), and no setpoint went after the
+    // hand-over: what bounds where it may coast (`safety::lost`). Measured: confirmed at
+    // 10.299 s, the swarm holding at 10.300 s.
+    let confirmed = link.hold_confirmed_at().expect("confirmed").as_secs_f64();
+    assert!(
+        (held - 0.01..held + 0.05).contains(&confirmed),
+        "confirmed at {confirmed} s"
+    );
+    let last_setpoint = link.last_setpoint_sent().expect("streamed").as_secs_f64();
+    assert!(
+        (held - 0.01..=held).contains(&last_setpoint),
+        "last setpoint at {last_setpoint} s"
+    );
     assert!(
         link.state().last_heartbeat.is_some_and(
             |t| secs(16.0).saturating_since(t) < std::time::Duration::from_millis(1100)
