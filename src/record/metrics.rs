@@ -352,6 +352,9 @@ pub struct SafetyReport {
     /// Vehicles that, told to land above another closer than the horizontal
     /// separation, first flew clear of every other vehicle's way down.
     pub landing_moves: u64,
+    /// Silences of a vehicle in the air kept as its stopping path: its neighbours kept
+    /// clear of where it may be until its own Hold stops it.
+    pub quiet_paths: u64,
     /// Ticks on which the time limit (`budget_share`, in real time) ended a solve before
     /// its answer: the dual ascent's answer so far went out, secured by the stopping
     /// check.
@@ -408,6 +411,7 @@ impl SafetyReport {
             jam_ticks: s.jam_ticks,
             layer_climbs: s.layer_climbs,
             landing_moves: s.landing_moves,
+            quiet_paths: s.quiet_paths,
             unfinished_ticks: s.unfinished_ticks,
             unfinished_missed_mps2: s.unfinished_missed_mps2,
             unfinished_braked: s.unfinished_braked,

@@ -468,6 +468,7 @@ fn a_quiet_vehicle_inside_the_block_is_not_run_into_while_everyone_brakes() {
         .count();
     eprintln!("closest {closest:.3} m, to the quiet vehicle {closest_to_quiet:.3} m");
     assert_eq!(named, 1);
+    assert_eq!(run.swarm().safety_stats().quiet_paths, 1);
     assert!(matches!(run.swarm().phase(), SwarmPhase::Holding(_)));
     assert!(closest >= 0.95 * 3.0, "{closest}");
 }

@@ -116,6 +116,7 @@ impl Swarm {
                 if let Some(named) = self.safety.sent.named.get_mut(i.0) {
                     *named = last;
                 }
+                self.safety.stats.quiet_paths += 1;
                 self.log.push_vehicle(
                     now,
                     &self.setup.links[i],

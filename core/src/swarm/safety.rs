@@ -95,6 +95,9 @@ pub struct SafetyStats {
     /// Vehicles that, told to land above another closer than the horizontal
     /// separation, first flew clear of it (`super::landing`).
     pub landing_moves: u64,
+    /// Silences of a vehicle in the air kept as its stopping path (`super::lost`): once
+    /// per last state, each named in the events.
+    pub quiet_paths: u64,
     /// `safety.action = "continue"` was reported (once a flight).
     continue_reported: bool,
     /// The smallest ellipsoidal distance between two vehicles with a usable state, seen
@@ -465,8 +468,8 @@ impl Swarm {
         let what = match closest {
             Some((i, j, d)) => format!(
                 "vehicles {} and {} are {d:.2} m apart, inside {:.0} % of the {} m separation",
-                self.setup.links[i].system_id,
-                self.setup.links[j].system_id,
+                self.setup.links[i].file_label(),
+                self.setup.links[j].file_label(),
                 100.0 * BREACH_SHARE,
                 setup.separation.horizontal_m
             ),
@@ -569,7 +572,11 @@ impl Swarm {
         inside.extend(still);
         self.safety.stats.inside = inside;
         for (i, j, d) in entered {
-            let (a, b) = (self.setup.links[i].system_id, self.setup.links[j].system_id);
+            // Named by network too when system ids repeat across networks.
+            let (a, b) = (
+                self.setup.links[i].file_label(),
+                self.setup.links[j].file_label(),
+            );
             self.log.push(
                 now,
                 true,
