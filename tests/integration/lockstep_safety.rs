@@ -199,11 +199,13 @@ fn a_pair_the_filter_cannot_keep_apart_stops_the_swarm_as_safety_action_says() {
         .iter()
         .find(|e| e.text.starts_with("safety: vehicles"))
         .expect("an event names the pair");
+    // With each state's age: both flown here, reported every 4 ms.
     assert!(
         event.warning
+            && event.text.contains(" ms old here and ")
             && event
                 .text
-                .ends_with("inside 95 % of the 3 m separation: the swarm holds"),
+                .ends_with("ms old here), inside 95 % of the 3 m separation: the swarm holds"),
         "{}",
         event.text
     );

@@ -467,9 +467,11 @@ impl Swarm {
             .min_by(|a, b| a.2.total_cmp(&b.2));
         let what = match closest {
             Some((i, j, d)) => format!(
-                "vehicles {} and {} are {d:.2} m apart, inside {:.0} % of the {} m separation",
+                "vehicles {} and {} are {d:.2} m apart (states {} and {}), inside {:.0} % of the {} m separation",
                 self.setup.links[i].file_label(),
                 self.setup.links[j].file_label(),
+                self.state_age_text(VehicleIndex(i), now),
+                self.state_age_text(VehicleIndex(j), now),
                 100.0 * BREACH_SHARE,
                 setup.separation.horizontal_m
             ),
@@ -497,6 +499,20 @@ impl Swarm {
                 self.stop_law(now, StopReason::Separation, land, text);
             }
         }
+    }
+
+    /// How old vehicle `i`'s state is at `now` and where it came from ("12 ms old here",
+    /// "40 ms old from another shard"; "none yet" before its first).
+    fn state_age_text(&self, i: VehicleIndex, now: SimTime) -> String {
+        let whence = if self.is_remote(i) {
+            "from another shard"
+        } else {
+            "here"
+        };
+        self.state_time(i).map_or_else(
+            || "none yet".to_owned(),
+            |at| format!("{} ms old {whence}", now.saturating_since(at).as_millis()),
+        )
     }
 
     /// How old what is known of vehicle `i` is by the time a command sent now acts (s):
