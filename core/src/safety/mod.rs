@@ -561,16 +561,13 @@ impl SafetyFilter {
             broken |= row.lhs(agents, commands) < row.row.b;
             self.push_row(row);
         }
-        if agents[..n].iter().any(|a| !a.measured()) {
+        if self.measured.contains(&false) {
             // The closest pair of the measured states alone.
-            self.positions
-                .iter_mut()
-                .zip(&agents[..n])
-                .for_each(|(p, a)| {
-                    if !a.measured() {
-                        *p = None;
-                    }
-                });
+            for (p, measured) in self.positions.iter_mut().zip(&self.measured) {
+                if !measured {
+                    *p = None;
+                }
+            }
             closest = sweep
                 .sweep(
                     &self.positions,
@@ -680,7 +677,7 @@ impl SafetyFilter {
         self.active.extend(
             self.rows
                 .iter()
-                .filter(|r| agents[r.i].measured() && agents[r.j].measured())
+                .filter(|r| self.measured[r.i] && self.measured[r.j])
                 .filter(|r| r.lhs(agents, commands) - r.row.b < ACTIVE_SLACK_MPS2)
                 .map(|r| (r.i, r.j)),
         );
