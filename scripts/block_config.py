@@ -12,6 +12,10 @@ With `--shards S` the vehicles are split in S contiguous shards (`fly --shard s0
 and watching every vehicle over Zenoh on loopback (tcp/127.0.0.1:7500 + s, each shard
 connecting to every shard before it).
 
+`--telemetry-rate-hz 10` boots the emulated PX4s streaming their position and attitude at
+10 Hz rather than 50 until the handshake sets each stream: a thousand vehicles at 50 Hz
+are 200 000 datagrams a second on a machine that also runs the coordinators.
+
 The safety filter gets `--budget-ms` of each 20 ms control period (`[safety] budget_share`;
 2 ms by default, the per-tick time the dense-swarm goal allows; the coordinator's own default
 share, 0.2, would give it 4 ms at this rate).
@@ -38,6 +42,13 @@ def main():
     ap.add_argument("--duration", type=float, default=60.0, help="seconds of consensus flight")
     ap.add_argument("--shards", type=int, default=1, help="split the block in this many shards (1: none)")
     ap.add_argument("--budget-ms", type=float, default=2.0, help="the safety filter's time per control tick (ms, of 20)")
+    ap.add_argument(
+        "--telemetry-rate-hz",
+        type=float,
+        default=None,
+        help="[emulator] telemetry_rate_hz: the emulated PX4s' position and attitude rate from boot, "
+        "until the handshake sets them (default: the emulator's 50 Hz)",
+    )
     a = ap.parse_args()
     n = a.side * a.side
     if a.side < 2 or n % 2:
@@ -101,8 +112,12 @@ def main():
         "",
         "[emulator]",
         "ground_below_m = 100.0",
-        "",
     ]
+    if a.telemetry_rate_hz is not None:
+        if not (0.0 < a.telemetry_rate_hz <= 1000.0):
+            raise SystemExit(f"--telemetry-rate-hz must be in (0, 1000], got {a.telemetry_rate_hz}")
+        out.append(f"telemetry_rate_hz = {a.telemetry_rate_hz:g}")
+    out.append("")
     if a.shards > 1:
         out += ["[distributed]", 'swarm = "block"', 'watch = "all"', ""]
         for s in range(a.shards):

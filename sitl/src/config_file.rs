@@ -286,6 +286,12 @@ impl EmulatedVehicle {
                 self.drift_tau_s
             ));
         }
+        let rate = self.telemetry_rate_hz;
+        if !(rate.is_finite() && rate > 0.0 && rate <= 1000.0) {
+            problems.push(format!(
+                "{est}telemetry_rate_hz must be a finite number in (0, 1000] Hz, got {rate}"
+            ));
+        }
         let profile = match self.profile.parse::<Profile>() {
             Ok(p) => match p.with_airframe(self.mass_kg, self.hover_throttle, self.drag_per_s) {
                 Ok(p) => Some(p),
@@ -577,6 +583,11 @@ mod tests {
         assert!(err.contains("unknown vehicle profile \"x600\""));
         assert!(err.contains("below the ground"));
         assert!(err.contains("system_id 2 is used twice"));
-        assert!(err.contains("telemetry rate"));
+        assert!(
+            err.contains(
+                "vehicle[2].telemetry_rate_hz must be a finite number in (0, 1000] Hz, got 0"
+            ),
+            "{err}"
+        );
     }
 }

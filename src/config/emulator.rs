@@ -130,6 +130,7 @@ impl Config {
                 battery_capacity_mah: e.battery_capacity_mah,
                 autopilot: v.autopilot.clone(),
                 ekf_settle_s: e.ekf_settle_s,
+                telemetry_rate_hz: e.telemetry_rate_hz,
                 ..EmulatedVehicle::default()
             };
             let (vehicle, airframe_key) =

@@ -533,6 +533,11 @@ pub struct EmulatorSection {
     /// Vehicles with `autopilot = "ardupilot"`: seconds after boot before their EKF has
     /// a position and they may arm (default 5; real ArduPilot SITL takes about 40).
     pub ekf_settle_s: f64,
+    /// Rate (Hz) at which the emulated PX4s stream their position and attitude from boot,
+    /// before a ground station sets each stream (default 50, about PX4's `onboard` MAVLink
+    /// mode; its `normal` mode sends LOCAL_POSITION_NED at 1 Hz). A thousand vehicles at
+    /// 50 Hz are 200 000 datagrams a second until the coordinator's handshake sets them.
+    pub telemetry_rate_hz: f64,
 }
 
 /// `[[emulator.fault]]`: vehicle `vehicle` (1-based) reports something wrong between
@@ -595,6 +600,7 @@ impl Default for EmulatorSection {
             battery_capacity_mah: None,
             fault: Vec::new(),
             ekf_settle_s: 5.0,
+            telemetry_rate_hz: 50.0,
         }
     }
 }

@@ -780,7 +780,7 @@ fn a_coordinator_file_and_a_sitl_file_are_read_into_one_emulator_schema() {
     // The shared estimator's problems are named as the coordinator file has them, once.
     let bad = with(
         "ground_below_m = 100.0   # the paper's z = 0 is 100 m above the ground",
-        "ground_below_m = 100.0\nposition_noise_m = -1.0",
+        "ground_below_m = 100.0\nposition_noise_m = -1.0\ntelemetry_rate_hz = 0.0",
     )
     .replacen(
         "start_enu_m = [0.0, 20.0, 0.0]",
@@ -791,8 +791,17 @@ fn a_coordinator_file_and_a_sitl_file_are_read_into_one_emulator_schema() {
     assert_eq!(
         err,
         "emulator.position_noise_m must be a finite number in [0, 100] m, got -1\n\
+         emulator.telemetry_rate_hz must be a finite number in (0, 1000] Hz, got 0\n\
          vehicle[0].airframe.hover_throttle must be in [0.01, 0.99], got 1.5"
     );
+    // The emulated vehicles' boot stream rate reaches each of them.
+    let slow = with(
+        "ground_below_m = 100.0   # the paper's z = 0 is 100 m above the ground",
+        "ground_below_m = 100.0\ntelemetry_rate_hz = 10.0",
+    );
+    let (_, vehicles) = Config::from_toml(&slow).unwrap().emulator().unwrap();
+    assert!(vehicles.iter().all(|v| v.fast_rate_hz == 10.0));
+    assert_eq!(from_coordinator[0].fast_rate_hz, 50.0);
 }
 
 #[test]
