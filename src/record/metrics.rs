@@ -326,6 +326,13 @@ pub struct SafetyReport {
     /// The smallest ellipsoidal distance between two vehicles seen on a control tick
     /// (m, horizontal metres; `null` while never two had a usable state).
     pub min_separation_seen_m: Option<f64>,
+    /// When it was seen (s of swarm time, as in `events.csv`).
+    pub min_separation_seen_at_s: Option<f64>,
+    /// The swarm's phase then (`handshake`, `consensus`, `ended`, ...).
+    pub min_separation_seen_phase: Option<&'static str>,
+    /// The two vehicles, named as in the events (`n2-10` where ids repeat across
+    /// networks, the system id otherwise).
+    pub min_separation_seen_pair: Option<[String; 2]>,
     /// The fraction of control ticks with at least one active barrier constraint.
     pub active_fraction: f64,
     /// Control ticks on which the filter changed a command.
@@ -396,6 +403,12 @@ impl SafetyReport {
             min_separation_m: sep.horizontal_m,
             vertical_separation_m: sep.vertical_m,
             min_separation_seen_m: Some(s.min_seen_m).filter(|m| m.is_finite()),
+            min_separation_seen_at_s: s.min_seen.map(|c| c.at.as_secs_f64()),
+            min_separation_seen_phase: s.min_seen.map(|c| c.phase.name()),
+            min_separation_seen_pair: s.min_seen.map(|c| {
+                let label = |i: usize| swarm.setup().links[i].file_label();
+                [label(c.pair.0), label(c.pair.1)]
+            }),
             active_fraction: if s.ticks > 0 {
                 s.active_ticks as f64 / s.ticks as f64
             } else {

@@ -21,18 +21,26 @@ fn load(name: &str) -> Config {
 
 /// The smallest ellipsoidal distance between two of the emulator's vehicles now (truth).
 fn closest_now_m(run: &Lockstep, sep: &Separation) -> f64 {
+    closest_pair_now(run, sep).0
+}
+
+/// The same, with the pair (vehicle indices, the lower first).
+fn closest_pair_now(run: &Lockstep, sep: &Separation) -> (f64, usize, usize) {
     let p: Vec<Vector3<f64>> = run
         .vehicles()
         .iter()
         .map(|v| ned_to_enu(v.status().pos_world_ned_m))
         .collect();
-    let mut min_m = f64::INFINITY;
+    let mut closest = (f64::INFINITY, 0, 0);
     for (i, a) in p.iter().enumerate() {
-        for b in &p[i + 1..] {
-            min_m = min_m.min(sep.distance_m(*a, *b));
+        for (j, b) in p.iter().enumerate().skip(i + 1) {
+            let d = sep.distance_m(*a, *b);
+            if d < closest.0 {
+                closest = (d, i, j);
+            }
         }
     }
-    min_m
+    closest
 }
 
 #[derive(Debug)]
@@ -136,6 +144,15 @@ fn the_shipped_scenarios_keep_the_separation_with_takeoff_and_landing() {
 /// The crossing flown with `latency_ms` each way on every link and `action` for a pair
 /// the filter cannot keep apart: the truth's smallest separation, and the swarm.
 fn crossing_late(latency_ms: f64, action: BreachAction) -> (f64, Lockstep) {
+    let (closest, run) = crossing_late_closest(latency_ms, action);
+    (closest.0, run)
+}
+
+/// [`crossing_late`] with the truth's closest pair and when (s).
+fn crossing_late_closest(
+    latency_ms: f64,
+    action: BreachAction,
+) -> ((f64, usize, usize, f64), Lockstep) {
     let mut config = load("crossing");
     config.emulator.latency_ms = latency_ms;
     config.safety.action = action;
@@ -145,11 +162,14 @@ fn crossing_late(latency_ms: f64, action: BreachAction) -> (f64, Lockstep) {
         gamma: 1.0,
     };
     let mut run = Lockstep::from_config(&config).unwrap();
-    let mut min_m = f64::INFINITY;
+    let mut closest = (f64::INFINITY, 0, 0, 0.0);
     run.run_until(SimTime::from_millis(40_000), |r| {
-        min_m = min_m.min(closest_now_m(r, &sep));
+        let (d, i, j) = closest_pair_now(r, &sep);
+        if d < closest.0 {
+            closest = (d, i, j, r.now().as_secs_f64());
+        }
     });
-    (min_m, run)
+    (closest, run)
 }
 
 #[test]
@@ -157,7 +177,28 @@ fn the_round_trip_is_counted_in_the_barrier() {
     // 150 ms each way: TIMESYNC measures 300 ms (and a control period's wait at most),
     // and the barrier counts it: the separation holds. Without the round trip the same
     // flight came within 2.75 m.
-    let (min_m, run) = crossing_late(150.0, BreachAction::Hold);
+    let ((min_m, i, j, at_s), run) = crossing_late_closest(150.0, BreachAction::Hold);
+    // The summary names where and when the coordinator saw its closest pair: the
+    // truth's closest pair, in consensus, seen through 150 ms of latency each way.
+    let stats = run.swarm().safety_stats();
+    let seen = stats.min_seen.expect("a closest pair was seen");
+    eprintln!(
+        "truth: {min_m:.3} m, {i}-{j} at {at_s:.2} s; seen: {:.3} m, {:?} at {:.2} s",
+        stats.min_seen_m,
+        seen.pair,
+        seen.at.as_secs_f64()
+    );
+    assert_eq!(seen.pair, (i, j));
+    assert!(matches!(seen.phase, SwarmPhase::Consensus(_)), "{seen:?}");
+    // Seen later than it was, by the 150 ms the positions take and a tick or two.
+    let late_s = seen.at.as_secs_f64() - at_s;
+    assert!((0.15..0.25).contains(&late_s), "{seen:?} vs {at_s}");
+    // States carried forward by their age: the same distance to a few centimetres.
+    assert!(
+        (stats.min_seen_m - min_m).abs() < 0.05,
+        "{} vs {min_m}",
+        stats.min_seen_m
+    );
     let mut slowest = 0.0f64;
     for (i, link) in run.swarm().links().enumerate() {
         let rtt = link.round_trip().expect("measured").as_secs_f64();

@@ -78,7 +78,7 @@ pub use landing::LANDING_CLEAR_WAIT;
 use model::FlownModel;
 pub use phases::LOST_LANDING_WAIT;
 pub use places::AssignJob;
-pub use safety::SafetyStats;
+pub use safety::{ClosestSeen, SafetyStats};
 use scheduler::LinkScheduler;
 pub use setup::{
     BREACH_SHARE, BreachAction, EndAction, FenceSetup, LossPolicy, PlanDecision, Retargeted,

@@ -103,8 +103,22 @@ pub struct SafetyStats {
     /// The smallest ellipsoidal distance between two vehicles with a usable state, seen
     /// on a control tick (m; infinite while never two).
     pub min_seen_m: f64,
+    /// When that smallest distance was seen, the swarm's phase then and the pair
+    /// (vehicle indices): what a flight that lost its separation needs to be read.
+    pub min_seen: Option<ClosestSeen>,
     /// Pairs within the separation now (to log each entry once).
     inside: Vec<(usize, usize)>,
+}
+
+/// Where and when the smallest distance of a flight was seen.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClosestSeen {
+    /// The control tick's time.
+    pub at: SimTime,
+    /// The swarm's phase on that tick.
+    pub phase: SwarmPhase,
+    /// The two vehicles (indices into the swarm's links).
+    pub pair: (usize, usize),
 }
 
 impl SafetyStats {
@@ -331,8 +345,15 @@ impl Swarm {
         stats.counted_age.record(counted_age);
         stats.largest_piece = stats.largest_piece.max(report.largest_piece);
         stats.most_sweeps = stats.most_sweeps.max(report.sweeps);
-        if let Some((_, _, d)) = report.closest {
-            stats.min_seen_m = stats.min_seen_m.min(d);
+        if let Some((i, j, d)) = report.closest
+            && d < stats.min_seen_m
+        {
+            stats.min_seen_m = d;
+            stats.min_seen = Some(ClosestSeen {
+                at: now,
+                phase: self.phase,
+                pair: (i, j),
+            });
         }
         stats.check_braked_ticks += u64::from(report.braked > 0);
         stats.check_braked += report.braked as u64;
