@@ -330,8 +330,8 @@ pub struct SafetyReport {
     pub min_separation_seen_at_s: Option<f64>,
     /// The swarm's phase then (`handshake`, `consensus`, `ended`, ...).
     pub min_separation_seen_phase: Option<&'static str>,
-    /// The two vehicles, named as in the events (`n2-10` where ids repeat across
-    /// networks, the system id otherwise).
+    /// The two vehicles, named as in the events (`n2-10` for a vehicle on a network,
+    /// its system id otherwise).
     pub min_separation_seen_pair: Option<[String; 2]>,
     /// The fraction of control ticks with at least one active barrier constraint.
     pub active_fraction: f64,

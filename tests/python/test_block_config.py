@@ -41,7 +41,24 @@ def test_the_block_swap_flies_apart_with_its_places_mirrored(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["safety"]["min_separation_seen_m"] >= 0.95 * 3.0, summary["safety"]
     assert summary["safety"]["filtered_ticks"] > 0
+    # Where and when that closest distance was seen: two of the 16, named as the events
+    # name them (network and system id), inside the flight.
+    pair = summary["safety"]["min_separation_seen_pair"]
+    assert len(pair) == 2 and pair[0] != pair[1], pair
+    assert all(v.startswith("n0-") and 1 <= int(v[3:]) <= 16 for v in pair), pair
+    assert 0.0 <= summary["safety"]["min_separation_seen_at_s"] <= 30.0, summary["safety"]
+    assert summary["safety"]["min_separation_seen_phase"] in ("handshake", "consensus", "ended"), summary["safety"]
     assert done.returncode == 0, done.stderr[-2000:]
+
+
+def test_the_emulated_vehicles_boot_rate_is_written_and_checked():
+    args = ["4", "--yu-bound", "10", "--time-scale", "0.5"]
+    text = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "block_config.py"), *args, "--telemetry-rate-hz", "10"],
+        check=True, capture_output=True, text=True,
+    ).stdout
+    assert "[emulator]\nground_below_m = 100.0\ntelemetry_rate_hz = 10\n" in text
+    assert "--telemetry-rate-hz must be in (0, 1000]" in refused(*args, "--telemetry-rate-hz", "0")
 
 
 def test_a_block_with_an_odd_number_of_vehicles_is_refused_by_name():
