@@ -402,7 +402,7 @@ impl SafetyReport {
         Some(Self {
             min_separation_m: sep.horizontal_m,
             vertical_separation_m: sep.vertical_m,
-            min_separation_seen_m: Some(s.min_seen_m).filter(|m| m.is_finite()),
+            min_separation_seen_m: s.min_seen.map(|c| c.distance_m),
             min_separation_seen_at_s: s.min_seen.map(|c| c.at.as_secs_f64()),
             min_separation_seen_phase: s.min_seen.map(|c| c.phase.name()),
             min_separation_seen_pair: s.min_seen.map(|c| {

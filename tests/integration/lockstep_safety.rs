@@ -184,7 +184,7 @@ fn the_round_trip_is_counted_in_the_barrier() {
     let seen = stats.min_seen.expect("a closest pair was seen");
     eprintln!(
         "truth: {min_m:.3} m, {i}-{j} at {at_s:.2} s; seen: {:.3} m, {:?} at {:.2} s",
-        stats.min_seen_m,
+        seen.distance_m,
         seen.pair,
         seen.at.as_secs_f64()
     );
@@ -195,9 +195,9 @@ fn the_round_trip_is_counted_in_the_barrier() {
     assert!((0.15..0.25).contains(&late_s), "{seen:?} vs {at_s}");
     // States carried forward by their age: the same distance to a few centimetres.
     assert!(
-        (stats.min_seen_m - min_m).abs() < 0.05,
+        (seen.distance_m - min_m).abs() < 0.05,
         "{} vs {min_m}",
-        stats.min_seen_m
+        seen.distance_m
     );
     let mut slowest = 0.0f64;
     for (i, link) in run.swarm().links().enumerate() {

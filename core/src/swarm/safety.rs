@@ -100,11 +100,9 @@ pub struct SafetyStats {
     pub quiet_paths: u64,
     /// `safety.action = "continue"` was reported (once a flight).
     continue_reported: bool,
-    /// The smallest ellipsoidal distance between two vehicles with a usable state, seen
-    /// on a control tick (m; infinite while never two).
-    pub min_seen_m: f64,
-    /// When that smallest distance was seen, the swarm's phase then and the pair
-    /// (vehicle indices): what a flight that lost its separation needs to be read.
+    /// The smallest ellipsoidal distance between two vehicles with a usable state seen on
+    /// a control tick, with when, the swarm's phase then and the pair (`None` while never
+    /// two): what a flight that lost its separation needs to be read.
     pub min_seen: Option<ClosestSeen>,
     /// Pairs within the separation now (to log each entry once).
     inside: Vec<(usize, usize)>,
@@ -113,6 +111,8 @@ pub struct SafetyStats {
 /// Where and when the smallest distance of a flight was seen.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ClosestSeen {
+    /// The ellipsoidal distance (m, horizontal metres).
+    pub distance_m: f64,
     /// The control tick's time.
     pub at: SimTime,
     /// The swarm's phase on that tick.
@@ -124,10 +124,7 @@ pub struct ClosestSeen {
 impl SafetyStats {
     /// Empty statistics.
     pub fn new() -> Self {
-        Self {
-            min_seen_m: f64::INFINITY,
-            ..Self::default()
-        }
+        Self::default()
     }
 }
 
@@ -346,10 +343,10 @@ impl Swarm {
         stats.largest_piece = stats.largest_piece.max(report.largest_piece);
         stats.most_sweeps = stats.most_sweeps.max(report.sweeps);
         if let Some((i, j, d)) = report.closest
-            && d < stats.min_seen_m
+            && d < stats.min_seen.map_or(f64::INFINITY, |c| c.distance_m)
         {
-            stats.min_seen_m = d;
             stats.min_seen = Some(ClosestSeen {
+                distance_m: d,
                 at: now,
                 phase: self.phase,
                 pair: (i, j),
