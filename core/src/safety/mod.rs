@@ -98,6 +98,15 @@ pub const MAX_SWEEPS_TIMED: usize = 1_000_000;
 /// With a time limit, the largest piece (variables) solved by clarabel when the dual
 /// ascent did not finish it and time is left.
 pub const EXACT_MAX_VARS: usize = 32;
+/// What clarabel is allowed for a piece of `n` variables with a time limit (s):
+/// `EXACT_FIXED_S + n · EXACT_PER_VAR_S`, about three times what it took on this
+/// project's 2-core machine (30 µs for a head-on pair, 58 µs for 4 vehicles, 109 µs for
+/// 8, 208 µs for 16). The ascent of such a piece gets as long before clarabel takes it
+/// over, so neither can cost more than twice the cheaper of the two: a head-on pair
+/// whose disc and row nearly touch can take the ascent 10⁵ sweeps, clarabel 30 µs.
+pub const EXACT_FIXED_S: f64 = 60e-6;
+/// See [`EXACT_FIXED_S`] (s per variable).
+pub const EXACT_PER_VAR_S: f64 = 40e-6;
 
 /// One vehicle as the filter sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -753,7 +762,8 @@ impl SafetyFilter {
 
     /// One piece's QP over its variables: writes the commands and says whether a row had
     /// to be relaxed (its slack used). The dual ascent first ([`dual`]); when it does not
-    /// finish, clarabel without a time limit, or for a small piece with time left;
+    /// finish, clarabel without a time limit, or for a piece of up to [`EXACT_MAX_VARS`]
+    /// once the ascent has spent what clarabel is allowed and that much is left;
     /// otherwise the ascent's answer so far ([`Outcome::Unfinished`]).
     fn solve(
         &mut self,
@@ -768,12 +778,29 @@ impl SafetyFilter {
         if self.exact_only {
             return self.solve_exact(settings, agents, commands, piece);
         }
-        if let Some(relaxed) = self.solve_dual(settings, agents, commands, piece) {
+        // With a time limit, a piece clarabel can take is given to it once the ascent has
+        // spent what clarabel would (and there is that much left): the ascent goes on to
+        // the limit only when clarabel no longer fits.
+        let exact_s = EXACT_FIXED_S + EXACT_PER_VAR_S * vars.len() as f64;
+        let small = vars.len() <= EXACT_MAX_VARS;
+        let switch = match self.deadline {
+            Some(deadline) if small => {
+                Some((Instant::now() + Duration::from_secs_f64(exact_s)).min(deadline))
+            }
+            other => other,
+        };
+        if let Some(relaxed) = self.solve_dual(settings, agents, commands, piece, switch) {
             return Ok(relaxed);
         }
         let time_left = self.time_left_s();
-        if self.deadline.is_none() || (vars.len() <= EXACT_MAX_VARS && time_left > 0.0) {
+        if self.deadline.is_none() || (small && time_left >= exact_s) {
             return self.solve_exact(settings, agents, commands, piece);
+        }
+        if small
+            && time_left > 0.0
+            && let Some(relaxed) = self.solve_dual(settings, agents, commands, piece, self.deadline)
+        {
+            return Ok(relaxed);
         }
         self.tally.unfinished = true;
         self.write_ascent(agents, commands, vars);
@@ -799,14 +826,16 @@ impl SafetyFilter {
         }
     }
 
-    /// The piece's QP by dual ascent, warm-started from the rows' multipliers; `None`
-    /// (commands untouched) when it stopped before converging.
+    /// The piece's QP by dual ascent, warm-started from the rows' multipliers, until
+    /// `stop_at` (without one, [`MAX_SWEEPS`]); `None` (commands untouched) when it
+    /// stopped before converging.
     fn solve_dual(
         &mut self,
         settings: &Settings,
         agents: &[Agent],
         commands: &mut [Vector2<f64>],
         piece: Piece<'_>,
+        stop_at: Option<Instant>,
     ) -> Option<bool> {
         let Piece {
             rows,
@@ -861,14 +890,13 @@ impl SafetyFilter {
                 .filter(|&&k| piece_has_side(&self.rows[k], var_of))
                 .map(|&k| self.lambda[k]),
         );
-        let deadline = self.deadline;
-        let max_sweeps = if deadline.is_some() {
+        let max_sweeps = if stop_at.is_some() {
             MAX_SWEEPS_TIMED
         } else {
             MAX_SWEEPS
         };
         let end = dual::ascend(&self.piece, &mut self.dual, max_sweeps, || {
-            deadline.is_some_and(|d| Instant::now() >= d)
+            stop_at.is_some_and(|d| Instant::now() >= d)
         });
         let used = rows
             .iter()

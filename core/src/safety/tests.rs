@@ -789,3 +789,66 @@ fn a_vehicle_closing_on_a_lost_ones_stopping_path_brakes_for_where_it_may_stop()
     assert_eq!((i, j), (0, agents.len() - 1));
     assert!((distance - 30.0).abs() < 1e-12);
 }
+
+#[test]
+fn a_head_on_pair_is_solved_inside_a_time_limit_as_without_one() {
+    // Head-on pairs with their commands at their discs along the row: the disc and the
+    // row nearly touch, and the ascent can crawl (10⁵ sweeps for some of these). With a
+    // time limit, clarabel takes such a piece once the ascent has spent what clarabel
+    // would: every pair is solved, no answer left unfinished, as the lockstep (no limit)
+    // solves it. The limit is generous; what is asserted does not depend on the clock.
+    let mut next = uniform(11);
+    let (mut solved, mut slow) = (0, 0);
+    for case in 0..300 {
+        let gap = 3.05 + 2.0 * next();
+        let lateral = 0.4 * (next() - 0.5);
+        let mut agents = vec![
+            agent([0.0, 0.0, 10.0], [1.0 + 2.0 * next(), 0.1 * (next() - 0.5), 0.0], 1.0 + next()),
+            agent([gap, lateral, 10.0], [-1.0 - 2.0 * next(), 0.1 * (next() - 0.5), 0.0], 1.0 + next()),
+        ];
+        for a in &mut agents {
+            a.limit_mps2 = 2.0 + next();
+            a.braking_mps2 = 0.5 * a.limit_mps2;
+        }
+        let heading = 0.3 * (next() - 0.5);
+        let before = vec![
+            Vector2::new(heading.cos(), heading.sin()) * agents[0].limit_mps2,
+            Vector2::new(-heading.cos(), 0.2 * (next() - 0.5)) * agents[1].limit_mps2 * 0.999,
+        ];
+        let untimed = settings(case % 4 != 0);
+        let timed = Settings {
+            time_limit_s: 0.5,
+            ..untimed
+        };
+        let solve = |s: &Settings| {
+            let mut filter = SafetyFilter {
+                whole_only: true,
+                ..SafetyFilter::default()
+            };
+            let mut commands = before.clone();
+            let report = filter.filter(s, &agents, &mut commands, None);
+            (report, commands)
+        };
+        let (lockstep, by_lockstep) = solve(&untimed);
+        let (real_time, by_real_time) = solve(&timed);
+        if lockstep.largest_piece == 0 {
+            continue;
+        }
+        solved += 1;
+        slow += usize::from(lockstep.sweeps >= MAX_SWEEPS);
+        assert!(
+            matches!(real_time.outcome, Outcome::Filtered { .. }),
+            "case {case}: {real_time:?}"
+        );
+        assert_eq!(real_time.outcome, lockstep.outcome, "case {case}");
+        // Clarabel's answer or the ascent's converged one: the same to clarabel's
+        // tolerance.
+        for k in 0..2 {
+            let diff = (by_real_time[k] - by_lockstep[k]).norm();
+            assert!(diff < 5e-4, "case {case}: {diff}");
+        }
+        // Before clarabel took over, such a pair ran the ascent to the limit.
+        assert!(real_time.sweeps < 20_000, "case {case}: {real_time:?}");
+    }
+    assert!(solved > 250 && slow > 100, "{solved} {slow}");
+}
