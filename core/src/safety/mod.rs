@@ -394,6 +394,8 @@ struct Tally {
     sweeps: usize,
     largest_piece: usize,
     unfinished: bool,
+    /// With a time limit, clarabel took a piece the ascent had not finished.
+    taken_over: bool,
     missed_mps2: f64,
 }
 
@@ -436,7 +438,10 @@ impl SafetyFilter {
         let unfinished =
             self.tally.unfinished && matches!(report.outcome, Outcome::Filtered { .. });
         let every_tick = self.stop.is_some() && !self.rows.is_empty();
-        let checked = unfinished || every_tick;
+        // A piece the ascent could not finish in time is one whose vehicles press
+        // against their envelopes: clarabel's answer there is checked as an unfinished
+        // one is.
+        let checked = unfinished || every_tick || self.tally.taken_over;
         if !checked {
             self.committed.clear();
         }
@@ -794,6 +799,7 @@ impl SafetyFilter {
         }
         let time_left = self.time_left_s();
         if self.deadline.is_none() || (small && time_left >= exact_s) {
+            self.tally.taken_over |= self.deadline.is_some();
             return self.solve_exact(settings, agents, commands, piece);
         }
         if small
