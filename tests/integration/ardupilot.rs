@@ -720,3 +720,81 @@ fn a_vehicle_met_in_the_air_keeps_its_velocity_through_the_handshake_however_slo
     let v = at_start.expect("consensus started");
     assert!((v - Vector2::new(0.3, 0.2)).norm() < 0.1, "{v:?}");
 }
+
+/// An ArduCopter of the mixed ring (vehicle 2) goes silent both ways at 15 s, in
+/// consensus at about 2 m/s: its BRAKE is never confirmed. As ArduCopter does, it flies
+/// its last attitude target until GUID_TIMEOUT (3 s, read in the handshake), levels and
+/// drifts in GUIDED, slowed by its drag alone. The others keep clear of where it may be,
+/// and that is bounded: on every tick of the silence the emulator's truth of the silent
+/// vehicle lies inside the stopping path the filter kept clear of, the path stops
+/// growing once its last setpoint can no longer act (until now a path grew with the
+/// time for as long as no Hold was confirmed), and every pair keeps 0.95 × the
+/// separation.
+#[test]
+fn a_silent_ardupilot_vehicle_is_kept_clear_of_where_it_drifts_and_its_path_is_bounded() {
+    use ringswarm::control::ned_to_enu;
+    use ringswarm::driver::lockstep::Lockstep;
+    use ringswarm::safety::Separation;
+    use ringswarm::swarm::{SwarmPhase, VehicleIndex};
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/mixed-autopilots.toml"),
+    )
+    .unwrap()
+    .replace(
+        "[formation]",
+        "[[emulator.silence]]\nvehicle = 2\nfrom_s = 15.0\nuntil_s = 1000.0\n\n[formation]",
+    );
+    let config = ringswarm::config::Config::from_toml(&text).unwrap();
+    let sep = Separation {
+        horizontal_m: config.safety.horizontal_m,
+        vertical_m: config.safety.vertical_m,
+        gamma: 1.0,
+    };
+    let silent = VehicleIndex(1);
+    let mut run = Lockstep::from_config(&config).unwrap();
+    let (mut tick, mut kept_ticks, mut outside_m, mut closest) = (0, 0, 0.0f64, f64::INFINITY);
+    let (mut length_at_25, mut length_at_45, mut speed_at_15) = (None, None, None);
+    run.run_until(SimTime::from_secs_f64(45.0), |r| {
+        if r.swarm().control_ticks() == tick {
+            return;
+        }
+        tick = r.swarm().control_ticks();
+        let now_s = r.now().as_secs_f64();
+        let p: Vec<_> = r
+            .vehicles()
+            .iter()
+            .map(|v| ned_to_enu(v.status().pos_world_ned_m))
+            .collect();
+        for (i, a) in p.iter().enumerate() {
+            for b in &p[i + 1..] {
+                closest = closest.min(sep.distance_m(*a, *b));
+            }
+        }
+        if speed_at_15.is_none() && now_s >= 15.0 {
+            assert!(matches!(r.swarm().phase(), SwarmPhase::Consensus(_)));
+            speed_at_15 = Some(r.vehicles()[1].status().vel_ned_mps.xy().norm());
+        }
+        if let Some(path) = r.swarm().stopping_path(silent) {
+            kept_ticks += 1;
+            outside_m = outside_m.max(path.distance_m(p[1].xy()));
+            if now_s >= 25.0 && length_at_25.is_none() {
+                length_at_25 = Some(path.length_m);
+            }
+            length_at_45 = Some(path.length_m);
+        }
+    });
+    let (Some(at_25), Some(at_45)) = (length_at_25, length_at_45) else {
+        panic!("no stopping path kept for the silent vehicle");
+    };
+    eprintln!(
+        "speed at 15 s {:?} m/s; path {at_25:.2} m at 25 s, {at_45:.2} m at 45 s over {kept_ticks} ticks; truth outside it by {outside_m:.3} m; closest {closest:.3} m",
+        speed_at_15
+    );
+    assert!(speed_at_15.is_some_and(|v| v > 1.0), "{speed_at_15:?}");
+    // From the state timeout on to the end (about 29 s at 50 Hz).
+    assert!(kept_ticks > 1400, "{kept_ticks}");
+    assert_eq!(outside_m, 0.0);
+    assert_eq!(at_25, at_45);
+    assert!(at_45.is_finite() && at_45 > 0.0);
+    assert!(closest >= 0.95 * sep.horizontal_m, "{closest}");
+}

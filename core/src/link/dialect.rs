@@ -183,6 +183,29 @@ impl Autopilot {
         }
     }
 
+    /// How long it goes on flying the last setpoint it got when no new one comes (s), by
+    /// the values its handshake read: PX4 until its offboard loss failsafe
+    /// (COM_OF_LOSS_T, 1 s by default; [`Self::setpoint_loss_brakes_after_s`]); ArduPilot
+    /// until GUID_TIMEOUT (3 s by default, at least 0.1 s as it applies it; read), after
+    /// which it levels and drifts ([`Self::levels_after_setpoint_loss`]).
+    pub fn setpoint_held_s(self, read: impl Fn(&ardupilot::ParamName) -> Option<f32>) -> f64 {
+        match self {
+            Self::Px4 => 1.0,
+            Self::ArduPilot => read(&ardupilot::GUID_TIMEOUT)
+                .map(f64::from)
+                .filter(|t| t.is_finite())
+                .unwrap_or(3.0)
+                .max(0.1),
+        }
+    }
+
+    /// Whether, once its setpoints stop for [`Self::setpoint_held_s`], it levels and
+    /// drifts in its fly mode, slowed by its drag alone (ArduPilot, which has no
+    /// horizontal hold in GUIDED's angle sub-mode), rather than braking in a failsafe.
+    pub fn levels_after_setpoint_loss(self) -> bool {
+        self == Self::ArduPilot
+    }
+
     /// The mode it is handed to when it cannot be flown on: it brakes and holds on its
     /// own estimate.
     pub fn hold_mode(self) -> VehicleCommand {
@@ -355,6 +378,10 @@ fn ardupilot_guided_params(own_system_id: u8) -> Vec<ParamStep> {
             action: ParamAction::Read,
         },
         ParamStep {
+            param: ardupilot::GUID_TIMEOUT,
+            action: ParamAction::Read,
+        },
+        ParamStep {
             param: ardupilot::GUID_OPTIONS,
             action: ParamAction::SetBits(ardupilot::GUID_OPTIONS_THRUST_AS_THRUST),
         },
@@ -403,6 +430,7 @@ mod tests {
         let guided = [
             ("MOT_THST_HOVER", ParamAction::Read),
             ("ATC_ANGLE_BOOST", ParamAction::Read),
+            ("GUID_TIMEOUT", ParamAction::Read),
             ("GUID_OPTIONS", ParamAction::SetBits(8)),
             ("FS_GCS_ENABLE", ParamAction::Read),
             (
@@ -415,9 +443,9 @@ mod tests {
         ];
         assert_eq!(names(Autopilot::ArduPilot.setup_params(253, false)), guided);
         let fenced = names(Autopilot::ArduPilot.setup_params(253, true));
-        assert_eq!(fenced[..5], guided);
+        assert_eq!(fenced[..6], guided);
         assert_eq!(
-            fenced[5..],
+            fenced[6..],
             [
                 ("FENCE_TYPE", ParamAction::Set(4.0)),
                 ("FENCE_ENABLE", ParamAction::Set(1.0))

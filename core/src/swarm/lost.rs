@@ -9,8 +9,9 @@ use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
 use super::{Swarm, VehicleIndex};
+use crate::link::Autopilot;
 use crate::safety::Agent;
-use crate::safety::lost::{HOLD_BRAKING_MPS2, HOLD_ONSET_S, LostVehicle};
+use crate::safety::lost::{HOLD_BRAKING_MPS2, HOLD_ONSET_S, LostVehicle, StoppingPath};
 use crate::vehicle::Phase;
 
 /// How long what was sent to a vehicle is kept (s): longer than the longest response
@@ -27,6 +28,8 @@ pub(super) struct SentCommands {
     /// For a vehicle another shard flies: when the first report that its shard had
     /// handed it to its Hold (or lost it) was sent, while it is quiet.
     handed_over: Vec<Option<SimTime>>,
+    /// Each vehicle's stopping path as the filter kept clear of it on the last tick.
+    paths: Vec<Option<StoppingPath>>,
 }
 
 impl SentCommands {
@@ -35,6 +38,7 @@ impl SentCommands {
             per_vehicle: vec![VecDeque::new(); n],
             named: vec![None; n],
             handed_over: vec![None; n],
+            paths: vec![None; n],
         }
     }
 
@@ -55,6 +59,21 @@ impl SentCommands {
         {
             sent.pop_front();
         }
+    }
+
+    /// What the last net acceleration sent to vehicle `i` can add to its speed if it
+    /// is flown until `held_until` and for `lag_s` after (m/s): its size times the time
+    /// from when it was sent, less the period it is already counted for. Nothing when
+    /// none was sent.
+    fn held_margin_mps(&self, i: usize, period_s: f64, held_until: SimTime, lag_s: f64) -> f64 {
+        let Some((sent_at, dv)) = self.per_vehicle.get(i).and_then(|sent| sent.back()) else {
+            return 0.0;
+        };
+        if period_s <= 0.0 {
+            return 0.0;
+        }
+        let held_s = held_until.saturating_since(*sent_at).as_secs_f64() + lag_s.max(0.0);
+        dv.norm() / period_s * (held_s - period_s).max(0.0)
     }
 
     /// What the commands sent to vehicle `i` can still add to its speed from its last
@@ -101,12 +120,18 @@ impl Swarm {
     /// with the spread of its stretch. Named in the events once per silence.
     pub(super) fn push_lost_vehicles(&mut self, now: SimTime) {
         for i in self.indices() {
+            if let Some(kept) = self.safety.sent.paths.get_mut(i.0) {
+                *kept = None;
+            }
             let Some(lost) = self.lost_vehicle(i, now) else {
                 continue;
             };
             let Some(path) = lost.path() else {
                 continue;
             };
+            if let Some(kept) = self.safety.sent.paths.get_mut(i.0) {
+                *kept = Some(path);
+            }
             for (pos_m, spread_m) in path.points() {
                 self.safety.agents.push(Agent::bound(pos_m, spread_m));
                 self.safety.xy.push(Vector2::zeros());
@@ -130,6 +155,12 @@ impl Swarm {
         }
     }
 
+    /// Vehicle `i`'s stopping path as the filter kept the others clear of it on the last
+    /// tick (`None`: it had a fresh state, or nothing bounds where it is).
+    pub fn stopping_path(&self, i: VehicleIndex) -> Option<StoppingPath> {
+        self.safety.sent.paths.get(i.0).copied().flatten()
+    }
+
     /// What is known of vehicle `i` when it is in the air (as last known) without a fresh
     /// state: flying on our commands, handed to its own Hold, or silent; flown here or,
     /// as its shard reports it, by another shard. `None` otherwise (a vehicle landing,
@@ -150,26 +181,68 @@ impl Swarm {
         }
         let state = self.common_state(i)?;
         let last = link.state().last_position?;
+        let dialect = link.state().dialect();
+        let held_s = link.setpoint_held_s();
+        let (delay_s, lag_s) = self.counted_delay_and_lag_s(i);
+        // If its uplink is down too, the last command that reached it is flown until its
+        // autopilot's own timeout after it arrived; a confirmed Hold ends it sooner (the
+        // uplink works, and the vehicle left its fly mode). Later level setpoints may
+        // not have reached it.
+        let period_s = self.setup.control_interval.as_secs_f64();
+        let timeout = link
+            .last_setpoint_sent()
+            .map(|sent| sent + Duration::from_secs_f64(held_s + delay_s));
+        let held_mps = [timeout, link.hold_confirmed_at()]
+            .into_iter()
+            .flatten()
+            .min()
+            .map_or(0.0, |until| {
+                self.safety
+                    .sent
+                    .held_margin_mps(i.0, period_s, until, lag_s)
+            });
+        let speed_margin_mps =
+            self.safety.sent.speed_margin_mps(i.0, last, delay_s, lag_s) + held_mps;
+        let since_last = |t: SimTime| t.saturating_since(last).as_secs_f64() + HOLD_ONSET_S;
         // It brakes once its Hold is confirmed, or its own failsafe took over after the
-        // last setpoint; until either, it may still coast.
-        let failsafe = link
-            .state()
-            .dialect()
+        // last setpoint; until either, it may still coast (a bound that grows with now).
+        let failsafe = dialect
             .setpoint_loss_brakes_after_s()
             .zip(link.last_setpoint_sent())
-            .map(|(after_s, sent)| sent + Duration::from_secs_f64(after_s));
+            .map(|(after_s, sent)| sent + Duration::from_secs_f64(after_s + delay_s));
         let braking_from = [link.hold_confirmed_at(), failsafe]
             .into_iter()
             .flatten()
             .min()
             .unwrap_or(now);
-        let (delay_s, lag_s) = self.counted_delay_and_lag_s(i);
-        Some(LostVehicle {
+        let braked = LostVehicle {
             pos_m: state.pos_enu_m,
             vel_mps: state.vel_enu_mps.xy(),
-            coast_s: braking_from.saturating_since(last).as_secs_f64() + HOLD_ONSET_S,
-            speed_margin_mps: self.safety.sent.speed_margin_mps(i.0, last, delay_s, lag_s),
+            coast_s: since_last(braking_from),
+            speed_margin_mps,
             braking_mps2: HOLD_BRAKING_MPS2,
+        };
+        // An ArduPilot vehicle levels once its setpoints stopped for GUID_TIMEOUT and
+        // then drifts, slowed by its drag alone: from speed V at rate k it goes V/k
+        // further, what braking at V·k/2 gives.
+        let drift_drag_per_s = self.slots[i].flown.drift_drag_per_s();
+        let drifted = link
+            .last_setpoint_sent()
+            .filter(|_| dialect.levels_after_setpoint_loss() && drift_drag_per_s > 0.0)
+            .map(|sent| {
+                let levels_at = sent + Duration::from_secs_f64(held_s + delay_s);
+                let top_mps = state.vel_enu_mps.xy().norm() + speed_margin_mps;
+                LostVehicle {
+                    coast_s: since_last(levels_at),
+                    braking_mps2: top_mps * drift_drag_per_s / 2.0,
+                    ..braked
+                }
+            });
+        // Both bound where it may be: the shorter is kept.
+        let length = |v: &LostVehicle| v.path().map_or(f64::INFINITY, |p| p.length_m);
+        Some(match drifted {
+            Some(d) if length(&d) < length(&braked) => d,
+            _ => braked,
         })
     }
 
@@ -196,12 +269,28 @@ impl Swarm {
             return None;
         }
         let handed = *handed.get_or_insert(sent);
-        let failsafe = match self.setup.links[i].autopilot {
-            crate::link::AutopilotChoice::Only(a) => a.setpoint_loss_brakes_after_s(),
+        let autopilot = match self.setup.links[i].autopilot {
+            crate::link::AutopilotChoice::Only(a) => Some(a),
             crate::link::AutopilotChoice::Auto => None,
-        }
-        .map(|after_s| handed + Duration::from_secs_f64(after_s));
+        };
         let (delay_s, lag_s) = self.counted_delay_and_lag_s(i);
+        let failsafe = autopilot
+            .and_then(|a| a.setpoint_loss_brakes_after_s())
+            .map(|after_s| handed + Duration::from_secs_f64(after_s + delay_s));
+        // Its last command may act until its autopilot's own timeout (the default here:
+        // its own shard read the vehicle's); the longest of the two when it is not named.
+        let held_s = autopilot.map_or(
+            Autopilot::Px4
+                .setpoint_held_s(|_| None)
+                .max(Autopilot::ArduPilot.setpoint_held_s(|_| None)),
+            |a| a.setpoint_held_s(|_| None),
+        );
+        let period_s = self.setup.control_interval.as_secs_f64();
+        let until = handed + Duration::from_secs_f64(held_s + delay_s);
+        let held_mps = self
+            .safety
+            .sent
+            .held_margin_mps(i.0, period_s, until, lag_s);
         Some(LostVehicle {
             pos_m: state.pos_enu_m,
             vel_mps: state.vel_enu_mps.xy(),
@@ -213,7 +302,8 @@ impl Swarm {
             speed_margin_mps: self
                 .safety
                 .sent
-                .speed_margin_mps(i.0, measured, delay_s, lag_s),
+                .speed_margin_mps(i.0, measured, delay_s, lag_s)
+                + held_mps,
             braking_mps2: HOLD_BRAKING_MPS2,
         })
     }
@@ -263,5 +353,26 @@ mod tests {
         sent.record(0, at(4000), east * 3.0, 0.02);
         sent.record(0, at(4020), Vector2::new(f64::NAN, 0.0), 0.02);
         assert!((sent.speed_margin_mps(0, at(0), 0.0, 0.0) - 0.06).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_last_command_held_adds_its_size_for_as_long_as_it_may_be_flown_beyond_its_period() {
+        let mut sent = SentCommands::new(2);
+        // 1 m/s² north at 0 ms, then 3 m/s² along (0.6, 0.8) at 20 ms, 20 ms periods.
+        sent.record(0, at(0), Vector2::new(0.0, 1.0), 0.02);
+        sent.record(0, at(20), Vector2::new(1.8, 2.4), 0.02);
+        // Flown until 3.02 s (ArduPilot's GUID_TIMEOUT after it), and a 0.1 s lag after:
+        // 3 m/s² for 3.1 s less the 20 ms already counted, 9.24 m/s.
+        let held = sent.held_margin_mps(0, 0.02, at(3020), 0.1);
+        assert!((held - 9.24).abs() < 1e-9, "{held}");
+        // Until its own period's end with no lag: nothing beyond what is counted.
+        assert_eq!(sent.held_margin_mps(0, 0.02, at(40), 0.0), 0.0);
+        // Ended before it was sent (a Hold confirmed earlier): nothing.
+        assert_eq!(sent.held_margin_mps(0, 0.02, at(10), 0.0), 0.0);
+        assert_eq!(
+            sent.held_margin_mps(1, 0.02, at(3000), 0.1),
+            0.0,
+            "nothing sent"
+        );
     }
 }

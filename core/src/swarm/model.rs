@@ -179,6 +179,17 @@ impl FlownModel {
         }
     }
 
+    /// The drag a vehicle left to drift is surely slowed by (1/s): the estimate's lower
+    /// confidence bound while the estimator runs (zero until it knows), the configured
+    /// drag otherwise.
+    pub(super) fn drift_drag_per_s(&self) -> f64 {
+        if self.estimate_drag {
+            self.drag.lower_bound_per_s()
+        } else {
+            self.drag_per_s
+        }
+    }
+
     /// The acceleration the commands do not explain, to take off the next command
     /// (m/s², ENU; zero while the observer is off).
     pub(super) fn disturbance_mps2(&self) -> Vector2<f64> {

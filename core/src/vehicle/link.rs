@@ -90,6 +90,9 @@ pub struct VehicleLink {
     restore: Option<ParamSession>,
     /// Whether the vehicle multiplies the thrust it is sent by 1/cos(tilt).
     angle_boost: bool,
+    /// How long it flies its last setpoint when no new one comes (s), as its handshake
+    /// read it; `None` before (its autopilot's default then).
+    setpoint_held_s: Option<f64>,
     /// Whether what `params` read was taken (the angle boost, the hover reported).
     params_applied: bool,
     /// The last warning the vehicle sent (STATUSTEXT, severity WARNING or worse).
@@ -111,6 +114,7 @@ impl VehicleLink {
             params: None,
             restore: None,
             angle_boost: false,
+            setpoint_held_s: None,
             params_applied: false,
             last_warning: None,
             restore_reported: false,
@@ -211,6 +215,14 @@ impl VehicleLink {
     /// When the last setpoint was sent (`None`: never).
     pub fn last_setpoint_sent(&self) -> Option<SimTime> {
         self.last_setpoint_sent
+    }
+
+    /// How long the vehicle goes on flying the last setpoint it got when no new one
+    /// comes (s): its autopilot's timeout, as the handshake read it
+    /// ([`crate::link::Autopilot::setpoint_held_s`]).
+    pub fn setpoint_held_s(&self) -> f64 {
+        self.setpoint_held_s
+            .unwrap_or_else(|| self.state.dialect().setpoint_held_s(|_| None))
     }
 
     /// Whether the last accepted position is younger than the state timeout (its origin

@@ -122,6 +122,7 @@ impl VehicleLink {
             let dialect = self.state.dialect();
             let read = |p: &ringswarm_wire::ardupilot::ParamName| params.value(p);
             self.angle_boost = dialect.angle_boost(read);
+            self.setpoint_held_s = Some(dialect.setpoint_held_s(read));
             if let Some(hover_throttle) = dialect.reported_hover(read) {
                 self.events
                     .push_back(LinkEvent::HoverReported { hover_throttle });
