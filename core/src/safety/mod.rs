@@ -636,7 +636,8 @@ impl SafetyFilter {
         }
         if let Some(relaxed) = self.solve_in_pieces(settings, agents, &mut commands[..n]) {
             let outcome = Outcome::Filtered {
-                sum_kept: settings.keep_weighted_sum,
+                // A piece clarabel took over in time does not have its sum given back.
+                sum_kept: settings.keep_weighted_sum && !self.tally.taken_over,
                 relaxed,
             };
             return self.report(agents, commands, outcome, closest);
