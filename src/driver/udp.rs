@@ -189,20 +189,12 @@ pub async fn run_swarm<O: Observer>(
     mut observer: O,
     mut shards: Option<&mut (dyn ShardTransport + Send + 'static)>,
 ) -> io::Result<(Swarm, O)> {
-    let wall_us = || {
+    let start = Instant::now();
+    swarm.set_swarm_epoch_us(
         std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX))
-    };
-    // A shard's clock starts at its own share of the control period on the wall clock,
-    // so that shards sharing a host take turns (docs/distributed.md).
-    if let Some(plan) = swarm.shard_plan() {
-        let period_us = u64::try_from(swarm.setup().control_interval.as_micros()).unwrap_or(0);
-        let wait_us = plan.tick_phase_wait_us(wall_us(), period_us);
-        tokio::time::sleep(std::time::Duration::from_micros(wait_us)).await;
-    }
-    let start = Instant::now();
-    swarm.set_swarm_epoch_us(wall_us());
+            .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX)),
+    );
     let now = || SimTime::from_micros(start.elapsed().as_micros() as u64);
     let (tx, mut rx) = mpsc::channel::<Batch>(RECEIVE_QUEUE);
     let mut receivers = JoinSet::new();

@@ -251,19 +251,6 @@ impl ShardPlan {
     pub fn epoch_us(&self) -> u64 {
         self.epoch_us
     }
-
-    /// How long (µs) to wait from the wall clock `wall_us` (µs) before this shard's
-    /// clock starts, so that its control ticks (every `period_us` from its zero) fall at
-    /// its own share of the period: shard `k` of `n` at `k/n` of it, on the wall clock.
-    /// Shards sharing a host then take turns rather than all running their filters at
-    /// one instant; on separate hosts it costs at most a period at the start.
-    pub fn tick_phase_wait_us(&self, wall_us: u64, period_us: u64) -> u64 {
-        if period_us == 0 || self.shards == 0 {
-            return 0;
-        }
-        let phase_us = (u128::from(period_us) * self.this as u128 / self.shards as u128) as u64;
-        (phase_us + period_us - wall_us % period_us) % period_us
-    }
 }
 
 /// The default [`ShardPlan::tile_m`] (m): a horizon of 60–130 m (vehicles at 5–15 m/s)
@@ -347,21 +334,5 @@ mod tests {
                 .to_string(),
             "vehicle 3 is given to shard 2, but there are only 2 shards"
         );
-    }
-
-    #[test]
-    fn each_shard_ticks_at_its_own_share_of_the_period_on_the_wall_clock() {
-        let owner = vec![0, 1, 2, 3, 0, 1, 2, 3];
-        let period_us = 20_000;
-        for this in 0..4 {
-            let plan = ShardPlan::new(this, 4, owner.clone(), &ring(8), Watch::All).unwrap();
-            // Shard k's ticks at 5k ms past each 20 ms of the wall clock.
-            for wall_us in [0, 1, 4_999, 5_000, 19_999, 1_765_000_123_456] {
-                let wait = plan.tick_phase_wait_us(wall_us, period_us);
-                assert!(wait < period_us, "{this} {wall_us} {wait}");
-                assert_eq!((wall_us + wait) % period_us, 5_000 * this as u64, "{this} {wall_us}");
-            }
-            assert_eq!(plan.tick_phase_wait_us(123, 0), 0);
-        }
     }
 }
