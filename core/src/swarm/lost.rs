@@ -62,17 +62,18 @@ impl SentCommands {
     }
 
     /// What the last net acceleration sent to vehicle `i` can add to its speed if it
-    /// is flown until `held_until` and for `lag_s` after (m/s): its size times the time
-    /// from when it was sent, less the period it is already counted for. Nothing when
-    /// none was sent.
-    fn held_margin_mps(&self, i: usize, period_s: f64, held_until: SimTime, lag_s: f64) -> f64 {
+    /// is flown until `held_until` (m/s): its size times the time from when it was sent,
+    /// less the period it is already counted for. (Through the vehicle's attitude lag a
+    /// command adds, in all, its size times how long it is the input: the lag delays
+    /// that, it adds nothing.) Nothing when none was sent.
+    fn held_margin_mps(&self, i: usize, period_s: f64, held_until: SimTime) -> f64 {
         let Some((sent_at, dv)) = self.per_vehicle.get(i).and_then(|sent| sent.back()) else {
             return 0.0;
         };
         if period_s <= 0.0 {
             return 0.0;
         }
-        let held_s = held_until.saturating_since(*sent_at).as_secs_f64() + lag_s.max(0.0);
+        let held_s = held_until.saturating_since(*sent_at).as_secs_f64();
         dv.norm() / period_s * (held_s - period_s).max(0.0)
     }
 
@@ -184,22 +185,21 @@ impl Swarm {
         let dialect = link.state().dialect();
         let held_s = link.setpoint_held_s();
         let (delay_s, lag_s) = self.counted_delay_and_lag_s(i);
-        // If its uplink is down too, the last command that reached it is flown until its
-        // autopilot's own timeout after it arrived; a confirmed Hold ends it sooner (the
-        // uplink works, and the vehicle left its fly mode). Later level setpoints may
-        // not have reached it.
+        // If its uplink is down too, an ArduCopter flies the last target that reached it
+        // until GUID_TIMEOUT after it arrived (3 s, and nothing brakes it after); a
+        // confirmed BRAKE ends it sooner (the uplink works, and the vehicle left GUIDED).
+        // Later level setpoints may not have reached it. (PX4 holds its last setpoint for
+        // COM_OF_LOSS_T, 1 s, then brakes in its failsafe: not counted here, see
+        // docs/dense.md.)
         let period_s = self.setup.control_interval.as_secs_f64();
         let timeout = link
             .last_setpoint_sent()
+            .filter(|_| dialect.levels_after_setpoint_loss())
             .map(|sent| sent + Duration::from_secs_f64(held_s + delay_s));
-        let held_mps = [timeout, link.hold_confirmed_at()]
-            .into_iter()
-            .flatten()
-            .min()
+        let held_mps = timeout
+            .map(|t| link.hold_confirmed_at().map_or(t, |c| c.min(t)))
             .map_or(0.0, |until| {
-                self.safety
-                    .sent
-                    .held_margin_mps(i.0, period_s, until, lag_s)
+                self.safety.sent.held_margin_mps(i.0, period_s, until)
             });
         let speed_margin_mps =
             self.safety.sent.speed_margin_mps(i.0, last, delay_s, lag_s) + held_mps;
@@ -277,20 +277,16 @@ impl Swarm {
         let failsafe = autopilot
             .and_then(|a| a.setpoint_loss_brakes_after_s())
             .map(|after_s| handed + Duration::from_secs_f64(after_s + delay_s));
-        // Its last command may act until its autopilot's own timeout (the default here:
-        // its own shard read the vehicle's); the longest of the two when it is not named.
-        let held_s = autopilot.map_or(
-            Autopilot::Px4
-                .setpoint_held_s(|_| None)
-                .max(Autopilot::ArduPilot.setpoint_held_s(|_| None)),
-            |a| a.setpoint_held_s(|_| None),
-        );
-        let period_s = self.setup.control_interval.as_secs_f64();
-        let until = handed + Duration::from_secs_f64(held_s + delay_s);
-        let held_mps = self
-            .safety
-            .sent
-            .held_margin_mps(i.0, period_s, until, lag_s);
+        // An ArduCopter (or an autopilot not named) may fly its last target until
+        // GUID_TIMEOUT (the default here: its own shard read the vehicle's).
+        let held_mps = if autopilot.is_none_or(Autopilot::levels_after_setpoint_loss) {
+            let held_s = Autopilot::ArduPilot.setpoint_held_s(|_| None);
+            let until = handed + Duration::from_secs_f64(held_s + delay_s);
+            let period_s = self.setup.control_interval.as_secs_f64();
+            self.safety.sent.held_margin_mps(i.0, period_s, until)
+        } else {
+            0.0
+        };
         Some(LostVehicle {
             pos_m: state.pos_enu_m,
             vel_mps: state.vel_enu_mps.xy(),
@@ -361,18 +357,14 @@ mod tests {
         // 1 m/s² north at 0 ms, then 3 m/s² along (0.6, 0.8) at 20 ms, 20 ms periods.
         sent.record(0, at(0), Vector2::new(0.0, 1.0), 0.02);
         sent.record(0, at(20), Vector2::new(1.8, 2.4), 0.02);
-        // Flown until 3.02 s (ArduPilot's GUID_TIMEOUT after it), and a 0.1 s lag after:
-        // 3 m/s² for 3.1 s less the 20 ms already counted, 9.24 m/s.
-        let held = sent.held_margin_mps(0, 0.02, at(3020), 0.1);
-        assert!((held - 9.24).abs() < 1e-9, "{held}");
-        // Until its own period's end with no lag: nothing beyond what is counted.
-        assert_eq!(sent.held_margin_mps(0, 0.02, at(40), 0.0), 0.0);
+        // Flown until 3.02 s (ArduPilot's GUID_TIMEOUT after it): 3 m/s² for 3 s less
+        // the 20 ms already counted, 8.94 m/s.
+        let held = sent.held_margin_mps(0, 0.02, at(3020));
+        assert!((held - 8.94).abs() < 1e-9, "{held}");
+        // Until its own period's end: nothing beyond what is counted.
+        assert_eq!(sent.held_margin_mps(0, 0.02, at(40)), 0.0);
         // Ended before it was sent (a Hold confirmed earlier): nothing.
-        assert_eq!(sent.held_margin_mps(0, 0.02, at(10), 0.0), 0.0);
-        assert_eq!(
-            sent.held_margin_mps(1, 0.02, at(3000), 0.1),
-            0.0,
-            "nothing sent"
-        );
+        assert_eq!(sent.held_margin_mps(0, 0.02, at(10)), 0.0);
+        assert_eq!(sent.held_margin_mps(1, 0.02, at(3000)), 0.0, "nothing sent");
     }
 }
