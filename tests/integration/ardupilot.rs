@@ -760,23 +760,15 @@ fn a_silent_ardupilot_vehicle_is_kept_clear_of_where_it_drifts_and_its_path_is_b
         }
         tick = r.swarm().control_ticks();
         let now_s = r.now().as_secs_f64();
-        let p: Vec<_> = r
-            .vehicles()
-            .iter()
-            .map(|v| ned_to_enu(v.status().pos_world_ned_m))
-            .collect();
-        for (i, a) in p.iter().enumerate() {
-            for b in &p[i + 1..] {
-                closest = closest.min(sep.distance_m(*a, *b));
-            }
-        }
+        closest = closest.min(super::lockstep_safety::closest_now_m(r, &sep));
         if speed_at_15.is_none() && now_s >= 15.0 {
             assert!(matches!(r.swarm().phase(), SwarmPhase::Consensus(_)));
             speed_at_15 = Some(r.vehicles()[1].status().vel_ned_mps.xy().norm());
         }
         if let Some(path) = r.swarm().stopping_path(silent) {
             kept_ticks += 1;
-            outside_m = outside_m.max(path.distance_m(p[1].xy()));
+            let truth = ned_to_enu(r.vehicles()[1].status().pos_world_ned_m);
+            outside_m = outside_m.max(path.distance_m(truth.xy()));
             if now_s >= 25.0 && length_at_25.is_none() {
                 length_at_25 = Some(path.length_m);
             }

@@ -20,7 +20,7 @@ fn load(name: &str) -> Config {
 }
 
 /// The smallest ellipsoidal distance between two of the emulator's vehicles now (truth).
-fn closest_now_m(run: &Lockstep, sep: &Separation) -> f64 {
+pub(super) fn closest_now_m(run: &Lockstep, sep: &Separation) -> f64 {
     closest_pair_now(run, sep).0
 }
 
