@@ -657,7 +657,7 @@ impl SafetyFilter {
         let solved = self.solve(settings, agents, commands, whole(true));
         let outcome = match solved {
             Ok(relaxed) => Outcome::Filtered {
-                sum_kept: settings.keep_weighted_sum,
+                sum_kept: settings.keep_weighted_sum && !self.tally.taken_over,
                 relaxed,
             },
             Err(_) if settings.keep_weighted_sum => {
@@ -799,8 +799,19 @@ impl SafetyFilter {
             return Ok(relaxed);
         }
         let time_left = self.time_left_s();
-        if self.deadline.is_none() || (small && time_left >= exact_s) {
-            self.tally.taken_over |= self.deadline.is_some();
+        if self.deadline.is_none() {
+            return self.solve_exact(settings, agents, commands, piece);
+        }
+        if small && time_left >= exact_s {
+            // Taken over in time: solved without the weighted sum, as the ascent's answer
+            // so far on an unfinished tick is. With it, the free vehicles of the piece are
+            // sent what the pressed ones cannot give (on PX4 SIH, a vehicle's whole disc
+            // towards one braking ahead of it).
+            self.tally.taken_over = true;
+            let piece = Piece {
+                with_sum: false,
+                ..piece
+            };
             return self.solve_exact(settings, agents, commands, piece);
         }
         if small
