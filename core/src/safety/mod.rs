@@ -98,15 +98,6 @@ pub const MAX_SWEEPS_TIMED: usize = 1_000_000;
 /// With a time limit, the largest piece (variables) solved by clarabel when the dual
 /// ascent did not finish it and time is left.
 pub const EXACT_MAX_VARS: usize = 32;
-/// What clarabel is allowed for a piece of `n` variables with a time limit (s):
-/// `EXACT_FIXED_S + n · EXACT_PER_VAR_S`, about three times what it took on this
-/// project's 2-core machine (30 µs for a head-on pair, 58 µs for 4 vehicles, 109 µs for
-/// 8, 208 µs for 16). The ascent of such a piece gets as long before clarabel takes it
-/// over, so neither can cost more than twice the cheaper of the two: a head-on pair
-/// whose disc and row nearly touch can take the ascent 10⁵ sweeps, clarabel 30 µs.
-pub const EXACT_FIXED_S: f64 = 60e-6;
-/// See [`EXACT_FIXED_S`] (s per variable).
-pub const EXACT_PER_VAR_S: f64 = 40e-6;
 
 /// One vehicle as the filter sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -394,8 +385,6 @@ struct Tally {
     sweeps: usize,
     largest_piece: usize,
     unfinished: bool,
-    /// With a time limit, clarabel took a piece the ascent had not finished.
-    taken_over: bool,
     missed_mps2: f64,
 }
 
@@ -438,10 +427,7 @@ impl SafetyFilter {
         let unfinished =
             self.tally.unfinished && matches!(report.outcome, Outcome::Filtered { .. });
         let every_tick = self.stop.is_some() && !self.rows.is_empty();
-        // A piece the ascent could not finish in time is one whose vehicles press
-        // against their envelopes: clarabel's answer there is checked as an unfinished
-        // one is.
-        let checked = unfinished || every_tick || self.tally.taken_over;
+        let checked = unfinished || every_tick;
         if !checked {
             self.committed.clear();
         }
@@ -636,8 +622,7 @@ impl SafetyFilter {
         }
         if let Some(relaxed) = self.solve_in_pieces(settings, agents, &mut commands[..n]) {
             let outcome = Outcome::Filtered {
-                // A piece clarabel took over in time does not have its sum given back.
-                sum_kept: settings.keep_weighted_sum && !self.tally.taken_over,
+                sum_kept: settings.keep_weighted_sum,
                 relaxed,
             };
             return self.report(agents, commands, outcome, closest);
@@ -657,7 +642,7 @@ impl SafetyFilter {
         let solved = self.solve(settings, agents, commands, whole(true));
         let outcome = match solved {
             Ok(relaxed) => Outcome::Filtered {
-                sum_kept: settings.keep_weighted_sum && !self.tally.taken_over,
+                sum_kept: settings.keep_weighted_sum,
                 relaxed,
             },
             Err(_) if settings.keep_weighted_sum => {
@@ -768,8 +753,7 @@ impl SafetyFilter {
 
     /// One piece's QP over its variables: writes the commands and says whether a row had
     /// to be relaxed (its slack used). The dual ascent first ([`dual`]); when it does not
-    /// finish, clarabel without a time limit, or for a piece of up to [`EXACT_MAX_VARS`]
-    /// once the ascent has spent what clarabel is allowed and that much is left;
+    /// finish, clarabel without a time limit, or for a small piece with time left;
     /// otherwise the ascent's answer so far ([`Outcome::Unfinished`]).
     fn solve(
         &mut self,
@@ -784,41 +768,12 @@ impl SafetyFilter {
         if self.exact_only {
             return self.solve_exact(settings, agents, commands, piece);
         }
-        // With a time limit, a piece clarabel can take is given to it once the ascent has
-        // spent what clarabel would (and there is that much left): the ascent goes on to
-        // the limit only when clarabel no longer fits.
-        let exact_s = EXACT_FIXED_S + EXACT_PER_VAR_S * vars.len() as f64;
-        let small = vars.len() <= EXACT_MAX_VARS;
-        let switch = match self.deadline {
-            Some(deadline) if small => {
-                Some((Instant::now() + Duration::from_secs_f64(exact_s)).min(deadline))
-            }
-            other => other,
-        };
-        if let Some(relaxed) = self.solve_dual(settings, agents, commands, piece, switch) {
+        if let Some(relaxed) = self.solve_dual(settings, agents, commands, piece) {
             return Ok(relaxed);
         }
         let time_left = self.time_left_s();
-        if self.deadline.is_none() {
+        if self.deadline.is_none() || (vars.len() <= EXACT_MAX_VARS && time_left > 0.0) {
             return self.solve_exact(settings, agents, commands, piece);
-        }
-        if small && time_left >= exact_s {
-            // Taken over in time: solved without the weighted sum, as the ascent's answer
-            // so far on an unfinished tick is. With it, the free vehicles of the piece are
-            // sent what the pressed ones cannot give (on PX4 SIH, a vehicle's whole disc
-            // towards one braking ahead of it).
-            self.tally.taken_over = true;
-            let piece = Piece {
-                with_sum: false,
-                ..piece
-            };
-            return self.solve_exact(settings, agents, commands, piece);
-        }
-        if small
-            && time_left > 0.0
-            && let Some(relaxed) = self.solve_dual(settings, agents, commands, piece, self.deadline)
-        {
-            return Ok(relaxed);
         }
         self.tally.unfinished = true;
         self.write_ascent(agents, commands, vars);
@@ -844,16 +799,14 @@ impl SafetyFilter {
         }
     }
 
-    /// The piece's QP by dual ascent, warm-started from the rows' multipliers, until
-    /// `stop_at` (without one, [`MAX_SWEEPS`]); `None` (commands untouched) when it
-    /// stopped before converging.
+    /// The piece's QP by dual ascent, warm-started from the rows' multipliers; `None`
+    /// (commands untouched) when it stopped before converging.
     fn solve_dual(
         &mut self,
         settings: &Settings,
         agents: &[Agent],
         commands: &mut [Vector2<f64>],
         piece: Piece<'_>,
-        stop_at: Option<Instant>,
     ) -> Option<bool> {
         let Piece {
             rows,
@@ -908,13 +861,14 @@ impl SafetyFilter {
                 .filter(|&&k| piece_has_side(&self.rows[k], var_of))
                 .map(|&k| self.lambda[k]),
         );
-        let max_sweeps = if stop_at.is_some() {
+        let deadline = self.deadline;
+        let max_sweeps = if deadline.is_some() {
             MAX_SWEEPS_TIMED
         } else {
             MAX_SWEEPS
         };
         let end = dual::ascend(&self.piece, &mut self.dual, max_sweeps, || {
-            stop_at.is_some_and(|d| Instant::now() >= d)
+            deadline.is_some_and(|d| Instant::now() >= d)
         });
         let used = rows
             .iter()

@@ -92,13 +92,9 @@ impl SafetyFilter {
                     }
                 }
             }
-            if self.tally.unfinished || self.tally.taken_over {
+            if self.tally.unfinished {
                 // Out of time: the answer so far goes out, as it is (the stopping check
-                // secures it); solving the whole problem again would only overrun. So
-                // does one with a piece clarabel took over in time: what its vehicles
-                // pressing against their envelopes changed of the sum is not given back
-                // by the free vehicles (on PX4 SIH that gave a vehicle its whole disc
-                // towards a neighbour braking ahead of it).
+                // secures it); solving the whole problem again would only overrun.
                 return Some(relaxed);
             }
             if settings.keep_weighted_sum {
