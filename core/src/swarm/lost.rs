@@ -192,11 +192,12 @@ impl Swarm {
         // COM_OF_LOSS_T, 1 s, then brakes in its failsafe: not counted here, see
         // docs/dense.md.)
         let period_s = self.setup.control_interval.as_secs_f64();
-        let timeout = link
+        // When an ArduCopter's GUID_TIMEOUT runs out after its last setpoint arrived.
+        let levels_at = link
             .last_setpoint_sent()
             .filter(|_| dialect.levels_after_setpoint_loss())
             .map(|sent| sent + Duration::from_secs_f64(held_s + delay_s));
-        let held_mps = timeout
+        let held_mps = levels_at
             .map(|t| link.hold_confirmed_at().map_or(t, |c| c.min(t)))
             .map_or(0.0, |until| {
                 self.safety.sent.held_margin_mps(i.0, period_s, until)
@@ -226,11 +227,9 @@ impl Swarm {
         // then drifts, slowed by its drag alone: from speed V at rate k it goes V/k
         // further, what braking at V·k/2 gives.
         let drift_drag_per_s = self.slots[i].flown.drift_drag_per_s();
-        let drifted = link
-            .last_setpoint_sent()
-            .filter(|_| dialect.levels_after_setpoint_loss() && drift_drag_per_s > 0.0)
-            .map(|sent| {
-                let levels_at = sent + Duration::from_secs_f64(held_s + delay_s);
+        let drifted = levels_at
+            .filter(|_| drift_drag_per_s > 0.0)
+            .map(|levels_at| {
                 let top_mps = state.vel_enu_mps.xy().norm() + speed_margin_mps;
                 LostVehicle {
                     coast_s: since_last(levels_at),
