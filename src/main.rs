@@ -19,6 +19,13 @@ use tracing_subscriber::EnvFilter;
 use tracing_subscriber::filter::LevelFilter;
 
 fn main() -> ExitCode {
+    if let Some(missing) = missing_cpu_features() {
+        eprintln!(
+            "error: this build of ringswarm needs x86-64-v3, and this processor lacks {missing}; \
+             rebuild it with RUSTFLAGS=\"-C target-cpu=x86-64\" (.cargo/config.toml)"
+        );
+        return ExitCode::from(2);
+    }
     let cli = Cli::parse();
     // A sweep flies thousands of flights: their swarm events (what a single flight
     // prints) would bury its progress. They are in each flight's row, and `sweep --cell`
@@ -62,4 +69,25 @@ fn main() -> ExitCode {
             ExitCode::from(ringswarm::error::code_of(&err))
         }
     }
+}
+
+/// The processor features the build was compiled to use (`.cargo/config.toml`) that this
+/// processor lacks, named; `None` when it has them all (or the build assumes none).
+fn missing_cpu_features() -> Option<String> {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    {
+        let mut missing = Vec::new();
+        macro_rules! need {
+            ($($f:tt),*) => {
+                $(if !std::arch::is_x86_feature_detected!($f) {
+                    missing.push($f);
+                })*
+            };
+        }
+        need!("avx", "avx2", "fma", "bmi1", "bmi2", "lzcnt", "movbe", "f16c");
+        if !missing.is_empty() {
+            return Some(missing.join(", "));
+        }
+    }
+    None
 }
