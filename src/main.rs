@@ -84,7 +84,9 @@ fn missing_cpu_features() -> Option<String> {
                 })*
             };
         }
-        need!("avx", "avx2", "fma", "bmi1", "bmi2", "lzcnt", "movbe", "f16c");
+        need!(
+            "avx", "avx2", "fma", "bmi1", "bmi2", "lzcnt", "movbe", "f16c"
+        );
         if !missing.is_empty() {
             return Some(missing.join(", "));
         }
