@@ -158,6 +158,7 @@ fn filter_row(side: usize, share: f64, limit_s: f64, kind: Rows) {
                     braking_mps2: share * 6.0,
                     lag_s: 0.0,
                     spread_m: 0.0,
+                    unseen_mps: 0.0,
                 })
                 .collect();
             // Every vehicle flown to its place (0.05/s² and 0.5/s, inside its disc):

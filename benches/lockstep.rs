@@ -474,6 +474,7 @@ fn safety_table() {
             braking_mps2: 3.5,
             lag_s: 0.0,
             spread_m: 0.0,
+            unseen_mps: 0.0,
         };
         // A row of vehicles 10 m apart along east, flying north in formation.
         let formation: Vec<Agent> = (0..n)

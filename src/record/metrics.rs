@@ -392,6 +392,12 @@ pub struct SafetyReport {
     pub largest_piece: usize,
     /// The most sweeps of the filter's dual ascent in one tick.
     pub most_sweeps: usize,
+    /// The largest unseen speed counted for a vehicle (m/s): how fast its reported
+    /// positions moved beyond its reported velocities, less a deadband; every pair with
+    /// it is kept apart as if closing that much faster. 0 when none was.
+    pub unseen_speed_max_mps: f64,
+    /// The vehicle it was counted for, named as in the events (`null` when none).
+    pub unseen_speed_max_vehicle: Option<String>,
 }
 
 impl SafetyReport {
@@ -437,6 +443,10 @@ impl SafetyReport {
             counted_age: s.counted_age.quantiles(),
             largest_piece: s.largest_piece,
             most_sweeps: s.most_sweeps,
+            unseen_speed_max_mps: s.unseen_max.map_or(0.0, |(v, _)| v),
+            unseen_speed_max_vehicle: s
+                .unseen_max
+                .map(|(_, i)| swarm.setup().links[i].file_label()),
         })
     }
 }

@@ -12,6 +12,7 @@ mod envelope;
 mod frames;
 mod hover;
 mod response;
+mod unseen;
 mod vehicle;
 
 pub use altitude::AltitudeGains;
@@ -24,4 +25,5 @@ pub use envelope::{Envelope, SaturationMode, SaturationSummary, saturate, satura
 pub use frames::{enu_to_ned, euler_ned_frd, ned_to_enu, quaternion_to_wxyz, roll_pitch_ned_frd};
 pub use hover::HoverThrustEkf;
 pub use response::{AttitudeResponse, ResponseFit};
+pub use unseen::UnseenMotion;
 pub use vehicle::{GRAVITY_MPS2, VehicleModel};

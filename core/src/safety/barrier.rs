@@ -99,13 +99,16 @@ pub fn pair_row(
     braking_mps2: f64,
     age_s: f64,
 ) -> Option<PairRow> {
-    pair_row_spread(sep, i, j, braking_mps2, age_s, 0.0)
+    pair_row_spread(sep, i, j, braking_mps2, age_s, 0.0, 0.0)
 }
 
 /// [`pair_row`] for a pair that must keep `spread_m` (m, scaled, ≥ 0) more than the
 /// separation: how far the two may be from the positions their sides give (a vehicle
 /// whose state stopped arriving, as a chain of points along its stopping path:
-/// [`super::lost`]).
+/// [`super::lost`]), and that may close `unseen_mps` (m/s, ≥ 0) faster than its
+/// velocities show (positions that move beyond their velocities:
+/// [`crate::control::UnseenMotion`]). The unseen speed is taken as closing: `s` becomes
+/// `s − δ` in `h` and its derivative, and the age grows the separation by `δτ` more.
 pub fn pair_row_spread(
     sep: &Separation,
     i: &Side,
@@ -113,6 +116,7 @@ pub fn pair_row_spread(
     braking_mps2: f64,
     age_s: f64,
     spread_m: f64,
+    unseen_mps: f64,
 ) -> Option<PairRow> {
     let dp = sep.scaled(i.pos_m - j.pos_m);
     let dv = sep.scaled(i.vel_mps - j.vel_mps);
@@ -121,12 +125,17 @@ pub fn pair_row_spread(
         return None;
     }
     let n = dp / distance;
-    let s = n.dot(&dv);
+    let unseen = unseen_mps.max(0.0);
+    let seen = n.dot(&dv);
+    let s = seen - unseen;
     let a_brake = braking_mps2;
-    let d =
-        sep.horizontal_m + spread_m.max(0.0) + dv.norm() * age_s + 0.5 * a_brake * age_s * age_s;
+    let d = sep.horizontal_m
+        + spread_m.max(0.0)
+        + (dv.norm() + unseen) * age_s
+        + 0.5 * a_brake * age_s * age_s;
     let room = distance - d;
-    let curvature = (dv.norm_squared() - s * s).max(0.0) / distance;
+    // The turn of the direction between the two (ṅ), from the velocities as reported.
+    let curvature = (dv.norm_squared() - seen * seen).max(0.0) / distance;
     // The vertical accelerations are given: their share of nᵀΔũ moves to the bound.
     let vertical = n.z * sep.vertical_scale() * (i.accel_z_mps2 - j.accel_z_mps2);
     Some(barrier_row(
@@ -192,6 +201,39 @@ mod tests {
     }
 
     #[test]
+    fn an_unseen_speed_is_a_closing_speed_the_velocities_do_not_show() {
+        // Two vehicles at rest 5 m apart along a tilted line, one of them unseen at
+        // 0.8 m/s: their row is the row of the same two closing head-on at 0.8 m/s
+        // (no turn of their direction, so no curvature term either way).
+        let s = sep();
+        let (a, age) = (3.0, 0.25);
+        let dir = Vector3::new(0.6, 0.8, 0.0);
+        let i = side([0.0, 0.0, 10.0], [0.0; 3]);
+        let j = Side {
+            pos_m: i.pos_m - 5.0 * dir,
+            ..i
+        };
+        let unseen = pair_row_spread(&s, &i, &j, a, age, 0.0, 0.8).expect("apart");
+        let closing = Side {
+            vel_mps: 0.8 * dir,
+            ..j
+        };
+        let seen = pair_row(&s, &i, &closing, a, age).expect("apart");
+        assert_eq!(unseen.a, seen.a);
+        assert!((unseen.b - seen.b).abs() < 1e-12, "{unseen:?} vs {seen:?}");
+        assert!((unseen.h_mps - seen.h_mps).abs() < 1e-12);
+        assert!((unseen.room_m - seen.room_m).abs() < 1e-12);
+        // By hand: d = 3 + 0.8·0.25 + 3·0.25²/2, h = −0.8 + √(2·3·(5 − d)).
+        let d = 3.0 + 0.8 * 0.25 + 0.5 * 3.0 * 0.0625;
+        assert!((unseen.room_m - (5.0 - d)).abs() < 1e-12);
+        assert!((unseen.h_mps - (-0.8 + (6.0 * (5.0 - d)).sqrt())).abs() < 1e-12);
+        // None: the plain row of two at rest.
+        let none = pair_row_spread(&s, &i, &j, a, age, 0.0, 0.0).expect("apart");
+        assert_eq!(Some(none), pair_row(&s, &i, &j, a, age));
+        assert!(none.h_mps > unseen.h_mps && none.b < unseen.b);
+    }
+
+    #[test]
     fn the_rows_derivative_is_the_barriers_along_a_trajectory() {
         // Two vehicles with given accelerations: ḣ by central differences of the closed
         // form must equal aᵀ(uᵢ − uⱼ) + (the row's drift), i.e. ḣ + γh³ − (aᵀΔu − b) = 0.
@@ -240,7 +282,7 @@ mod tests {
         let i = side([10.0, 0.0, 5.0], [-3.0, 0.0, 0.0]);
         let j = side([0.0, 0.0, 5.0], [1.0, 0.0, 0.0]);
         let plain = pair_row(&s, &i, &j, 4.0, 0.1).expect("apart");
-        let spread = pair_row_spread(&s, &i, &j, 4.0, 0.1, 1.25).expect("apart");
+        let spread = pair_row_spread(&s, &i, &j, 4.0, 0.1, 1.25, 0.0).expect("apart");
         // 10 m apart, 3 m + 0.42 m of age, 1.25 m more.
         assert!((spread.room_m - (plain.room_m - 1.25)).abs() < 1e-12);
         assert!((spread.room_m - (7.0 - 0.42 - 1.25)).abs() < 1e-12);

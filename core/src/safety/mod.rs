@@ -127,6 +127,11 @@ pub struct Agent {
     /// separation. An agent with a spread stands for where a vehicle may be, not for a
     /// state: it is left out of the closest pair, the close pairs and the active rows.
     pub spread_m: f64,
+    /// How fast its reported position may move beyond what its reported velocity says
+    /// (m/s, ≥ 0; [`crate::control::UnseenMotion`]): every pair with it is taken to
+    /// close this much faster than its velocities show, in its closing rate and in how
+    /// far it closes during the age.
+    pub unseen_mps: f64,
 }
 
 impl Agent {
@@ -146,6 +151,7 @@ impl Agent {
             braking_mps2: 0.0,
             lag_s: 0.0,
             spread_m,
+            unseen_mps: 0.0,
         }
     }
 
@@ -153,6 +159,15 @@ impl Agent {
     /// pairs and the active rows.
     pub fn measured(&self) -> bool {
         self.spread() <= 0.0
+    }
+
+    /// Its unseen speed (m/s; one that is not a positive number counts as none).
+    pub(crate) fn unseen(&self) -> f64 {
+        if self.unseen_mps.is_finite() {
+            self.unseen_mps.max(0.0)
+        } else {
+            0.0
+        }
     }
 
     /// Its spread, as a distance to keep (m; a spread that is not a positive number
@@ -546,6 +561,7 @@ impl SafetyFilter {
                     braking(a) + braking(b),
                     settings.age_s,
                     a.spread() + b.spread(),
+                    a.unseen() + b.unseen(),
                 )
             };
             let Some(row) = row else {

@@ -18,7 +18,9 @@
 //! ```
 //!
 //! `A_lo`, `A_hi` the least and greatest braking authority a pair can have, `L` the
-//! widest disc, `τ` the state age. The pair search ([`super::flow`]) keeps a pair within
+//! widest disc, `τ` the state age. A pair's unseen speed `δ` enters its row as `V` does
+//! (`s − δ ≥ −(V + δ)`, the age's growth `(|Δv| + δ)τ`), so `V + δ` stands for `V`, `δ`
+//! twice the largest agent's. The pair search ([`super::flow`]) keeps a pair within
 //! the bound at its own relative speed, and looks into a cell of vehicles only when the
 //! bound at the fastest relative speed their velocities allow reaches it.
 //!
@@ -41,6 +43,8 @@ pub struct ReachBound {
     x_mps: f64,
     /// `2·A_lo` (m/s²).
     two_a_lo: f64,
+    /// The largest unseen closing speed of a pair (m/s): twice the largest agent's.
+    unseen_mps: f64,
 }
 
 impl ReachBound {
@@ -85,8 +89,15 @@ impl ReachBound {
             .filter(|a| a.side.is_some())
             .map(Agent::spread)
             .fold(0.0, f64::max);
+        // A pair may close at its two unseen speeds more than its velocities say.
+        let unseen = agents
+            .iter()
+            .filter(|a| a.side.is_some())
+            .map(Agent::unseen)
+            .fold(0.0, f64::max);
         Some(Self {
             base_m: sep.horizontal_m + 2.0 * spread + 0.5 * a_hi * age_s * age_s + MARGIN_M,
+            unseen_mps: 2.0 * unseen,
             age_s,
             x_mps: x,
             two_a_lo: 2.0 * a_lo,
@@ -96,7 +107,7 @@ impl ReachBound {
     /// The distance (m, scaled) beyond which a pair whose relative scaled speed is at
     /// most `v_mps` has no row that can bind.
     pub fn distance_m(&self, v_mps: f64) -> f64 {
-        let v = v_mps.max(0.0);
+        let v = v_mps.max(0.0) + self.unseen_mps;
         self.base_m + v * self.age_s + (v + self.x_mps).powi(2) / self.two_a_lo
     }
 }
@@ -106,7 +117,7 @@ mod tests {
     use super::super::tests::sep;
     use nalgebra::{Vector2, Vector3};
 
-    use super::super::{Side, pair_row};
+    use super::super::{Side, pair_row_spread};
     use super::*;
 
     fn agent(p: Vector3<f64>, v: Vector3<f64>, az: f64, limit: f64, braking: f64) -> Agent {
@@ -123,6 +134,7 @@ mod tests {
             braking_mps2: braking,
             lag_s: 0.0,
             spread_m: 0.0,
+            unseen_mps: 0.0,
         }
     }
 
@@ -140,10 +152,19 @@ mod tests {
             let (li, lj) = (2.0 + 6.0 * next(), 2.0 + 6.0 * next());
             let (azi, azj) = (2.0 * next() - 1.0, 2.0 * next() - 1.0);
             let age = 0.3 * next();
+            // Unseen speeds for half of the pairs (positions moving beyond velocities).
+            let unseen = if next() < 0.5 { 1.5 } else { 0.0 };
+            let (ui, uj) = (unseen * next(), unseen * next());
             let third = agent(Vector3::new(500.0, 0.0, 0.0), vk, 0.0, 4.0, 2.0);
             let mut pair = [
-                agent(Vector3::zeros(), vi, azi, li, 0.5 * li),
-                agent(Vector3::zeros(), vj, azj, lj, 0.5 * lj),
+                Agent {
+                    unseen_mps: ui,
+                    ..agent(Vector3::zeros(), vi, azi, li, 0.5 * li)
+                },
+                Agent {
+                    unseen_mps: uj,
+                    ..agent(Vector3::zeros(), vj, azj, lj, 0.5 * lj)
+                },
                 third,
             ];
             let bound = ReachBound::new(&s, age, &pair).expect("usable");
@@ -157,7 +178,8 @@ mod tests {
                 ..pair[0].side.expect("known")
             });
             let (si, sj) = (pair[0].side.expect("known"), pair[1].side.expect("known"));
-            let row = pair_row(&s, &si, &sj, 0.5 * li + 0.5 * lj, age).expect("apart");
+            let row = pair_row_spread(&s, &si, &sj, 0.5 * li + 0.5 * lj, age, 0.0, ui + uj)
+                .expect("apart");
             assert!(row.b <= -(li + lj) - 1.0, "b {} at {} m", row.b, reach);
             checked += 1;
         }
@@ -180,6 +202,11 @@ mod tests {
             let got = bound.distance_m(v);
             assert!((got - expected).abs() < 1e-12, "{v}: {got} vs {expected}");
         }
+        // An agent's unseen speed counts twice (the pair may have two such), as speed.
+        let mut unseen = at_rest;
+        unseen[1].unseen_mps = 0.4;
+        let with = ReachBound::new(&s, 0.1, &unseen).expect("usable");
+        assert!((with.distance_m(2.5) - bound.distance_m(3.3)).abs() < 1e-12);
         // Nobody commanded: no bound.
         let mut idle = at_rest;
         idle.iter_mut().for_each(|a| a.controlled = false);

@@ -240,6 +240,7 @@ mod tests {
             braking_mps2: 3.0,
             lag_s: 0.0,
             spread_m: 0.0,
+            unseen_mps: 0.0,
         }
     }
 

@@ -36,6 +36,7 @@ fn agent(p: [f64; 3], v: [f64; 3], weight: f64) -> Agent {
         braking_mps2: 2.0,
         lag_s: 0.0,
         spread_m: 0.0,
+        unseen_mps: 0.0,
     }
 }
 
@@ -569,6 +570,7 @@ fn packed_swap(side: usize, s: Settings, ticks: usize, out_from: usize) -> (f64,
                 braking_mps2: 3.0,
                 lag_s: 0.0,
                 spread_m: 0.0,
+                unseen_mps: 0.0,
                 ..agent([pos[k].x, pos[k].y, 50.0], [vel[k].x, vel[k].y, 0.0], 1.0)
             })
             .collect();

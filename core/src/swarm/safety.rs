@@ -34,6 +34,10 @@ fn calm(last_unfinished: Option<SimTime>, now: SimTime) -> bool {
     last_unfinished.is_none_or(|t| now.saturating_since(t).as_secs_f64() >= LAYER_CALM_S)
 }
 
+/// A vehicle's unseen speed is named in the events once it reaches this (m/s); any is
+/// counted, and the largest is in the summary.
+pub const UNSEEN_REPORTED_MPS: f64 = 0.2;
+
 /// The longest measured attitude response counted (s); a longer fit is not trusted.
 pub const MAX_RESPONSE_S: f64 = 1.0;
 
@@ -98,6 +102,11 @@ pub struct SafetyStats {
     /// Silences of a vehicle in the air kept as its stopping path (`super::lost`): once
     /// per last state, each named in the events.
     pub quiet_paths: u64,
+    /// The largest unseen speed counted for a vehicle (m/s: its positions moving beyond
+    /// its velocities, [`crate::control::UnseenMotion`]) and which (`None`: none counted).
+    pub unseen_max: Option<(f64, usize)>,
+    /// Vehicles whose unseen speed was reported (once each).
+    unseen_reported: Vec<bool>,
     /// `safety.action = "continue"` was reported (once a flight).
     continue_reported: bool,
     /// The smallest ellipsoidal distance between two vehicles with a usable state seen on
@@ -258,6 +267,7 @@ impl Swarm {
         // (14 m/s and 100 ms: 1.4 m), which the barrier's reach, grown by the pair's
         // relative speed over the age, does not cover.
         // Another shard's vehicle is already carried to now by its hop, and stays.
+        self.count_unseen(now);
         let local = |i: VehicleIndex| self.slots[i].link().is_some();
         let newest = self
             .indices()
@@ -296,6 +306,8 @@ impl Swarm {
                 braking_mps2: setup.braking_share * limit,
                 lag_s: if local(i) { self.counted_lag_s(i) } else { 0.0 },
                 spread_m: 0.0,
+                // Another shard's vehicle's is not carried in its report: none counted.
+                unseen_mps: self.link(i).map_or(0.0, VehicleLink::unseen_speed_mps),
             });
             self.safety.xy.push(self.law.commands[i].xy());
         }
@@ -541,6 +553,36 @@ impl Swarm {
     /// uplink and the downlink), but never less than the link's round trip (TIMESYNC);
     /// a fit beyond [`MAX_RESPONSE_S`] is not trusted, and then the round trip plus
     /// [`UNMEASURED_RESPONSE_S`] is counted.
+    /// Takes each vehicle's unseen speed into the stats, and names a vehicle the first
+    /// time its unseen speed reaches [`UNSEEN_REPORTED_MPS`].
+    fn count_unseen(&mut self, now: SimTime) {
+        let n = self.vehicle_count();
+        let stats = &mut self.safety.stats;
+        stats.unseen_reported.resize(n, false);
+        for i in 0..n {
+            let unseen = self.slots[i]
+                .link()
+                .map_or(0.0, VehicleLink::unseen_speed_mps);
+            if unseen <= 0.0 {
+                continue;
+            }
+            if stats.unseen_max.is_none_or(|(m, _)| unseen > m) {
+                stats.unseen_max = Some((unseen, i));
+            }
+            if !stats.unseen_reported[i] && unseen >= UNSEEN_REPORTED_MPS {
+                stats.unseen_reported[i] = true;
+                self.log.push_vehicle(
+                    now,
+                    &self.setup.links[i],
+                    true,
+                    format!(
+                        "its reported positions move {unseen:.2} m/s beyond its reported velocity: every pair with it is kept apart as if closing that much faster"
+                    ),
+                );
+            }
+        }
+    }
+
     pub(super) fn command_age_s(&self, i: VehicleIndex, now: SimTime) -> f64 {
         let state = self
             .link(i)

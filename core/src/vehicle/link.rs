@@ -12,6 +12,7 @@ use super::fence_upload::FenceUpload;
 use super::params::ParamSession;
 use super::telemetry::TelemetryGate;
 use super::{LinkConfig, LinkEvent, Phase, Setpoint, VehicleState};
+use crate::control::UnseenMotion;
 
 use crate::link::{
     Encoder, Frame, Inbound, Outgoing, Signer, VehicleCommand, encode, for_each_frame, inbound,
@@ -99,6 +100,11 @@ pub struct VehicleLink {
     last_warning: Option<String>,
     /// The restore's end was told (and acted on).
     restore_reported: bool,
+    /// The motion its positions show and its velocities do not.
+    unseen: UnseenMotion,
+    /// The vehicle's clock at its last position report: `time_boot_ms` and the seconds
+    /// counted from the first report (unwrapped).
+    vehicle_clock: Option<(u32, f64)>,
 }
 
 impl VehicleLink {
@@ -148,6 +154,8 @@ impl VehicleLink {
             refusing: false,
             refused_reports: 0,
             next_origin: None,
+            unseen: UnseenMotion::default(),
+            vehicle_clock: None,
         }
     }
 
@@ -223,6 +231,12 @@ impl VehicleLink {
     pub fn setpoint_held_s(&self) -> f64 {
         self.setpoint_held_s
             .unwrap_or_else(|| self.state.dialect().setpoint_held_s(|_| None))
+    }
+
+    /// How fast its reported positions may move beyond what its reported velocities say
+    /// (m/s, ≥ 0; [`UnseenMotion`]).
+    pub fn unseen_speed_mps(&self) -> f64 {
+        self.unseen.latest_speed_mps()
     }
 
     /// Whether the last accepted position is younger than the state timeout (its origin

@@ -163,12 +163,39 @@ impl VehicleLink {
                 self.state.pos_local_ned_m = pos_ned_m;
                 self.state.vel_ned_mps = vel_ned_mps;
                 self.state.last_position = Some(now);
+                let restart = matches!(accepted, PositionVerdict::Reset { .. });
                 if let Some(origin) = self.next_origin.take() {
                     self.state.origin = Some(origin);
+                    self.unseen.restart();
                 }
+                if restart {
+                    self.unseen.restart();
+                }
+                let t_s = self.vehicle_time_s(sampled_ms);
+                self.unseen.report(t_s, pos_ned_m.xy(), vel_ned_mps.xy());
                 self.take_back_if_usable(now);
             }
         }
+    }
+
+    /// The vehicle's time of a report (s, counted from its first report), from its
+    /// `time_boot_ms`: forward by the wrapped difference up to a minute; a clock that went
+    /// back (a reboot) or leapt is put an hour on, which starts [`UnseenMotion`]'s window
+    /// over.
+    fn vehicle_time_s(&mut self, sampled_ms: u32) -> f64 {
+        let t_s = match self.vehicle_clock {
+            Some((last_ms, last_s)) => {
+                let forward_ms = sampled_ms.wrapping_sub(last_ms);
+                if forward_ms <= 60_000 {
+                    last_s + f64::from(forward_ms) * 1e-3
+                } else {
+                    last_s + 3600.0
+                }
+            }
+            None => 0.0,
+        };
+        self.vehicle_clock = Some((sampled_ms, t_s));
+        t_s
     }
 
     /// ATTITUDE_QUATERNION.
