@@ -65,15 +65,41 @@ pub struct LayerChange {
     pub back: Vec<usize>,
 }
 
-/// Whether no other vehicle is within `clear_m` of vehicle `k` horizontally (false when
-/// its position is unknown).
-fn nobody_near(clear_m: f64, positions_m: &[Option<Vector2<f64>>], k: usize) -> bool {
+/// How far ahead a vehicle about to come back from the layer looks for one closing on
+/// it (s): about the time its descent takes to bring it within the vertical separation of
+/// the vehicles below. On PX4 SIH one came back 4.2 m from another that closed on it at
+/// 2 m/s, and the two met during the descent.
+pub const COME_BACK_LOOKAHEAD_S: f64 = 3.0;
+
+/// Horizontal positions (m, ENU) and velocities (m/s, ENU; a vehicle without one, or
+/// beyond the slice, is taken at rest).
+pub type Motions<'a> = (&'a [Option<Vector2<f64>>], &'a [Option<Vector2<f64>>]);
+
+/// Whether no other vehicle is, or within [`COME_BACK_LOOKAHEAD_S`] at the velocities they
+/// have will be, within `clear_m` of vehicle `k` horizontally (false when its position is
+/// unknown).
+fn nobody_near(clear_m: f64, (positions_m, velocities_mps): Motions, k: usize) -> bool {
+    let velocity = |j: usize| velocities_mps.get(j).copied().flatten().unwrap_or_default();
     positions_m.get(k).copied().flatten().is_some_and(|p| {
-        positions_m
-            .iter()
-            .enumerate()
-            .all(|(j, q)| j == k || q.is_none_or(|q| (q - p).norm() >= clear_m))
+        let v = velocity(k);
+        positions_m.iter().enumerate().all(|(j, q)| {
+            j == k
+                || q.is_none_or(|q| {
+                    closest_approach_m(q - p, velocity(j) - v, COME_BACK_LOOKAHEAD_S) >= clear_m
+                })
+        })
     })
+}
+
+/// The least of `|d + v·t|` over `t` in `[0, horizon_s]` (m).
+fn closest_approach_m(d: Vector2<f64>, v: Vector2<f64>, horizon_s: f64) -> f64 {
+    let speed2 = v.norm_squared();
+    let t = if speed2 > 0.0 {
+        (-d.dot(&v) / speed2).clamp(0.0, horizon_s)
+    } else {
+        0.0
+    };
+    (d + v * t).norm()
 }
 
 /// When consensus is over: which of the layered vehicles `ks` may come back now, those
@@ -82,9 +108,9 @@ fn nobody_near(clear_m: f64, positions_m: &[Option<Vector2<f64>>], k: usize) -> 
 pub fn clear_to_come_back(
     rule: &LayerRule,
     ks: impl Iterator<Item = usize>,
-    positions_m: &[Option<Vector2<f64>>],
+    motions: Motions,
 ) -> Vec<usize> {
-    ks.filter(|&k| nobody_near(rule.clear_m, positions_m, k))
+    ks.filter(|&k| nobody_near(rule.clear_m, motions, k))
         .collect()
 }
 
@@ -109,11 +135,12 @@ pub fn update_layers(
     jammed: impl Fn(usize) -> bool,
     active: &[(usize, usize)],
     offset_m: &[Option<Vector2<f64>>],
-    positions_m: &[Option<Vector2<f64>>],
+    motions: Motions,
     layered: &mut [Option<SimTime>],
 ) -> LayerChange {
+    let positions_m = motions.0;
     let n = layered.len().min(offset_m.len()).min(positions_m.len());
-    let nobody_near = |k: usize| nobody_near(rule.clear_m, positions_m, k);
+    let nobody_near = |k: usize| nobody_near(rule.clear_m, motions, k);
     let way_clear = |layered: &[Option<SimTime>], k: usize, offset: Vector2<f64>| {
         positions_m[k].is_some_and(|p| {
             positions_m.iter().enumerate().all(|(j, q)| {
@@ -201,7 +228,16 @@ mod tests {
         positions: &[Option<Vector2<f64>>],
         layered: &mut [Option<SimTime>],
     ) -> LayerChange {
-        update_layers(&RULE, now, 1.0, jammed, active, offsets, positions, layered)
+        update_layers(
+            &RULE,
+            now,
+            1.0,
+            jammed,
+            active,
+            offsets,
+            (positions, &[]),
+            layered,
+        )
     }
 
     fn v(x: f64, y: f64) -> Option<Vector2<f64>> {
@@ -359,14 +395,44 @@ mod tests {
         // the 3.6 m clearance), 2 alone (4 m from 1, 5 m from 0); 3 not known.
         let positions = [v(0.0, 0.0), v(3.0, 0.0), v(3.0, 4.0), None];
         assert_eq!(
-            clear_to_come_back(&RULE, [0, 2, 3].into_iter(), &positions),
+            clear_to_come_back(&RULE, [0, 2, 3].into_iter(), (&positions, &[])),
             vec![2]
         );
         // Exactly the clearance away counts as clear.
         let positions = [v(0.0, 0.0), v(3.6, 0.0)];
         assert_eq!(
-            clear_to_come_back(&RULE, [0].into_iter(), &positions),
+            clear_to_come_back(&RULE, [0].into_iter(), (&positions, &[])),
             vec![0]
+        );
+    }
+
+    #[test]
+    fn a_vehicle_does_not_come_back_while_another_closes_on_it() {
+        // PX4 SIH's line swap: vehicle 1 on the layer, vehicle 0 4.2 m west of it and
+        // closing at 2 m/s. At rest it would be clear; closing, it is within the
+        // clearance (3.6 m) in 0.3 s.
+        let positions = [v(0.0, 0.0), v(4.2, 0.0)];
+        let at_rest = clear_to_come_back(&RULE, [1].into_iter(), (&positions, &[]));
+        assert_eq!(at_rest, vec![1]);
+        let closing = [v(0.0, 0.0), v(-2.0, 0.0)];
+        let back = clear_to_come_back(&RULE, [1].into_iter(), (&positions, &closing));
+        assert!(back.is_empty());
+        // Passing by: 4 m abeam at the closest, in 1 s (inside the look-ahead): clear.
+        let positions = [v(-2.0, 4.0), v(0.0, 0.0)];
+        let passing = [v(2.0, 0.0), None];
+        let back = clear_to_come_back(&RULE, [1].into_iter(), (&positions, &passing));
+        assert_eq!(back, vec![1]);
+        // Closing from 12 m at 2 m/s: 6 m after the look-ahead's 3 s, clear; at 3 m/s,
+        // 3 m: not.
+        let positions = [v(12.0, 0.0), v(0.0, 0.0)];
+        for (speed, clear) in [(2.0, true), (3.0, false)] {
+            let closing = [v(-speed, 0.0), None];
+            let back = clear_to_come_back(&RULE, [1].into_iter(), (&positions, &closing));
+            assert_eq!(back.is_empty(), !clear, "{speed} m/s");
+        }
+        assert_eq!(
+            closest_approach_m(Vector2::new(12.0, 0.0), Vector2::new(-3.0, 0.0), 3.0),
+            3.0
         );
     }
 

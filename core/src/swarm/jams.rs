@@ -47,6 +47,13 @@ impl Swarm {
         work.positions.clear();
         work.positions
             .extend(self.law.states.iter().map(|s| s.map(|s| s.pos_enu_m.xy())));
+        work.velocities.clear();
+        work.velocities.extend(
+            self.law
+                .states
+                .iter()
+                .map(|s| s.map(|s| s.vel_enu_mps.xy())),
+        );
         // Each vehicle's distance to its place: `pᵢ − placeᵢ` from their w-weighted mean
         // (the centre the position consensus goes to).
         let (mut sum, mut w_sum) = (Vector2::zeros(), 0.0);
@@ -189,7 +196,7 @@ impl Swarm {
             |k| work.watch.is_jammed(k),
             self.safety.filter.active_rows(),
             &work.offsets,
-            &work.positions,
+            (&work.positions, &work.velocities),
             &mut work.layered,
         );
         // Only this shard's vehicles move on its decisions; another shard's follow theirs.
@@ -246,11 +253,18 @@ impl Swarm {
         work.positions.clear();
         work.positions
             .extend(self.law.states.iter().map(|s| s.map(|s| s.pos_enu_m.xy())));
+        work.velocities.clear();
+        work.velocities.extend(
+            self.law
+                .states
+                .iter()
+                .map(|s| s.map(|s| s.vel_enu_mps.xy())),
+        );
         let layered = &work.layered;
         let back = clear_to_come_back(
             rule,
             (0..layered.len()).filter(|&k| layered[k].is_some() && self.slots[k].link().is_some()),
-            &work.positions,
+            (&work.positions, &work.velocities),
         );
         for &k in &back {
             work.layered[k] = None;

@@ -168,6 +168,8 @@ pub(super) struct JamWork {
     pub(super) remote_layered: Vec<Option<ringswarm_wire::time::SimTime>>,
     /// Horizontal positions (m, ENU).
     pub(super) positions: Vec<Option<Vector2<f64>>>,
+    /// Horizontal velocities (m/s, ENU).
+    pub(super) velocities: Vec<Option<Vector2<f64>>>,
     /// Horizontal commands (m/s², ENU).
     pub(super) commands: Vec<Vector2<f64>>,
     /// Whether the last filter took at least the watch's share of each vehicle's command
