@@ -204,7 +204,7 @@ impl UnseenMotion {
         } = self.sums;
         let nf = n as f64;
         let den = nf * stt - st * st;
-        if !(den > 0.0) {
+        if den.is_nan() || den <= 0.0 {
             return None;
         }
         let slope = (srt * nf - sr * st) / den;

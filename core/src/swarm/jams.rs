@@ -44,16 +44,7 @@ impl Swarm {
         }
         let n = self.vehicle_count();
         let work = &mut self.safety.jams;
-        work.positions.clear();
-        work.positions
-            .extend(self.law.states.iter().map(|s| s.map(|s| s.pos_enu_m.xy())));
-        work.velocities.clear();
-        work.velocities.extend(
-            self.law
-                .states
-                .iter()
-                .map(|s| s.map(|s| s.vel_enu_mps.xy())),
-        );
+        work.read_motions(&self.law.states);
         // Each vehicle's distance to its place: `pᵢ − placeᵢ` from their w-weighted mean
         // (the centre the position consensus goes to).
         let (mut sum, mut w_sum) = (Vector2::zeros(), 0.0);
@@ -250,16 +241,7 @@ impl Swarm {
         if !work.layered.iter().any(Option::is_some) || !work.filter_finished {
             return;
         }
-        work.positions.clear();
-        work.positions
-            .extend(self.law.states.iter().map(|s| s.map(|s| s.pos_enu_m.xy())));
-        work.velocities.clear();
-        work.velocities.extend(
-            self.law
-                .states
-                .iter()
-                .map(|s| s.map(|s| s.vel_enu_mps.xy())),
-        );
+        work.read_motions(&self.law.states);
         let layered = &work.layered;
         let back = clear_to_come_back(
             rule,

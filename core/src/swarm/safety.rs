@@ -182,6 +182,18 @@ pub(super) struct JamWork {
     pub(super) last_unfinished: Option<SimTime>,
 }
 
+impl JamWork {
+    /// Each vehicle's horizontal position and velocity from its state (`None` without).
+    pub(super) fn read_motions(&mut self, states: &[Option<super::CommonState>]) {
+        self.positions.clear();
+        self.positions
+            .extend(states.iter().map(|s| s.map(|s| s.pos_enu_m.xy())));
+        self.velocities.clear();
+        self.velocities
+            .extend(states.iter().map(|s| s.map(|s| s.vel_enu_mps.xy())));
+    }
+}
+
 impl SafetyWork {
     pub(super) fn new(n: usize) -> Self {
         Self {
@@ -547,14 +559,6 @@ impl Swarm {
         )
     }
 
-    /// How old what is known of vehicle `i` is by the time a command sent now acts (s):
-    /// its state's age since it arrived, how far behind its sockets the coordinator is
-    /// (what arrived may have waited that long unread), a control period, and the time
-    /// from a command
-    /// sent to a state that shows it: the measured attitude response (which holds the
-    /// uplink and the downlink), but never less than the link's round trip (TIMESYNC);
-    /// a fit beyond [`MAX_RESPONSE_S`] is not trusted, and then the round trip plus
-    /// [`UNMEASURED_RESPONSE_S`] is counted.
     /// Takes each vehicle's unseen speed into the stats, and names a vehicle the first
     /// time its unseen speed reaches [`UNSEEN_REPORTED_MPS`].
     fn count_unseen(&mut self, now: SimTime) {
@@ -585,6 +589,14 @@ impl Swarm {
         }
     }
 
+    /// How old what is known of vehicle `i` is by the time a command sent now acts (s):
+    /// its state's age since it arrived, how far behind its sockets the coordinator is
+    /// (what arrived may have waited that long unread), a control period, and the time
+    /// from a command
+    /// sent to a state that shows it: the measured attitude response (which holds the
+    /// uplink and the downlink), but never less than the link's round trip (TIMESYNC);
+    /// a fit beyond [`MAX_RESPONSE_S`] is not trusted, and then the round trip plus
+    /// [`UNMEASURED_RESPONSE_S`] is counted.
     pub(super) fn command_age_s(&self, i: VehicleIndex, now: SimTime) -> f64 {
         let state = self
             .link(i)

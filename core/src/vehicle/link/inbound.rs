@@ -180,7 +180,7 @@ impl VehicleLink {
 
     /// The vehicle's time of a report (s, counted from its first report), from its
     /// `time_boot_ms`: forward by the wrapped difference up to a minute; a clock that went
-    /// back (a reboot) or leapt is put an hour on, which starts [`UnseenMotion`]'s window
+    /// back (a reboot) or leapt is put an hour on, which starts [`crate::control::UnseenMotion`]'s window
     /// over.
     fn vehicle_time_s(&mut self, sampled_ms: u32) -> f64 {
         let t_s = match self.vehicle_clock {
