@@ -53,10 +53,10 @@ const FIT_EVERY_S: f64 = 0.015;
 /// build up.
 const REANCHOR_EVERY: u32 = 2048;
 
-/// The least-squares sums of the window's points, in times and residuals from an anchor.
+/// The least-squares sums of the window's points, in times and residuals from an anchor
+/// (their count is the window's length).
 #[derive(Debug, Clone, Copy, Default)]
 struct Sums {
-    n: usize,
     st: f64,
     stt: f64,
     sr: Vector2<f64>,
@@ -66,11 +66,6 @@ struct Sums {
 impl Sums {
     /// Adds (`sign` 1) or takes away (−1) the point at time `t` with residual `r`.
     fn add(&mut self, t: f64, r: Vector2<f64>, sign: f64) {
-        if sign > 0.0 {
-            self.n += 1;
-        } else {
-            self.n = self.n.saturating_sub(1);
-        }
         self.st += sign * t;
         self.stt += sign * t * t;
         self.sr += r * sign;
@@ -199,9 +194,7 @@ impl UnseenMotion {
         if n < LEAST_REPORTS || last.t_s - first.t_s < LEAST_SPAN_SHARE * WINDOW_S {
             return None;
         }
-        let Sums {
-            st, stt, sr, srt, ..
-        } = self.sums;
+        let Sums { st, stt, sr, srt } = self.sums;
         let nf = n as f64;
         let den = nf * stt - st * st;
         if den.is_nan() || den <= 0.0 {

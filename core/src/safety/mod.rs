@@ -163,22 +163,19 @@ impl Agent {
 
     /// Its unseen speed (m/s; one that is not a positive number counts as none).
     pub(crate) fn unseen(&self) -> f64 {
-        if self.unseen_mps.is_finite() {
-            self.unseen_mps.max(0.0)
-        } else {
-            0.0
-        }
+        positive_or_zero(self.unseen_mps)
     }
 
     /// Its spread, as a distance to keep (m; a spread that is not a positive number
     /// counts as none).
     fn spread(&self) -> f64 {
-        if self.spread_m.is_finite() {
-            self.spread_m.max(0.0)
-        } else {
-            0.0
-        }
+        positive_or_zero(self.spread_m)
     }
+}
+
+/// `x` when it is a positive number, else 0.
+fn positive_or_zero(x: f64) -> f64 {
+    if x.is_finite() { x.max(0.0) } else { 0.0 }
 }
 
 /// What the filter did on one tick.

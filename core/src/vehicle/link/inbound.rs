@@ -163,10 +163,11 @@ impl VehicleLink {
                 self.state.pos_local_ned_m = pos_ned_m;
                 self.state.vel_ned_mps = vel_ned_mps;
                 self.state.last_position = Some(now);
-                let restart = matches!(accepted, PositionVerdict::Reset { .. });
+                // A jump taken or a new origin is no motion: the window starts over.
+                let mut restart = matches!(accepted, PositionVerdict::Reset { .. });
                 if let Some(origin) = self.next_origin.take() {
                     self.state.origin = Some(origin);
-                    self.unseen.restart();
+                    restart = true;
                 }
                 if restart {
                     self.unseen.restart();
