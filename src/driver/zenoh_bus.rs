@@ -667,6 +667,7 @@ mod tests {
             landed: false,
             pos_enu_m: [x, y, 50.0],
             vel_enu_mps: [0.0; 3],
+            unseen_mps: 0.0,
         })
     }
 

@@ -388,6 +388,7 @@ mod tests {
             landed: false,
             pos_enu_m: pos,
             vel_enu_mps: vel,
+            unseen_mps: 0.0,
         })
     }
 

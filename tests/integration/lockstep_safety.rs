@@ -273,7 +273,7 @@ fn a_pair_the_filter_cannot_keep_apart_stops_the_swarm_as_safety_action_says() {
 /// flown here on the emulator), with the emulator's estimator drifting each reported
 /// position by `drift_std_m` (correlation time 1 s) that the reported velocity does not
 /// show.
-fn line_swap(drift_std_m: f64) -> Config {
+pub(super) fn line_swap(drift_std_m: f64) -> Config {
     let mut text = String::from(
         r#"
 [swarm]

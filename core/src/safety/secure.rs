@@ -211,7 +211,7 @@ impl SafetyFilter {
         i: usize,
         j: usize,
     ) -> bool {
-        let (Some(a), Some(b), Some(ma), Some(mb)) = (
+        let (Some(mut a), Some(mut b), Some(mut ma), Some(mut mb)) = (
             self.plans[i],
             self.plans[j],
             self.motions[i],
@@ -219,8 +219,25 @@ impl SafetyFilter {
         ) else {
             return false;
         };
+        let (mut path_a, mut path_b) = (self.paths[i], self.paths[j]);
+        // A pair whose positions may close faster than their velocities say (their unseen
+        // speeds, [`crate::control::UnseenMotion`]): that speed is taken as the velocity
+        // towards the other of the vehicle that brakes harder, which it then brakes away,
+        // as the barrier's row counts it.
+        let unseen = agents[i].unseen() + agents[j].unseen();
+        if unseen > 0.0 && a.braking_mps2.max(b.braking_mps2) > 0.0 {
+            if a.braking_mps2 >= b.braking_mps2 {
+                a = closing(&a, &b, unseen);
+                ma = Motion::of(&a, timing);
+                path_a = ma.path_m();
+            } else {
+                b = closing(&b, &a, unseen);
+                mb = Motion::of(&b, timing);
+                path_b = mb.path_m();
+            }
+        }
         let keep = keep_m(sep, (&agents[i], &agents[j]), timing, self.stop.is_some());
-        if (a.pos_m - b.pos_m).norm() - self.paths[i] - self.paths[j] >= keep {
+        if (a.pos_m - b.pos_m).norm() - path_a - path_b >= keep {
             return false;
         }
         // Rounding of a pair at rest exactly the distance apart is no conflict.
@@ -249,6 +266,17 @@ impl SafetyFilter {
         self.motions[k] = Some(motion);
         true
     }
+}
+
+/// `plan` with `speed_mps` more velocity towards `other` (horizontal, scaled frame).
+fn closing(plan: &Plan, other: &Plan, speed_mps: f64) -> Plan {
+    let towards = (other.pos_m - plan.pos_m).xy();
+    let distance = towards.norm();
+    let mut out = *plan;
+    if distance > 0.0 {
+        out.vel_mps += towards * (speed_mps / distance);
+    }
+    out
 }
 
 /// The check's deadline, looked at every few checks.

@@ -542,6 +542,38 @@ fn out_of_time_the_vehicles_whose_command_then_braking_would_meet_brake_instead(
     assert_eq!(commands[2], Vector2::new(0.5, 0.0));
 }
 
+/// The check counts a pair's unseen speed as closing velocity of its harder-braking
+/// vehicle, braked away as the barrier's row counts it.
+#[test]
+fn the_check_counts_a_pair_s_unseen_speed_as_closing() {
+    // Two vehicles at rest 3.3 m apart; a first call with no command gives the rows and
+    // puts nothing on its way. Then the first is pushed towards the second at 0.5 m/s².
+    // Age 0.04 s of which a period (0.02 s) is the hold: keep 3 + ½(6 + 6)·0.02² =
+    // 3.0024 m. With δ of unseen speed on the first (the two brake alike: the first takes
+    // it), it moves at δ for the delay (0.02 δ m), then for the hold at 0.5 m/s²
+    // (0.02 δ + ½·0.5·0.02² m, to δ + 0.01 m/s), then brakes at 2 m/s² ((δ + 0.01)²/4 m):
+    // with x = δ + 0.01 the pair conflicts when x² + 0.16x − 1.1916 > 0, i.e.
+    // δ > 1.00453 m/s.
+    let s = settings(false);
+    let check = |unseen_mps: f64| {
+        let mut agents = [
+            agent([0.0, 0.0, 50.0], [0.0, 0.0, 0.0], 1.0),
+            agent([3.3, 0.0, 50.0], [0.0, 0.0, 0.0], 1.0),
+        ];
+        let mut filter = SafetyFilter::default();
+        filter.filter(&s, &agents, &mut [Vector2::zeros(); 2], None);
+        agents[0].unseen_mps = unseen_mps;
+        let mut commands = [Vector2::new(0.5, 0.0), Vector2::zeros()];
+        let secured = filter.secure(&s, &agents, &mut commands, None);
+        (secured.braked, commands[0])
+    };
+    assert_eq!(check(0.0), (0, Vector2::new(0.5, 0.0)));
+    assert_eq!(check(0.995), (0, Vector2::new(0.5, 0.0)));
+    // Over the bound both brake: the first stops pushing (its reported velocity is nil,
+    // so there is nothing to brake).
+    assert_eq!(check(1.015), (2, Vector2::zeros()));
+}
+
 /// A `side` × `side` block 4 m apart about the origin, each vehicle flown by a PD law to
 /// its start mirrored through the centre, every command acting a tick after its state
 /// (exact double integrators, 10 ms ticks, age 0.02 s); the filter with `s` except that

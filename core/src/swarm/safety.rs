@@ -8,6 +8,7 @@ use nalgebra::Vector2;
 use ringswarm_wire::time::SimTime;
 
 use super::VehicleIndex;
+use super::slot::VehicleSlot;
 use super::{BREACH_SHARE, BreachAction, SafetySetup, StopReason, Swarm, SwarmPhase};
 use crate::safety::{Agent, Outcome, Settings, Side};
 use crate::vehicle::VehicleLink;
@@ -320,8 +321,8 @@ impl Swarm {
                 braking_mps2: setup.braking_share * limit,
                 lag_s: if local(i) { self.counted_lag_s(i) } else { 0.0 },
                 spread_m: 0.0,
-                // Another shard's vehicle's is not carried in its report: none counted.
-                unseen_mps: self.link(i).map_or(0.0, VehicleLink::unseen_speed_mps),
+                // Another shard's vehicle's as its shard counts it.
+                unseen_mps: self.slots[i].unseen_mps(),
             });
             self.safety.xy.push(self.law.commands[i].xy());
         }
@@ -696,6 +697,12 @@ impl Swarm {
     /// The closest pair on the last control tick (indices and ellipsoidal distance, m).
     pub fn closest_pair(&self) -> Option<(usize, usize, f64)> {
         self.safety.closest_pair
+    }
+
+    /// Vehicle `i`'s unseen speed as the filter counts it (m/s): its link's, or what its
+    /// own shard reported last; 0 for an index out of range.
+    pub fn unseen_speed_mps(&self, i: usize) -> f64 {
+        self.slots.get(i).map_or(0.0, VehicleSlot::unseen_mps)
     }
 
     /// The separation the filter enforces (`None`: off).

@@ -41,7 +41,7 @@ use super::{CommonState, Swarm, SwarmPhase};
 use crate::distributed::{
     MemberPhase, PlanVelocities, ShardMessage, ShardPlan, ShardReport, VehicleReport, WeightedSum,
 };
-use crate::vehicle::Phase;
+use crate::vehicle::{Phase, VehicleLink};
 
 /// What another shard is told of a link's phase.
 pub(super) fn member_phase(phase: Phase) -> MemberPhase {
@@ -191,8 +191,10 @@ impl Swarm {
                     pos_enu_m: from_f32(v.pos_enu_m),
                     vel_enu_mps: from_f32(v.vel_enu_mps),
                 };
-                if !(state.pos_enu_m.iter().chain(state.vel_enu_mps.iter())).all(|x| x.is_finite())
-                {
+                let unseen_mps = f64::from(v.unseen_mps);
+                let finite =
+                    (state.pos_enu_m.iter().chain(state.vel_enu_mps.iter())).all(|x| x.is_finite());
+                if !finite || !(0.0..=f64::MAX).contains(&unseen_mps) {
                     p.refused += 1;
                     return;
                 }
@@ -202,6 +204,7 @@ impl Swarm {
                     measured,
                     sent,
                     state,
+                    unseen_mps,
                 });
             }
             ShardMessage::Shard(r) => {
@@ -479,7 +482,9 @@ impl Swarm {
         p.now_sum = own;
         for (i, s, at, member) in messages {
             let age_us = now.saturating_since(at).as_micros();
-            let landed = self.slots[i].link().is_some_and(|l| l.state().landed);
+            let link = self.slots[i].link();
+            let landed = link.is_some_and(|l| l.state().landed);
+            let unseen_mps = link.map_or(0.0, VehicleLink::unseen_speed_mps);
             let report = VehicleReport {
                 vehicle: u16::try_from(i.get()).unwrap_or(u16::MAX),
                 sent_us: p.to_swarm_us(now),
@@ -488,6 +493,7 @@ impl Swarm {
                 landed,
                 pos_enu_m: to_f32(s.pos_enu_m),
                 vel_enu_mps: to_f32(s.vel_enu_mps),
+                unseen_mps: unseen_mps as f32,
             };
             p.push(ShardMessage::Vehicle(report));
         }

@@ -21,6 +21,8 @@ pub(super) struct RemoteVehicle {
     /// When its shard sent it (its control tick, this shard's clock).
     pub(super) sent: SimTime,
     pub(super) state: CommonState,
+    /// Its unseen speed as its shard counts it (m/s, finite and ≥ 0).
+    pub(super) unseen_mps: f64,
 }
 
 /// A vehicle flown here, or by another shard.
@@ -115,6 +117,14 @@ impl VehicleSlot {
         match &self.member {
             Member::Remote(r) => r.as_ref(),
             Member::Local(_) => None,
+        }
+    }
+
+    /// Its unseen speed (m/s): its link's count here, or what its own shard reported.
+    pub(super) fn unseen_mps(&self) -> f64 {
+        match &self.member {
+            Member::Local(link) => link.unseen_speed_mps(),
+            Member::Remote(r) => r.as_ref().map_or(0.0, |r| r.unseen_mps),
         }
     }
 
