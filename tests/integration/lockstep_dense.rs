@@ -472,3 +472,71 @@ fn a_quiet_vehicle_inside_the_block_is_not_run_into_while_everyone_brakes() {
     assert!(matches!(run.swarm().phase(), SwarmPhase::Holding(_)));
     assert!(closest >= 0.95 * 3.0, "{closest}");
 }
+
+/// The mirror swap of `config/block-swap.toml` with a filter given no time at all (a
+/// share of the period next to nothing, on the wall clock as `fly` runs it): every tick
+/// with a broken row stops its solve at once and its stopping check too, so every vehicle
+/// brakes. Braking tick after tick holds velocities, not places. Once the check has run
+/// out of time on 2 s of ticks (100 at 50 Hz) more than it finished on, every vehicle is
+/// handed to its own Hold, once, named in the events; on the emulator's truth every pair
+/// keeps 0.95 × the separation.
+#[test]
+fn a_check_that_keeps_running_out_of_time_hands_the_vehicles_to_their_own_hold() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/block-swap.toml");
+    let config = config(&std::fs::read_to_string(path).unwrap());
+    let mut setup = config.validate().unwrap();
+    let safety = setup.safety.as_mut().expect("[safety] on");
+    safety.wall_clock_budget = true;
+    safety.budget_share = 1e-12;
+    let (world, vehicles) = config.emulator().unwrap();
+    let vehicles = vehicles
+        .into_iter()
+        .map(|v| ringswarm_sitl::autopilot::Vehicle::new(v, world).unwrap())
+        .collect();
+    let mut run = Lockstep::new(
+        ringswarm::swarm::Swarm::new(setup),
+        vehicles,
+        ringswarm::driver::lockstep::LinkConditions::default(),
+    );
+    let sep = ringswarm::safety::Separation {
+        horizontal_m: 3.0,
+        vertical_m: config.safety.vertical_m,
+        gamma: 1.0,
+    };
+    let (mut closest, mut tick) = (f64::INFINITY, 0);
+    run.run_until(SimTime::from_secs_f64(90.0), |r| {
+        if r.swarm().control_ticks() == tick {
+            return;
+        }
+        tick = r.swarm().control_ticks();
+        let p: Vec<_> = r
+            .vehicles()
+            .iter()
+            .map(|v| ned_to_enu(v.status().pos_world_ned_m))
+            .collect();
+        for (i, a) in p.iter().enumerate() {
+            for b in &p[i + 1..] {
+                closest = closest.min(sep.distance_m(*a, *b));
+            }
+        }
+    });
+    let stats = run.swarm().safety_stats();
+    let named: Vec<_> = run
+        .swarm()
+        .events()
+        .iter()
+        .filter(|e| e.text.contains("handed to their own Hold"))
+        .map(|e| e.text.clone())
+        .collect();
+    eprintln!(
+        "overload hold at {:?}, out of time on {} ticks of {}, closest {closest:.3} m: {named:?}",
+        stats.overload_hold, stats.check_out_of_time_ticks, stats.ticks
+    );
+    let at = stats.overload_hold.expect("handed to their own Hold");
+    assert_eq!(named.len(), 1);
+    assert!(named[0].contains("16 vehicles flown here"), "{named:?}");
+    // No sooner than 100 ticks out of time.
+    assert!(stats.check_out_of_time_ticks >= 100);
+    assert!(at.as_secs_f64() >= 2.0);
+    assert!(closest >= 0.95 * 3.0, "{closest}");
+}
