@@ -381,10 +381,6 @@ pub struct SafetyReport {
     pub check_unresolved: u64,
     /// Ticks on which the stopping check ran out of time and every vehicle braked.
     pub check_out_of_time_ticks: u64,
-    /// When (s from the start) the stopping check had run out of time on 2 s of ticks
-    /// more than it finished on and every vehicle flown here was handed to its own Hold
-    /// (`null`: never).
-    pub overload_hold_s: Option<f64>,
     /// The filter's time per control tick (wall clock; the sweep for pairs and the
     /// solve): median, 99th percentile and longest.
     pub filter_time: crate::swarm::timing::Quantiles,
@@ -443,7 +439,6 @@ impl SafetyReport {
             check_braked: s.check_braked,
             check_unresolved: s.check_unresolved,
             check_out_of_time_ticks: s.check_out_of_time_ticks,
-            overload_hold_s: s.overload_hold.map(SimTime::as_secs_f64),
             filter_time: s.filter_time.quantiles(),
             counted_age: s.counted_age.quantiles(),
             largest_piece: s.largest_piece,

@@ -35,15 +35,6 @@ fn calm(last_unfinished: Option<SimTime>, now: SimTime) -> bool {
     last_unfinished.is_none_or(|t| now.saturating_since(t).as_secs_f64() >= LAYER_CALM_S)
 }
 
-/// When the stopping check has run out of time on this much more of the control ticks
-/// than it finished on (s of ticks), every vehicle flown here is handed to its own Hold.
-/// Out of time, the check brakes every vehicle: safe for a tick, but tick after tick it
-/// holds velocities and not places, and a packed block wanders into itself (four shards
-/// of a packed thousand on a saturated 2-core host, holding after the guard stopped them:
-/// pairs 1.05 m and 0.00 m apart after 50 and 440 s). The autopilot's own Hold keeps each
-/// vehicle's place on its own estimate.
-pub const OVERLOAD_HOLD_S: f64 = 2.0;
-
 /// A vehicle's unseen speed is named in the events once it reaches this (m/s); any is
 /// counted, and the largest is in the summary.
 pub const UNSEEN_REPORTED_MPS: f64 = 0.2;
@@ -85,12 +76,6 @@ pub struct SafetyStats {
     pub check_unresolved: u64,
     /// Ticks on which the stopping check ran out of time and every vehicle braked.
     pub check_out_of_time_ticks: u64,
-    /// Ticks the check ran out of time, less those it finished in (never below zero):
-    /// braking every vehicle on tick after tick holds velocities but not places.
-    overload_ticks: u64,
-    /// When every vehicle flown here was handed to its own Hold because the check ran
-    /// out of time for [`OVERLOAD_HOLD_S`] more than it finished (`None`: never).
-    pub overload_hold: Option<SimTime>,
     /// How long each tick's filter call took (wall clock).
     pub filter_time: super::timing::Histogram,
     /// The age each tick's filter counted, by which every pair's separation grows: what
@@ -397,11 +382,6 @@ impl Swarm {
         stats.check_braked_ticks += u64::from(report.braked > 0);
         stats.check_braked += report.braked as u64;
         stats.check_unresolved += report.unresolved as u64;
-        stats.overload_ticks = if report.check_out_of_time {
-            stats.overload_ticks + 1
-        } else {
-            stats.overload_ticks.saturating_sub(1)
-        };
         if report.check_out_of_time {
             stats.check_out_of_time_ticks += 1;
             if stats.check_out_of_time_ticks % 100 == 1 {
@@ -480,7 +460,6 @@ impl Swarm {
                 }
             }
         }
-        self.hold_when_overloaded(now, period_s);
         // What the filter took of each command, for the jam watch: an active row holds a
         // vehicle only when it took a good share of the law's command away (read only with
         // this call's active rows, so not needed without one).
@@ -579,37 +558,6 @@ impl Swarm {
             || "none yet".to_owned(),
             |at| format!("{} ms old {whence}", now.saturating_since(at).as_millis()),
         )
-    }
-
-    /// Hands every vehicle flown here in the air to its own Hold, once, when the stopping
-    /// check has run out of time on [`OVERLOAD_HOLD_S`] more of the ticks than it
-    /// finished on.
-    fn hold_when_overloaded(&mut self, now: SimTime, period_s: f64) {
-        let stats = &self.safety.stats;
-        let limit = (OVERLOAD_HOLD_S / period_s).ceil();
-        if stats.overload_hold.is_some() || (stats.overload_ticks as f64) < limit {
-            return;
-        }
-        self.safety.stats.overload_hold = Some(now);
-        let reason = "the safety filter's stopping check keeps running out of time";
-        let mut handed = 0usize;
-        for i in self.indices() {
-            if !self.ours_in_air(i) {
-                continue;
-            }
-            self.slots[i].isolated = true;
-            if let Some(link) = self.slots[i].link_mut() {
-                link.hold_on_own(now, reason);
-                handed += 1;
-            }
-        }
-        self.log.push(
-            now,
-            true,
-            format!(
-                "safety filter: the stopping check ran out of time on {limit:.0} more ticks than it finished: braking every vehicle holds velocities, not places; {handed} vehicles flown here handed to their own Hold"
-            ),
-        );
     }
 
     /// Takes each vehicle's unseen speed into the stats, and names a vehicle the first
