@@ -843,3 +843,35 @@ fn a_remote_vehicle_s_unseen_speed_is_counted_as_its_own_shard_counts_it() {
     assert!(counted > matched / 2, "{counted} of {matched}");
     assert!(closest >= 0.95 * 3.0, "{closest}");
 }
+
+/// A vehicle report whose unseen speed is not a finite number ≥ 0 is refused whole, as
+/// one with a state that is not finite; one that is is counted as sent, to the `f32` it
+/// carries.
+#[test]
+fn a_report_with_a_bad_unseen_speed_is_refused() {
+    use ringswarm::distributed::{MemberPhase, ShardMessage, VehicleReport};
+    let setup = config().validate().unwrap();
+    let plan = ShardPlan::new(0, 3, THREE.to_vec(), &setup.ring, Watch::All).unwrap();
+    let mut shard = Swarm::new_shard(setup, plan).unwrap();
+    // Vehicle 2 is shard 1's.
+    let report = |sent_us: u64, unseen_mps: f32| {
+        ShardMessage::Vehicle(VehicleReport {
+            vehicle: 2,
+            sent_us,
+            age_us: 0,
+            phase: MemberPhase::Flying,
+            landed: false,
+            pos_enu_m: [0.0, 0.0, 50.0],
+            vel_enu_mps: [0.0; 3],
+            unseen_mps,
+        })
+    };
+    for (k, bad) in [f32::NAN, -0.1, f32::INFINITY].into_iter().enumerate() {
+        shard.handle_shard_message(SimTime::ZERO, &report(1000 + k as u64, bad));
+        assert_eq!(shard.shard_message_counts().0, k as u64 + 1, "{bad}");
+        assert_eq!(shard.unseen_speed_mps(2), 0.0, "{bad}");
+    }
+    shard.handle_shard_message(SimTime::ZERO, &report(2000, 0.7));
+    assert_eq!(shard.shard_message_counts().0, 3);
+    assert_eq!(shard.unseen_speed_mps(2), f64::from(0.7f32));
+}
