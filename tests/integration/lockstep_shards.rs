@@ -77,6 +77,17 @@ fn build(
     Lockstep::sharded(shards, vehicles(config), LinkConditions::default(), bus).unwrap()
 }
 
+/// `config` split by `owner`, every shard reading every state, the bus 20 ms.
+fn all_20_ms_apart(config: &Config, owner: &[usize]) -> Lockstep {
+    build(
+        config,
+        owner,
+        (Watch::All, 100.0),
+        bus_ms(20.0, 0.0, 0.0),
+        |_| {},
+    )
+}
+
 /// The smallest ellipsoidal distance between two of the emulator's vehicles now (truth).
 fn closest_now_m(run: &Lockstep, sep: &ringswarm::safety::Separation) -> f64 {
     let p: Vec<_> = run
@@ -545,13 +556,7 @@ fn watching_the_horizon_flies_paper_sim1_as_watching_the_neighbours_does() {
 fn three_shards_plan_re_target_and_reach_the_target_as_one_process_does() {
     let config = load("paper-sim2");
     let mut retargeting = [None; 3];
-    let mut flight = build(
-        &config,
-        &THREE,
-        (Watch::All, 100.0),
-        bus_ms(20.0, 0.0, 0.0),
-        |_| {},
-    );
+    let mut flight = all_20_ms_apart(&config, &THREE);
     flight.run_until(SimTime::from_millis(71_000), |r| {
         for (s, shard) in r.shards().iter().enumerate() {
             if let SwarmPhase::Retargeting(t) = shard.phase() {
@@ -619,13 +624,7 @@ fn three_shards_plan_re_target_and_reach_the_target_as_one_process_does() {
 fn shards_agree_on_one_assignment() {
     let config = load("block-circle");
     let owner: Vec<usize> = (0..16).map(|i| i / 4).collect();
-    let mut run = build(
-        &config,
-        &owner,
-        (Watch::All, 100.0),
-        bus_ms(20.0, 0.0, 0.0),
-        |_| {},
-    );
+    let mut run = all_20_ms_apart(&config, &owner);
     let sep = ringswarm::safety::Separation {
         horizontal_m: 3.0,
         vertical_m: 9.0,
@@ -674,13 +673,7 @@ fn shards_agree_on_one_assignment() {
 fn four_shards_pass_the_mirror_swap_s_jams_on_the_layer() {
     let config = load("block-swap");
     let owner: Vec<usize> = (0..16).map(|i| i / 4).collect();
-    let mut run = build(
-        &config,
-        &owner,
-        (Watch::All, 100.0),
-        bus_ms(20.0, 0.0, 0.0),
-        |_| {},
-    );
+    let mut run = all_20_ms_apart(&config, &owner);
     let sep = ringswarm::safety::Separation {
         horizontal_m: 3.0,
         vertical_m: 9.0,
@@ -746,13 +739,7 @@ fn a_quiet_vehicle_of_one_shard_is_kept_clear_of_in_both() {
                  kind = \"no_position\"\n\n[[vehicle]]";
     let config = Config::from_toml(&text.replacen("[[vehicle]]", fault, 1)).unwrap();
     let owner: Vec<usize> = (0..16).map(|i| usize::from(i >= 8)).collect();
-    let mut flight = build(
-        &config,
-        &owner,
-        (Watch::All, 100.0),
-        bus_ms(20.0, 0.0, 0.0),
-        |_| {},
-    );
+    let mut flight = all_20_ms_apart(&config, &owner);
     let sep = ringswarm::safety::Separation {
         horizontal_m: 3.0,
         vertical_m: config.safety.vertical_m,
@@ -788,13 +775,7 @@ fn a_quiet_vehicle_of_one_shard_is_kept_clear_of_in_both() {
 fn a_remote_vehicle_s_unseen_speed_is_counted_as_its_own_shard_counts_it() {
     let config = super::lockstep_safety::line_swap(0.3);
     let owner = [0, 1, 0, 1];
-    let mut flight = build(
-        &config,
-        &owner,
-        (Watch::All, 100.0),
-        bus_ms(20.0, 0.0, 0.0),
-        |_| {},
-    );
+    let mut flight = all_20_ms_apart(&config, &owner);
     // Each tick: every shard's count of every vehicle.
     let mut counts: Vec<Vec<[f64; 4]>> = Vec::new();
     let (mut closest, mut tick) = (f64::INFINITY, 0);

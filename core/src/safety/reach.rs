@@ -83,18 +83,14 @@ impl ReachBound {
             return None;
         }
         let x = ((2.0 * widest + 1.0 + z + a_hi) / sep.gamma).cbrt();
-        // A pair keeps its two spreads more than the separation.
-        let spread = agents
+        // A pair keeps its two spreads more than the separation, and may close at its two
+        // unseen speeds more than its velocities say: the largest of each, counted twice.
+        let (spread, unseen) = agents
             .iter()
             .filter(|a| a.side.is_some())
-            .map(Agent::spread)
-            .fold(0.0, f64::max);
-        // A pair may close at its two unseen speeds more than its velocities say.
-        let unseen = agents
-            .iter()
-            .filter(|a| a.side.is_some())
-            .map(Agent::unseen)
-            .fold(0.0, f64::max);
+            .fold((0.0f64, 0.0f64), |(s, u), a| {
+                (s.max(a.spread()), u.max(a.unseen()))
+            });
         Some(Self {
             base_m: sep.horizontal_m + 2.0 * spread + 0.5 * a_hi * age_s * age_s + MARGIN_M,
             unseen_mps: 2.0 * unseen,
